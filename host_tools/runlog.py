@@ -1,0 +1,431 @@
+"""Run-log I/O: the CSV run-log format (shared/formats/run-log.md, version 1) and a lossless NPZ form.
+
+A run log is one power-on of one gyroscope, sampled at a nominally fixed rate.  In memory it is a
+:class:`RunLog`: named float64 columns (``mode`` is int64), the ``# key: value`` metadata lines in
+order, the file it came from, and the notes of every repair the reader made.
+
+Columns (units): ``t_s`` [s since power-on], ``rate_dph`` [deg/h, raw loop output; ``rate_dps``
+in a file is converted on read], ``mode`` [0 FTR, 1 mode 1, 2 mode 2, 3 exchange; default 0],
+``freq_hz`` [Hz, drive-mode frequency], ``temp_c`` [degC], ``aux_*`` [any]; every other column is
+kept as it is (e.g. ``bias_dph`` and ``valid`` of a compensated log).
+
+Bad input (each case is tested in tests/test_runlog.py):
+
+* errors (:class:`RunLogError`, message ``FILE:LINE: problem``): empty file, no header, no data
+  rows, missing required column, duplicated column name, a row with too many or too few cells
+  (except the last line, below), text in a numeric cell, NaN or inf, a blank line inside the data,
+  non-increasing or duplicated ``t_s``, a ``mode`` code that is not 0, 1, 2 or 3;
+* warnings (:class:`RunLogWarning`, and the same text in ``RunLog.notes``) with a documented
+  repair:
+
+  - **truncated last line** (fewer cells than the header, or a cell that does not parse, on the
+    final line of a file that does not end with a newline): the partial line is discarded; the
+    warning names its line number and text.
+  - **gaps in time** (a step longer than 1.5x the nominal step, the median step): every sample is
+    kept; the log is split into contiguous *segments* at the gaps (``RunLog.segments``, start
+    indices), so that causal estimators restart at each segment instead of differencing across a
+    gap. The warning gives the count, the nominal step and the largest gap with its line.
+"""
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+import re
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+FORMAT_VERSION = 1
+MODES = (0, 1, 2, 3)
+MODE_FTR, MODE_1, MODE_2, MODE_EXCHANGE = MODES
+GAP_FACTOR = 1.5
+PROXY_COLUMNS = {"freq": "freq_hz", "temp": "temp_c"}
+
+
+class RunLogError(ValueError):
+    """A run log that cannot be read: names the file, the line (1-based, physical) and the problem."""
+
+    def __init__(self, source: str, line: int | None, problem: str):
+        self.source, self.line, self.problem = source, line, problem
+        where = f"{source}:{line}" if line is not None else source
+        super().__init__(f"{where}: {problem}")
+
+
+class RunLogWarning(UserWarning):
+    """A repair the reader made (truncated last line dropped, gaps found); the text says which."""
+
+
+@dataclass
+class RunLog:
+    """One run log in memory.
+
+    ``columns`` maps column name -> 1-D array (float64; ``mode`` int64), all of one length, in file
+    order.  ``metadata`` keeps the ``# key: value`` lines in order (free-form ``#`` lines are kept
+    under the key ``"#<n>"`` with their text as value).  ``first_data_line`` is the file line of
+    row 0 (so row i is line ``first_data_line + i``).  ``segments`` holds the start index of each
+    gap-free segment (``segments[0] == 0``).
+    """
+
+    columns: dict
+    metadata: dict = field(default_factory=dict)
+    source: str = "<memory>"
+    notes: list = field(default_factory=list)
+    first_data_line: int | None = None
+    segments: np.ndarray = None
+
+    def __post_init__(self):
+        cols = {}
+        for name, values in self.columns.items():
+            arr = np.asarray(values)
+            cols[name] = arr.astype(np.int64) if name == "mode" else arr.astype(np.float64)
+        if "mode" not in cols and "t_s" in cols:
+            cols["mode"] = np.zeros(len(cols["t_s"]), np.int64)
+        self.columns = cols
+        _validate(self)
+        if self.segments is None:
+            self.segments = _find_segments(self, report=False)
+
+    # -- accessors -------------------------------------------------------------------------
+    def __len__(self) -> int:
+        return len(self.columns["t_s"])
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.columns
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.columns[name]
+
+    @property
+    def t_s(self) -> np.ndarray:
+        return self.columns["t_s"]
+
+    @property
+    def rate_dph(self) -> np.ndarray:
+        return self.columns["rate_dph"]
+
+    @property
+    def mode(self) -> np.ndarray:
+        return self.columns["mode"]
+
+    @property
+    def reversal(self) -> bool:
+        """True when the log uses mode reversal (any sample in mode 1, 2 or 3)."""
+        return bool(np.any(self.mode != MODE_FTR))
+
+    @property
+    def aux_columns(self) -> list:
+        return [c for c in self.columns if c.startswith("aux_")]
+
+    @property
+    def nominal_step_s(self) -> float:
+        """Nominal sample step [s]: the median time step."""
+        if len(self) < 2:
+            return float("nan")
+        return float(np.median(np.diff(self.t_s)))
+
+    @property
+    def sample_rate_hz(self) -> float:
+        """Sample rate [Hz]: ``# sample_rate_hz`` metadata if it starts with a number, else 1/median step."""
+        m = re.match(r"\s*([0-9.eE+-]+)", self.metadata.get("sample_rate_hz", ""))
+        if m:
+            try:
+                value = float(m.group(1))
+                if value > 0 and math.isfinite(value):
+                    return value
+            except ValueError:
+                pass
+        return 1.0 / self.nominal_step_s
+
+    def proxy(self, kind: str | None = None) -> tuple[str, np.ndarray]:
+        """The temperature proxy: ``kind`` 'freq' (``freq_hz``) or 'temp' (``temp_c``); None picks
+        ``freq_hz`` when present (self-sensing), else ``temp_c``.  Returns (column name, values)."""
+        if kind is None:
+            kind = "freq" if "freq_hz" in self.columns else "temp"
+        if kind not in PROXY_COLUMNS:
+            raise ValueError(f"proxy must be 'freq' or 'temp', not {kind!r}")
+        name = PROXY_COLUMNS[kind]
+        if name not in self.columns:
+            raise RunLogError(self.source, None, f"proxy '{kind}' needs column '{name}', which the log lacks")
+        return name, self.columns[name]
+
+    def line_of(self, row: int) -> int | None:
+        """File line number of data row ``row`` (None for a log built in memory)."""
+        return None if self.first_data_line is None else self.first_data_line + int(row)
+
+    def select(self, rows) -> "RunLog":
+        """A new RunLog with the given rows (boolean mask or index array); metadata copied."""
+        cols = {k: v[rows] for k, v in self.columns.items()}
+        return RunLog(cols, dict(self.metadata), self.source, list(self.notes))
+
+    def with_columns(self, **new) -> "RunLog":
+        """A copy with columns added or replaced (arrays of the same length)."""
+        cols = dict(self.columns)
+        cols.update(new)
+        return RunLog(cols, dict(self.metadata), self.source, list(self.notes),
+                      self.first_data_line, self.segments)
+
+    @classmethod
+    def from_arrays(cls, metadata: dict | None = None, source: str = "<memory>", **columns) -> "RunLog":
+        return cls(dict(columns), dict(metadata or {}), source)
+
+
+# -- validation shared by the readers and the in-memory constructor ------------------------------
+
+def _validate(log: RunLog) -> None:
+    src, cols = log.source, log.columns
+
+    def where(row):
+        return log.line_of(row) if log.first_data_line is not None else None
+
+    def rowtxt(row):
+        return "" if log.first_data_line is not None else f"row {row}: "
+
+    for req in ("t_s",):
+        if req not in cols:
+            raise RunLogError(src, log.first_data_line and log.first_data_line - 1, f"missing required column '{req}'")
+    if "rate_dph" not in cols:
+        raise RunLogError(src, log.first_data_line and log.first_data_line - 1,
+                          "missing required column 'rate_dph' (or 'rate_dps')")
+    if "freq_hz" not in cols and "temp_c" not in cols:
+        raise RunLogError(src, log.first_data_line and log.first_data_line - 1,
+                          "missing temperature proxy: one of the columns 'freq_hz', 'temp_c' is required")
+    n = len(cols["t_s"])
+    for name, arr in cols.items():
+        if arr.ndim != 1 or len(arr) != n:
+            raise RunLogError(src, None, f"column '{name}' has {len(arr)} values, 't_s' has {n}")
+    if n == 0:
+        raise RunLogError(src, log.first_data_line, "no data rows")
+    for name, arr in cols.items():
+        if arr.dtype.kind == "f":
+            bad = ~np.isfinite(arr)
+            if bad.any():
+                row = int(np.argmax(bad))
+                raise RunLogError(src, where(row), f"{rowtxt(row)}column '{name}' is {arr[row]} (NaN/inf is not a value)")
+    t = cols["t_s"]
+    if n > 1:
+        d = np.diff(t)
+        if np.any(d <= 0):
+            row = int(np.argmax(d <= 0)) + 1
+            kind = "duplicated" if d[row - 1] == 0 else "not increasing"
+            raise RunLogError(src, where(row), f"{rowtxt(row)}t_s {kind}: {t[row]!r} after {t[row - 1]!r}")
+    mode = cols["mode"]
+    bad = ~np.isin(mode, MODES)
+    if bad.any():
+        row = int(np.argmax(bad))
+        raise RunLogError(src, where(row), f"{rowtxt(row)}unknown mode code {mode[row]} (known: 0 FTR, 1, 2, 3 exchange)")
+
+
+def _find_segments(log: RunLog, report: bool) -> np.ndarray:
+    t = log.t_s
+    if len(t) < 3:
+        return np.zeros(1, np.int64)
+    d = np.diff(t)
+    step = float(np.median(d))
+    gaps = np.flatnonzero(d > GAP_FACTOR * step)
+    if report and len(gaps):
+        big = int(gaps[np.argmax(d[gaps])])
+        line = log.line_of(big + 1)
+        msg = (f"{log.source}: {len(gaps)} gap(s) in time (nominal step {step:.6g} s); largest "
+               f"{d[big]:.6g} s before line {line}. Repair: all samples kept; the log is split into "
+               f"{len(gaps) + 1} segments at the gaps (RunLog.segments) and causal estimators restart "
+               f"at each segment")
+        log.notes.append(msg)
+        warnings.warn(msg, RunLogWarning, stacklevel=3)
+    return np.concatenate([[0], gaps + 1]).astype(np.int64)
+
+
+# -- CSV -----------------------------------------------------------------------------------------
+
+def _parse_metadata_line(text: str, index: int, metadata: dict) -> None:
+    body = text[1:].strip()
+    if ":" in body:
+        key, value = body.split(":", 1)
+        metadata[key.strip()] = value.strip()
+    elif body:
+        metadata[f"#{index}"] = body
+
+
+def read_csv(path) -> RunLog:
+    """Read a CSV run log.  Raises :class:`RunLogError`; warns :class:`RunLogWarning` on repairs."""
+    source = os.fspath(path)
+    try:
+        with open(source, "r", encoding="utf-8", newline="") as fh:
+            text = fh.read()
+    except UnicodeDecodeError as exc:
+        raise RunLogError(source, None, f"not a text file (UTF-8 decoding failed at byte {exc.start})") from None
+    return parse_csv_text(text, source)
+
+
+def parse_csv_text(text: str, source: str = "<text>") -> RunLog:
+    """Parse run-log CSV text (see :func:`read_csv`)."""
+    if not text.strip():
+        raise RunLogError(source, 1, "empty file (no header, no data)")
+    ends_with_newline = text.endswith("\n") or text.endswith("\r")
+    lines = text.splitlines()
+    metadata, notes = {}, []
+    i = 0
+    while i < len(lines) and (lines[i].startswith("#") or not lines[i].strip()):
+        if lines[i].startswith("#"):
+            _parse_metadata_line(lines[i], i + 1, metadata)
+        i += 1
+    if i >= len(lines):
+        raise RunLogError(source, len(lines), "no header row (only metadata lines)")
+    header_line = i + 1
+    names = [c.strip() for c in lines[i].split(",")]
+    if any(not c for c in names):
+        raise RunLogError(source, header_line, f"empty column name in header {lines[i]!r}")
+    seen = set()
+    for c in names:
+        if c in seen:
+            raise RunLogError(source, header_line, f"column '{c}' appears twice in the header")
+        seen.add(c)
+    for req, alt in (("t_s", None), ("rate_dph", "rate_dps")):
+        if req not in names and (alt is None or alt not in names):
+            need = f"'{req}'" + (f" (or '{alt}')" if alt else "")
+            raise RunLogError(source, header_line, f"missing required column {need}; header has {names}")
+    if "freq_hz" not in names and "temp_c" not in names:
+        raise RunLogError(source, header_line,
+                          f"missing temperature proxy: one of the columns 'freq_hz', 'temp_c' is required; header has {names}")
+    data = lines[i + 1:]
+    while data and not data[-1].strip():  # trailing blank lines are harmless
+        data.pop()
+    first_data_line = header_line + 1
+    if not data:
+        raise RunLogError(source, first_data_line, "no data rows after the header")
+
+    ncol = len(names)
+
+    def check_last():
+        # a truncated final line: fewer cells, or a cell that does not parse, and no final newline
+        last = data[-1]
+        cells = last.split(",")
+        broken = len(cells) < ncol
+        if not broken and len(cells) == ncol:
+            try:
+                [float(c) for c in cells]
+            except ValueError:
+                broken = not ends_with_newline
+        if broken and (not ends_with_newline or len(cells) < ncol):
+            line = first_data_line + len(data) - 1
+            msg = (f"{source}:{line}: truncated last line {last!r} ({len(cells)} of {ncol} cells); "
+                   f"repair: the partial line is discarded, the {len(data) - 1} complete rows are kept")
+            notes.append(msg)
+            warnings.warn(msg, RunLogWarning, stacklevel=4)
+            data.pop()
+
+    check_last()
+    if not data:
+        raise RunLogError(source, first_data_line, "no complete data rows after the header")
+    try:
+        table = np.loadtxt(io.StringIO("\n".join(data)), delimiter=",", dtype=np.float64, ndmin=2,
+                           comments=None)
+        if table.shape[1] != ncol:
+            raise ValueError("column count")
+    except ValueError:
+        _locate_bad_row(data, names, source, first_data_line)
+        raise  # _locate_bad_row always raises; kept for safety
+    columns = {}
+    for k, name in enumerate(names):
+        col = table[:, k]
+        if name == "mode":
+            bad = (col != np.round(col)) | ~np.isfinite(col)
+            if bad.any():
+                row = int(np.argmax(bad))
+                raise RunLogError(source, first_data_line + row, f"mode {data[row].split(',')[k]!r} is not an integer code")
+            col = col.astype(np.int64)
+        columns[name] = col
+    if "rate_dps" in columns and "rate_dph" not in columns:
+        columns["rate_dph"] = columns.pop("rate_dps") * 3600.0
+        notes.append(f"{source}: 'rate_dps' converted to 'rate_dph' (x 3600)")
+    log = RunLog.__new__(RunLog)
+    log.columns = {k: v for k, v in columns.items()}
+    if "mode" not in log.columns:
+        log.columns["mode"] = np.zeros(len(table), np.int64)
+    log.metadata, log.source, log.notes, log.first_data_line = metadata, source, notes, first_data_line
+    _validate(log)
+    log.segments = _find_segments(log, report=True)
+    return log
+
+
+def _locate_bad_row(data, names, source, first_data_line):
+    ncol = len(names)
+    for r, line in enumerate(data):
+        lineno = first_data_line + r
+        if not line.strip():
+            raise RunLogError(source, lineno, "blank line inside the data")
+        if line.startswith("#"):
+            raise RunLogError(source, lineno, "metadata/comment line inside the data")
+        cells = line.split(",")
+        if len(cells) != ncol:
+            raise RunLogError(source, lineno, f"{len(cells)} cells, the header has {ncol}: {line!r}")
+        for k, cell in enumerate(cells):
+            try:
+                float(cell)
+            except ValueError:
+                raise RunLogError(source, lineno, f"column '{names[k]}': {cell.strip()!r} is not a number") from None
+    raise RunLogError(source, None, "could not parse the data rows")
+
+
+def _fmt_column(name: str, arr: np.ndarray) -> list:
+    if arr.dtype.kind in "iu":
+        return [str(int(x)) for x in arr.tolist()]
+    return [repr(x) for x in arr.tolist()]  # shortest repr that round-trips exactly
+
+
+def write_csv(log: RunLog, path, extra_metadata: dict | None = None) -> None:
+    """Write ``log`` as CSV run log (values in shortest round-trip form, so CSV -> CSV is lossless).
+    ``extra_metadata`` lines are added after the log's own."""
+    meta = dict(log.metadata)
+    meta.update(extra_metadata or {})
+    names = list(log.columns)
+    formatted = [_fmt_column(n, log.columns[n]) for n in names]
+    with open(os.fspath(path), "w", encoding="utf-8", newline="\n") as fh:
+        for key, value in meta.items():
+            fh.write(f"# {value}\n" if key.startswith("#") else f"# {key}: {value}\n")
+        fh.write(",".join(names) + "\n")
+        fh.writelines(",".join(row) + "\n" for row in zip(*formatted))
+
+
+# -- NPZ (lossless binary) ---------------------------------------------------------------------
+
+def write_npz(log: RunLog, path) -> None:
+    """Lossless binary form: every column bit-exact, metadata and notes as JSON."""
+    header = json.dumps({"format": "hdrg-runlog", "version": FORMAT_VERSION, "columns": list(log.columns),
+                         "metadata": log.metadata, "notes": log.notes})
+    arrays = {f"col_{i}": v for i, v in enumerate(log.columns.values())}
+    with open(os.fspath(path), "wb") as fh:
+        np.savez(fh, header=np.array(header), **arrays)
+
+
+def read_npz(path) -> RunLog:
+    source = os.fspath(path)
+    try:
+        with np.load(source, allow_pickle=False) as z:
+            header = json.loads(str(z["header"]))
+            if header.get("format") != "hdrg-runlog":
+                raise RunLogError(source, None, "not an hdrg run-log NPZ (header 'format' missing)")
+            cols = {name: z[f"col_{i}"] for i, name in enumerate(header["columns"])}
+    except (OSError, ValueError, KeyError) as exc:
+        if isinstance(exc, RunLogError):
+            raise
+        raise RunLogError(source, None, f"unreadable NPZ run log: {exc}") from None
+    log = RunLog(cols, header.get("metadata", {}), source, header.get("notes", []))
+    return log
+
+
+def read(path) -> RunLog:
+    """Read a run log by extension: ``.npz`` binary, anything else CSV."""
+    return read_npz(path) if os.fspath(path).lower().endswith(".npz") else read_csv(path)
+
+
+def write(log: RunLog, path, extra_metadata: dict | None = None) -> None:
+    """Write a run log by extension: ``.npz`` binary, anything else CSV."""
+    if os.fspath(path).lower().endswith(".npz"):
+        if extra_metadata:
+            log = RunLog(dict(log.columns), {**log.metadata, **extra_metadata}, log.source, list(log.notes))
+        write_npz(log, path)
+    else:
+        write_csv(log, path, extra_metadata)
