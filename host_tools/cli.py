@@ -45,6 +45,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
     for name, (module, helptext) in _available().items():
         mod = importlib.import_module(module)
+        if not hasattr(mod, "configure_cli"):
+            continue
         p = sub.add_parser(name, help=helptext, description=(mod.__doc__ or helptext).strip().split("\n\n")[0])
         mod.configure_cli(p)
         p.set_defaults(_module=module)

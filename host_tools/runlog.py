@@ -319,6 +319,9 @@ def parse_csv_text(text: str, source: str = "<text>") -> RunLog:
     check_last()
     if not data:
         raise RunLogError(source, first_data_line, "no complete data rows after the header")
+    blank = next((r for r, line in enumerate(data) if not line.strip()), None)
+    if blank is not None:  # np.loadtxt would skip it silently
+        raise RunLogError(source, first_data_line + blank, "blank line inside the data")
     try:
         table = np.loadtxt(io.StringIO("\n".join(data)), delimiter=",", dtype=np.float64, ndmin=2,
                            comments=None)

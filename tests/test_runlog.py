@@ -1,0 +1,150 @@
+"""Run-log I/O: the CSV format of shared/formats/run-log.md, NPZ, and every bad input it lists."""
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from host_tools import runlog
+from host_tools.runlog import RunLog, RunLogError, RunLogWarning
+
+GOOD = """# device: hdrg-01
+# sample_rate_hz: 1
+# reversal: on
+# exchange_s: 30
+# dwell_s: 120
+t_s,freq_hz,rate_dph,mode,temp_c,aux_vdd
+0.0,6227.3862488,397.25391,3,20.095,4.995019
+1.0,6227.3852465,274.61107,3,19.957,4.994312
+2.0,6227.3842465,12.5,1,19.957,4.994312
+"""
+
+
+def write(tmp_path, text, name="run.csv"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_reads_spec_example(tmp_path):
+    log = runlog.read(write(tmp_path, GOOD))
+    assert len(log) == 3
+    assert log.metadata["device"] == "hdrg-01" and log.metadata["dwell_s"] == "120"
+    assert list(log.columns) == ["t_s", "freq_hz", "rate_dph", "mode", "temp_c", "aux_vdd"]
+    assert log.mode.dtype == np.int64 and list(log.mode) == [3, 3, 1]
+    assert log.freq_hz if False else log["freq_hz"][0] == 6227.3862488
+    assert log.aux_columns == ["aux_vdd"] and log.reversal and log.sample_rate_hz == 1.0
+    assert log.proxy()[0] == "freq_hz" and log.proxy("temp")[0] == "temp_c"
+    assert log.line_of(0) == 7
+
+
+def test_column_order_free_and_mode_default(tmp_path):
+    log = runlog.read(write(tmp_path, "rate_dph,temp_c,t_s\n1.5,20,0\n2.5,20,1\n"))
+    assert list(log.t_s) == [0, 1] and list(log.mode) == [0, 0] and not log.reversal
+    with pytest.raises(RunLogError, match="freq"):
+        log.proxy("freq")
+
+
+def test_rate_dps_converted(tmp_path):
+    log = runlog.read(write(tmp_path, "t_s,rate_dps,temp_c\n0,0.001,20\n1,-0.002,20\n"))
+    np.testing.assert_allclose(log.rate_dph, [3.6, -7.2])
+    assert any("rate_dps" in n for n in log.notes)
+
+
+@pytest.mark.parametrize("text,line,problem", [
+    ("", 1, "empty file"),
+    ("# device: x\n# other: y\n", 2, "no header"),
+    ("t_s,rate_dph,temp_c\n", 2, "no data rows"),
+    ("t_s,temp_c\n0,1\n", 1, "missing required column 'rate_dph'"),
+    ("rate_dph,temp_c\n0,1\n", 1, "missing required column 't_s'"),
+    ("t_s,rate_dph\n0,1\n", 1, "temperature proxy"),
+    ("t_s,rate_dph,temp_c,t_s\n0,1,2,3\n", 1, "appears twice"),
+    ("t_s,rate_dph,temp_c\n0,1,2\n1,abc,2\n2,1,2\n", 3, "'rate_dph': 'abc' is not a number"),
+    ("t_s,rate_dph,temp_c\n0,1,2\n1,nan,2\n2,1,2\n", 3, "NaN/inf"),
+    ("t_s,rate_dph,temp_c\n0,1,2\n1,1,inf\n2,1,2\n", 3, "NaN/inf"),
+    ("t_s,rate_dph,temp_c\n0,1,2\n1,1,2\n1,1,2\n", 4, "duplicated"),
+    ("t_s,rate_dph,temp_c\n0,1,2\n2,1,2\n1,1,2\n", 4, "not increasing"),
+    ("t_s,rate_dph,temp_c,mode\n0,1,2,1\n1,1,2,7\n", 3, "unknown mode code 7"),
+    ("t_s,rate_dph,temp_c,mode\n0,1,2,1\n1,1,2,1.5\n", 3, "not an integer"),
+    ("t_s,rate_dph,temp_c\n0,1,2\n\n2,1,2\n", 3, "blank line"),
+    ("t_s,rate_dph,temp_c\n0,1,2\n1,1,2,9\n2,1,2\n", 3, "4 cells, the header has 3"),
+    ("t_s,rate_dph,temp_c\n0,1,2\n1,1\n2,1,2\n", 3, "2 cells, the header has 3"),
+])
+def test_bad_input_errors_name_file_line_problem(tmp_path, text, line, problem):
+    p = write(tmp_path, text)
+    with pytest.raises(RunLogError) as err:
+        runlog.read(p)
+    assert err.value.line == line, str(err.value)
+    assert problem in str(err.value)
+    assert str(err.value).startswith(f"{p}:{line}: ")
+
+
+def test_truncated_last_line_warns_and_repairs(tmp_path):
+    p = write(tmp_path, "t_s,rate_dph,temp_c\n0,1,2\n1,1,2\n2,1.2")  # no final newline, 2 of 3 cells
+    with pytest.warns(RunLogWarning, match=r":4: truncated last line '2,1.2'"):
+        log = runlog.read(p)
+    assert len(log) == 2 and any("truncated" in n for n in log.notes)
+    # a cut inside a number: the cell still parses but the line is incomplete -> same repair
+    p2 = write(tmp_path, "t_s,rate_dph,temp_c\n0,1,2\n1,1,2\n2,1,", "b.csv")
+    with pytest.warns(RunLogWarning, match="truncated"):
+        assert len(runlog.read(p2)) == 2
+
+
+def test_complete_last_line_without_newline_is_fine(tmp_path):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        log = runlog.read(write(tmp_path, "t_s,rate_dph,temp_c\n0,1,2\n1,1,2"))
+    assert len(log) == 2
+
+
+def test_gaps_warn_and_split_segments(tmp_path):
+    rows = "".join(f"{t},1,2\n" for t in [0, 1, 2, 3, 10, 11, 12, 50, 51])
+    with pytest.warns(RunLogWarning, match=r"2 gap\(s\).*largest 38 s before line 9"):
+        log = runlog.read(write(tmp_path, "t_s,rate_dph,temp_c\n" + rows))
+    assert len(log) == 9  # nothing dropped
+    assert list(log.segments) == [0, 4, 7]
+
+
+def test_measured_bursty_file_loads_and_reports_gaps(measured_x, measured_y):
+    for path in (measured_x, measured_y):
+        with pytest.warns(RunLogWarning, match="24 gap"):
+            log = runlog.read(path)
+        assert len(log) == 6250 and len(log.segments) == 25
+        assert log.proxy()[0] == "temp_c" and not log.reversal
+        assert log.sample_rate_hz == 50.0
+        assert "LSM6DSM" in log.metadata["device"]
+
+
+def test_in_memory_validation_names_row():
+    with pytest.raises(RunLogError, match="row 2: t_s duplicated"):
+        RunLog.from_arrays(t_s=[0, 1, 1], rate_dph=[0, 0, 0], temp_c=[0, 0, 0])
+    with pytest.raises(RunLogError, match="row 1: column 'rate_dph' is nan"):
+        RunLog.from_arrays(t_s=[0, 1, 2], rate_dph=[0, np.nan, 0], temp_c=[0, 0, 0])
+
+
+def test_npz_rejects_foreign_file(tmp_path):
+    p = tmp_path / "x.npz"
+    np.savez(p, a=np.arange(3))
+    with pytest.raises(RunLogError, match="not an hdrg run-log NPZ|unreadable"):
+        runlog.read(p)
+
+
+finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+
+
+@settings(max_examples=40, deadline=None)
+@given(data=st.lists(st.tuples(finite, finite, st.sampled_from([0, 1, 2, 3])), min_size=1, max_size=30),
+       meta=st.dictionaries(st.from_regex(r"[a-z_]{1,8}", fullmatch=True), st.from_regex(r"[a-z0-9 .]{0,12}", fullmatch=True), max_size=4))
+def test_csv_and_npz_round_trip_lossless(tmp_path_factory, data, meta):
+    d = tmp_path_factory.mktemp("rt")
+    t = np.cumsum(np.full(len(data), 0.5))
+    log = RunLog.from_arrays(meta, t_s=t, rate_dph=[r for r, _, _ in data], freq_hz=[f for _, f, _ in data],
+                             mode=[m for _, _, m in data], aux_x=np.arange(len(data)) * 0.1)
+    for name in ("a.csv", "a.npz"):
+        runlog.write(log, d / name)
+        back = runlog.read(d / name)
+        assert list(back.columns) == list(log.columns)
+        for k in log.columns:
+            np.testing.assert_array_equal(back[k], log[k])
+            assert back[k].dtype == log[k].dtype
+        assert {k: v.strip() for k, v in back.metadata.items()} == {k: v.strip() for k, v in meta.items()}
