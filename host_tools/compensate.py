@@ -1,0 +1,252 @@
+"""Apply a bias model to a run log (golden model, float64): `hdrg compensate`.
+
+Data flow, per sample i, all causal (sample i uses samples <= i only)::
+
+    run log --(mode-reversal combination, host_tools.reversal)--> y, combined-valid
+            --(proxy column p, host_tools.proxy)--------------> u, proxy-clamped
+            --(rate estimator on p, host_tools.rate)----------> v, rate-clamped, warm-up
+            --(aux generator, host_tools.regressors)----------> z
+            --(B = model, Horner form)-------------------------> B
+    output: rate_dph = y - B, bias_dph = B, valid
+
+Exact semantics (the fixed-point reference copies them):
+
+* **Target y** [deg/h]: FTR model (``reversal`` None): the log must be all mode 0; ``y = rate_dph``
+  and the combined output is valid at every sample.  Mode-reversal model: the log must use mode
+  reversal (modes 1/2/3); ``y, combined_valid = host_tools.reversal.combine(log, combiner,
+  max_stale_s, settle_s, fs_hz=rate.fs)`` (the model's nominal fs, as in firmware).  A model/log
+  mismatch is an error.
+* **u** from the proxy column of the model's kind (host_tools.proxy); **v** from the same column
+  by the model's rate estimator, restarted at every ``RunLog.segments`` start
+  (host_tools.rate); **z** from the aux generator (0 for 'none').
+* **valid[i]** = ``combined_valid[i] and not warmup[i] and mode[i] != 3``.  Clamping of u or v
+  does not invalidate a sample (it is flagged only).
+* **flags[i]** (uint8 bit field): ``FLAG_PROXY_CLAMPED`` 1 (u was clamped), ``FLAG_RATE_CLAMPED``
+  2 (v was clamped), ``FLAG_WARMUP`` 4 (rate estimator in warm-up), ``FLAG_EXCHANGE`` 8 (mode 3),
+  ``FLAG_STALE`` 16 (mode-reversal output not valid at a mode 1/2 sample: settling, no
+  complete window of the other mode yet, or that window older than max_stale_s).
+* **B[i]** = ``model.evaluate(u[i], v[i], z[i])`` at every sample (Horner form,
+  host_tools.regressors), deg/h.
+* **Output** (:func:`compensate`): where valid, ``rate_dph = y - B`` and ``bias_dph = B``; where
+  not valid, both *hold* their last valid values (0.0 before the first valid sample; the hold
+  is not reset at segment starts), like the combiner's output; ``valid`` = 1.0 / 0.0.
+
+The compensated run log keeps every other column and the metadata, and adds the metadata
+``compensated: yes``, ``compensation_model``, ``compensation_impl``, ``compensation_terms``,
+``compensation_valid``.  A log that is already compensated is refused.
+
+The log's sample rate (``RunLog.sample_rate_hz``) must match the model's ``rate.fs`` within 1 %
+(the rate scaling uses the nominal fs).
+"""
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+
+import numpy as np
+
+from host_tools import runlog as rl
+from host_tools.model import BiasModel, ModelConfig
+from host_tools.proxy import ProxyConfig, parse_range
+from host_tools.rate import RateConfig, parse_rate_range
+from host_tools.regressors import AuxConfig, aux_regressor
+from host_tools.reversal import ReversalConfig, combine
+
+FLAG_PROXY_CLAMPED = 1
+FLAG_RATE_CLAMPED = 2
+FLAG_WARMUP = 4
+FLAG_EXCHANGE = 8
+FLAG_STALE = 16
+FLAG_NAMES = {FLAG_PROXY_CLAMPED: "proxy_clamped", FLAG_RATE_CLAMPED: "rate_clamped",
+              FLAG_WARMUP: "warmup", FLAG_EXCHANGE: "exchange", FLAG_STALE: "stale"}
+FS_TOLERANCE = 0.01  # relative mismatch allowed between the log's sample rate and the model's fs
+IMPLS = ("float", "fixed")
+
+
+@dataclass
+class Prepared:
+    """Per-sample inputs of the model and the target, all float64[n] / bool[n] / uint8[n]:
+    ``p`` proxy [Hz or degC], ``u``, ``v``, ``z`` (normalized regressors), ``y`` target [deg/h]
+    (FTR rate_dph or the mode-reversal combined output), ``valid``, ``flags`` (FLAG_* bits)."""
+
+    p: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    z: np.ndarray
+    y: np.ndarray
+    valid: np.ndarray
+    flags: np.ndarray
+    source: str = "<memory>"
+
+    def __len__(self) -> int:
+        return len(self.y)
+
+    def flag_counts(self) -> dict:
+        """{flag name: number of samples with that flag}."""
+        return {name: int(np.count_nonzero(self.flags & bit)) for bit, name in FLAG_NAMES.items()}
+
+
+def _config_of(config) -> ModelConfig:
+    if isinstance(config, BiasModel):
+        return config.config
+    if not isinstance(config, ModelConfig):
+        raise TypeError(f"expected a ModelConfig or BiasModel, not {type(config).__name__}")
+    return config
+
+
+def check_sample_rate(log, fs: float) -> None:
+    """Refuse a log whose sample rate differs from the model's nominal fs by more than 1 %."""
+    fs_log = log.sample_rate_hz
+    if np.isfinite(fs_log) and abs(fs_log / fs - 1.0) > FS_TOLERANCE:
+        raise ValueError(f"{log.source}: sample rate {fs_log:.6g} Hz does not match the model's "
+                         f"nominal fs {fs:.6g} Hz (the rate estimator assumes the nominal period)")
+
+
+def prepare(log, config) -> Prepared:
+    """Per-sample u, v, z, y, valid, flags of ``log`` under ``config`` (a ModelConfig or a
+    BiasModel); see the module doc for the exact semantics."""
+    cfg = _config_of(config)
+    check_sample_rate(log, cfg.rate.fs)
+    _, p = log.proxy(cfg.proxy.kind)
+    u, u_clamped = cfg.proxy.normalize(p)
+    v, v_clamped, warm = cfg.rate.normalize(p, log.segments)
+    z = aux_regressor(log, cfg.aux)
+    mode = np.asarray(log.mode)
+    if cfg.reversal is None:
+        if log.reversal:
+            raise ValueError(f"{log.source}: the model is for force-to-rebalance (no mode reversal) "
+                             f"but the log uses mode reversal (modes 1/2/3)")
+        y = np.array(log.rate_dph, np.float64)
+        combined_valid = np.ones(len(y), bool)
+    else:
+        if not log.reversal:
+            raise ValueError(f"{log.source}: the model is for mode reversal "
+                             f"(combiner {cfg.reversal.combiner!r}) but the log is FTR (all mode 0)")
+        comb = combine(log, combiner=cfg.reversal.combiner, max_stale_s=cfg.reversal.max_stale_s,
+                       settle_s=cfg.reversal.settle_s, fs_hz=cfg.rate.fs)
+        y = np.asarray(comb.out_dph, np.float64)
+        combined_valid = np.asarray(comb.valid, bool)
+    exchange = mode == rl.MODE_EXCHANGE
+    valid = combined_valid & ~warm & ~exchange
+    flags = (u_clamped * FLAG_PROXY_CLAMPED + v_clamped * FLAG_RATE_CLAMPED + warm * FLAG_WARMUP
+             + exchange * FLAG_EXCHANGE + (~combined_valid & ~exchange) * FLAG_STALE).astype(np.uint8)
+    return Prepared(np.asarray(p, np.float64), u, v, z, y, valid, flags, log.source)
+
+
+def _hold(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """values where valid, else the last valid value (0.0 before the first)."""
+    idx = np.where(valid, np.arange(len(values)), -1)
+    np.maximum.accumulate(idx, out=idx)
+    return np.where(idx >= 0, values[np.maximum(idx, 0)], 0.0)
+
+
+def check_impl(impl: str) -> None:
+    """Refuse an implementation that is not available: only 'float' for now."""
+    if impl == "fixed":
+        raise ValueError("--impl fixed: the fixed-point implementation is not available yet "
+                         "(it comes with the firmware reference); use --impl float")
+    if impl != "float":
+        raise ValueError(f"--impl must be one of {IMPLS}, not {impl!r}")
+
+
+def compensate(log, model: BiasModel, impl: str = "float") -> rl.RunLog:
+    """The compensated run log (see the module doc): ``rate_dph = y - B``, ``bias_dph = B``,
+    ``valid`` 1/0, other columns and metadata kept, ``compensated: yes`` added."""
+    check_impl(impl)
+    if str(log.metadata.get("compensated", "")).strip().lower() == "yes" or "bias_dph" in log:
+        raise ValueError(f"{log.source}: the log is already compensated (metadata 'compensated: yes' "
+                         f"or a 'bias_dph' column)")
+    prep = prepare(log, model)
+    bias = model.evaluate(prep.u, prep.v, prep.z)
+    out = log.with_columns(rate_dph=_hold(prep.y - bias, prep.valid), bias_dph=_hold(bias, prep.valid),
+                           valid=prep.valid.astype(np.float64))
+    nvalid = int(np.count_nonzero(prep.valid))
+    out.metadata.update({
+        "compensated": "yes",
+        "compensation_model": model.source,
+        "compensation_impl": impl,
+        "compensation_terms": ",".join(f"k{k}" for k in model.terms),
+        "compensation_valid": f"{nvalid} of {len(prep)} samples",
+    })
+    return out
+
+
+def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: str = "diff", n: int = 8,
+                         shift: int = 4, proxy_range=None, rate_range: float | None = None,
+                         proxy_margin: float = 0.1, rate_margin: float = 0.1, rate_percentile: float = 99.9,
+                         reversal=None, aux=None, fs: float | None = None) -> ModelConfig:
+    """The default ModelConfig for training ``logs`` (RunLogs, all FTR or all mode reversal).
+
+    * proxy kind: ``proxy_kind`` or 'freq' if every log has ``freq_hz``, else 'temp';
+    * fs [Hz]: ``fs`` or the first log's sample rate; every log must match it within 1 %;
+    * proxy range: ``proxy_range`` (LO, HI) in proxy units, else ProxyConfig.from_data over the
+      logs' non-exchange samples widened by ``proxy_margin``;
+    * rate span: ``rate_range`` [proxy units/s], else RateConfig.from_data (``rate_percentile``
+      of |dp/dt| past warm-up on non-exchange samples, times 1 + ``rate_margin``);
+    * reversal: None for FTR logs (giving one is an error); for mode-reversal logs ``reversal``
+      (ReversalConfig or dict) or the default ReversalConfig();
+    * aux: ``aux`` (AuxConfig or dict) or AuxConfig() ('none').
+    """
+    logs = list(logs)
+    if not logs:
+        raise ValueError("no training logs")
+    if proxy_kind is None:
+        proxy_kind = "freq" if all("freq_hz" in log for log in logs) else "temp"
+    column = ProxyConfig(proxy_kind, 0.0, 1.0).column
+    for log in logs:
+        if column not in log:
+            raise rl.RunLogError(log.source, None, f"proxy '{proxy_kind}' needs column '{column}', which the log lacks")
+    if fs is None:
+        fs = logs[0].sample_rate_hz
+        if not np.isfinite(fs):
+            raise ValueError(f"{logs[0].source}: cannot tell the sample rate (one sample, no metadata)")
+    for log in logs:
+        check_sample_rate(log, fs)
+    kinds = {log.reversal for log in logs}
+    if len(kinds) > 1:
+        names = ", ".join(f"{log.source} ({'reversal' if log.reversal else 'FTR'})" for log in logs)
+        raise ValueError(f"training logs mix FTR and mode reversal: {names}")
+    if kinds == {False}:
+        if reversal is not None:
+            raise ValueError("reversal settings given but the training logs are FTR (all mode 0)")
+        rev = None
+    else:
+        rev = ReversalConfig() if reversal is None else (
+            reversal if isinstance(reversal, ReversalConfig) else ReversalConfig.from_dict(dict(reversal)))
+    aux_cfg = AuxConfig() if aux is None else (aux if isinstance(aux, AuxConfig) else AuxConfig.from_dict(dict(aux)))
+    keep = [np.asarray(log.mode) != rl.MODE_EXCHANGE for log in logs]
+    ps = [log[column] for log in logs]
+    if proxy_range is not None:
+        lo, hi = parse_range(proxy_range) if isinstance(proxy_range, str) else proxy_range
+        proxy = ProxyConfig.from_range(proxy_kind, float(lo), float(hi))
+    else:
+        proxy = ProxyConfig.from_data([p[m] for p, m in zip(ps, keep)], proxy_kind, proxy_margin)
+    if rate_range is not None:
+        span = parse_rate_range(rate_range) if isinstance(rate_range, str) else float(rate_range)
+        rate = RateConfig(rate_estimator, n, shift, span, fs)
+    else:
+        rate = RateConfig.from_data(ps, fs, rate_estimator, n, shift, restarts=[log.segments for log in logs],
+                                    percentile=rate_percentile, margin=rate_margin, masks=keep)
+    return ModelConfig(proxy, rate, rev, aux_cfg)
+
+
+# -- CLI ------------------------------------------------------------------------------------------
+
+def configure_cli(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("run", metavar="RUN", help="run log to compensate (CSV or .npz)")
+    parser.add_argument("--model", required=True, help="bias model JSON (hdrg fit)")
+    parser.add_argument("-o", "--output", required=True, help="compensated run log to write (CSV or .npz)")
+    parser.add_argument("--impl", choices=IMPLS, default="float",
+                        help="float: the float64 golden model (default); fixed: the bit-accurate "
+                             "fixed-point reference (not available yet)")
+
+
+def run_cli(args) -> int:
+    check_impl(args.impl)
+    model = BiasModel.from_json(args.model)
+    log = rl.read(args.run)
+    out = compensate(log, model, impl=args.impl)
+    rl.write(out, args.output)
+    nvalid = int(np.count_nonzero(out["valid"]))
+    print(f"{args.output}: {len(out)} samples, {nvalid} valid ({100.0 * nvalid / len(out):.1f} %)")
+    return 0
