@@ -60,6 +60,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     mod = importlib.import_module(args._module)
     warnings.simplefilter("default")
+    warnings.showwarning = lambda message, category, *a, **k: print(
+        f"hdrg {args.command}: warning: {message}", file=sys.stderr)
     try:
         return int(mod.run_cli(args) or 0)
     except (RunLogError, ValueError, FileNotFoundError) as exc:

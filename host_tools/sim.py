@@ -289,6 +289,16 @@ class DampingAsym:
 
 
 @dataclass
+class DampingWander:
+    """Non-repeatable part of B_D [deg/h]: the damping-axis angle theta_tau wanders (heat flow in
+    the structure, paper 3.1), a Gauss-Markov process of standard deviation sigma_dph and
+    correlation time tau_s, different at every power-on (seed).  Does not flip in mode 2, so mode
+    reversal cancels it while no temperature model can: the reason mode reversal exists."""
+    sigma_dph: float = 0.6
+    tau_s: float = 7200.0
+
+
+@dataclass
 class Electronics:
     """B_E [deg/h] = e1 y + e2 y^2, y = T_el - t_ref [degC].  Flips in mode 2."""
     e1_dph_per_c: float = 0.18
@@ -446,6 +456,8 @@ EFFECTS: dict = {
     "self_heating": EffectSpec(SelfHeating, 0, True, "self-heating of resonator/electronics/board after power-on"),
     "damping_asym": EffectSpec(DampingAsym, 0, True,
                                "B_D: damping-asymmetry bias in T_res and dT_res/dt (does not flip)"),
+    "damping_wander": EffectSpec(DampingWander, 8, True,
+                                 "non-repeatable wander of B_D (damping axis), Gauss-Markov (does not flip)"),
     "electronics": EffectSpec(Electronics, 0, True, "B_E: electronics bias in T_el (flips)"),
     "turn_on": EffectSpec(TurnOn, 0, True, "(b) turn-on transient after power-on (flips)"),
     "earth_rate": EffectSpec(EarthRate, 0, True, "Earth rate, vertical axis (true rate, flips)"),
@@ -857,6 +869,16 @@ def run_physics(cfg: SimConfig, seed: int) -> dict:
         d = eff["damping_asym"]
         add("damping_asym", ((d.c3_dph_per_c3 * x + d.c2_dph_per_c2) * x + d.c1_dph_per_c) * x
             + (d.g1_dph_per_cpm + d.g2_dph_per_c_cpm * x) * r_res, False)
+    if "damping_wander" in eff:
+        dw = eff["damping_wander"]
+        a = math.exp(-dt / dw.tau_s)
+        w = _rng(seed, "damping_wander").standard_normal(n)
+        x0 = dw.sigma_dph * w[0]
+        gm = np.empty(n)
+        gm[0] = x0
+        if n > 1:
+            gm[1:] = lfilter([dw.sigma_dph * math.sqrt(1.0 - a * a)], [1.0, -a], w[1:], zi=[a * x0])[0]
+        add("damping_wander", gm, False)
     if "electronics" in eff:
         e = eff["electronics"]
         y = T_el - p.t_ref_c

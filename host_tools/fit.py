@@ -1,0 +1,957 @@
+"""Numeric core of the host fitter of the 17-term bias model (firmware_ref/terms.py, eq. (8) of
+Chen et al. 2022):  y ~ sum_k c_k x_k(u, v, z), c in deg/h.
+
+Inputs are arrays of one length n (any real dtype, 1-D):
+
+* ``u``  normalized temperature proxy, dimensionless, nominally in [-1, 1];
+* ``v``  normalized proxy rate, dimensionless, nominally in [-1, 1];
+* ``z``  auxiliary regressor of k7 (any unit; the unit of k7 is deg/h per unit of z), or None;
+* ``y``  target bias, deg/h (the mode-reversal combined output of the golden pipeline);
+* ``w``  weight >= 0 or boolean mask, or None (all 1).  Samples with w == 0 never enter (their
+  u, v, z, y may hold anything, even NaN); w > 0 samples must be finite.  The fit minimizes
+  sum w r^2 (weights are relative inverse variances; a mask gives ordinary least squares).
+
+Design (what the CLI and other stages rely on):
+
+1. One streaming pass.  :class:`Accumulator` keeps mergeable sufficient statistics, never the
+   n x 17 design: the weighted moments ``M[a, b] = sum w P_a(u) P_b(v)`` (a, b = 0..6, P = Legendre
+   polynomials), ``Y[a, b] = sum w y P_a(u) P_b(v)`` and ``Z[a, b] = sum w z P_a(u) P_b(v)``
+   (a, b = 0..3), and the scalars sum w, n, sum w y^2, sum w z y, sum w z^2, min/max of u and v.
+   The Gram matrix of the 17 regressors follows exactly from these by the Legendre linearization
+   P_a P_c = sum_x L[a, c, x] P_x.  Accumulators add (runs, devices, chunks) and subtract
+   (cross-validation: train = total - fold).  Memory is O(1) in n (inputs are converted chunk by
+   chunk).
+2. Stable solve.  The Gram matrix is formed in the well-conditioned internal basis
+   q_k = P_i(u) P_j(v) (k7: z) and factored by diagonally pivoted Cholesky, G = R^T R (numerical
+   rank r, scaled tolerance 1e-14); R acts as the triangular factor of the never-built design.
+   A monomial term set S is the small problem  min || R A_S c - t ||  with A the exact change of
+   basis (u^i v^j = sum C[i,a] C[j,b] P_a(u) P_b(v)) and R^T t = X_q^T y; it is solved by
+   Householder QR, so the monomial design's condition number is not squared.  A term whose
+   (unit-normalized) column keeps a relative residual <= rcond (default 1e-6) after the terms
+   before it in index order is unidentifiable (Cholesky/QR with pivoting of deficient columns
+   only, like LINPACK dqrdc2): :class:`UnidentifiableError` names it and the terms it is collinear
+   with, or with ``drop_unidentifiable=True`` it is dropped and listed in ``FitResult.dropped``.
+3. Term selection ``terms='auto'``: forward stepwise from {k0} plus backward pruning, scored by
+   cross-validated held-out squared error over groups (runs, or contiguous time blocks of one
+   run: never random samples, the data are autocorrelated); the smallest model whose CV error is
+   within max(min_gain x, significance standard errors of) the best CV error is kept (see
+   :func:`select_terms`).
+
+Residual RMS is from the normal equations (sum w y^2 - fitted part): its absolute accuracy is
+about 1e-8 x rms(y), ample unless the model is nearly exact.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numba as nb
+import numpy as np
+from numpy.polynomial import legendre as _leg
+
+from firmware_ref.terms import K_AUX, N_TERMS, PAPER_TERMS, POLY_INDEX, TERM_NAMES, TERM_POWERS, parse_terms
+
+__all__ = [
+    "Accumulator", "FitResult", "UnidentifiableError", "accumulate_groups", "block_groups",
+    "design_matrix", "fit", "fit_accumulators", "predict", "select_terms", "solve",
+]
+
+CHUNK = 1 << 20          # samples converted per kernel call (bounds memory for non-float64 inputs)
+RCOND = 1e-6             # default identifiability threshold (relative column residual)
+_BASIS_TOL = 1e-14       # truncation of the pivoted Cholesky of the scaled internal Gram
+_BLOCK = 256             # samples per vectorized block inside the kernel
+_NM, _NQ = 7, 4          # moment orders 0..6, regressor orders 0..3
+# scalar slots of the accumulator state
+_SW, _N, _YY, _ZY, _ZZ, _UMIN, _UMAX, _VMIN, _VMAX = range(9)
+_NS = 9
+
+
+class UnidentifiableError(ValueError):
+    """The data cannot identify some requested terms.  ``collinear`` maps each unidentifiable
+    term index to the tuple of kept term indices it is (numerically) a combination of."""
+
+    def __init__(self, message, collinear):
+        super().__init__(message)
+        self.collinear = dict(collinear)
+
+
+# ---------------------------------------------------------------------------------------------
+# constant tables: Legendre <-> monomial, linearization
+# ---------------------------------------------------------------------------------------------
+def _tables():
+    c = np.zeros((_NQ, _NQ))          # x^i = sum_a C[i, a] P_a(x)
+    for i in range(_NQ):
+        e = np.zeros(i + 1)
+        e[i] = 1.0
+        c[i, :i + 1] = _leg.poly2leg(e)
+    lin = np.zeros((_NQ, _NQ, _NM))   # P_a P_c = sum_x L[a, c, x] P_x
+    for a in range(_NQ):
+        for b in range(_NQ):
+            ea = np.zeros(a + 1)
+            ea[a] = 1.0
+            eb = np.zeros(b + 1)
+            eb[b] = 1.0
+            p = _leg.legmul(ea, eb)
+            lin[a, b, :len(p)] = p
+    amat = np.zeros((N_TERMS, N_TERMS))  # monomial term k = sum_m A[m, k] q_m
+    for k, pw in enumerate(TERM_POWERS):
+        if pw is None:
+            amat[k, k] = 1.0
+            continue
+        for a in range(pw[0] + 1):
+            for b in range(pw[1] + 1):
+                amat[POLY_INDEX[a][b], k] = c[pw[0], a] * c[pw[1], b]
+    return c, lin, amat
+
+
+_C, _LIN, _A = _tables()
+_POLY_TERMS = tuple(k for k in range(N_TERMS) if k != K_AUX)
+
+
+def _name(k):
+    return f"k{k} ({TERM_NAMES[k]})"
+
+
+# ---------------------------------------------------------------------------------------------
+# the streaming kernel
+# ---------------------------------------------------------------------------------------------
+@nb.njit(cache=True, nogil=True, fastmath={"reassoc", "contract", "nsz"})
+def _flush(m, bu, bv, by, bz, bw, has_z, pu, pv, wpu, ypu, zpu, M, Y, Z, S, nm, nq):
+    """Add the m buffered samples to one group's sums (vectorizable dot products)."""
+    for j in range(m):
+        pu[0, j] = 1.0
+        pu[1, j] = bu[j]
+        pv[0, j] = 1.0
+        pv[1, j] = bv[j]
+    for a in range(2, nm):
+        c1 = (2.0 * a - 1.0) / a
+        c2 = (a - 1.0) / a
+        for j in range(m):
+            pu[a, j] = c1 * bu[j] * pu[a - 1, j] - c2 * pu[a - 2, j]
+        for j in range(m):
+            pv[a, j] = c1 * bv[j] * pv[a - 1, j] - c2 * pv[a - 2, j]
+    for a in range(nm):
+        for j in range(m):
+            wpu[a, j] = bw[j] * pu[a, j]
+    for a in range(nm):
+        for b in range(nm):
+            s = 0.0
+            for j in range(m):
+                s += wpu[a, j] * pv[b, j]
+            M[a, b] += s
+    for a in range(nq):
+        for j in range(m):
+            ypu[a, j] = by[j] * wpu[a, j]
+    for a in range(nq):
+        for b in range(nq):
+            s = 0.0
+            for j in range(m):
+                s += ypu[a, j] * pv[b, j]
+            Y[a, b] += s
+    s = 0.0
+    for j in range(m):
+        s += ypu[0, j] * by[j]
+    S[_YY] += s
+    s = 0.0
+    for j in range(m):
+        s += bw[j]
+    S[_SW] += s
+    S[_N] += m
+    if has_z:
+        for a in range(nq):
+            for j in range(m):
+                zpu[a, j] = bz[j] * wpu[a, j]
+        for a in range(nq):
+            for b in range(nq):
+                s = 0.0
+                for j in range(m):
+                    s += zpu[a, j] * pv[b, j]
+                Z[a, b] += s
+        s = 0.0
+        s2 = 0.0
+        for j in range(m):
+            s += zpu[0, j] * by[j]
+            s2 += zpu[0, j] * bz[j]
+        S[_ZY] += s
+        S[_ZZ] += s2
+    for j in range(m):
+        S[_UMIN] = min(S[_UMIN], bu[j])
+        S[_UMAX] = max(S[_UMAX], bu[j])
+        S[_VMIN] = min(S[_VMIN], bv[j])
+        S[_VMAX] = max(S[_VMAX], bv[j])
+
+
+@nb.njit(cache=True, nogil=True)
+def _accumulate(u, v, z, y, w, g, has_z, has_w, has_g, M, Y, Z, S, nm, nq):
+    """Accumulate samples into M (G,7,7), Y (G,4,4), Z (G,4,4), S (G,9) by group g (0..G-1).
+    Returns -1, or the index of the first w != 0 sample with a non-finite value or w < 0
+    (the sums are then partial: callers pass zeroed scratch and commit only on success)."""
+    n = u.shape[0]
+    B = _BLOCK
+    bu = np.empty(B)
+    bv = np.empty(B)
+    by = np.empty(B)
+    bz = np.empty(B)
+    bw = np.empty(B)
+    pu = np.empty((_NM, B))
+    pv = np.empty((_NM, B))
+    wpu = np.empty((_NM, B))
+    ypu = np.empty((_NQ, B))
+    zpu = np.empty((_NQ, B))
+    m = 0
+    cur = 0
+    for i in range(n):
+        wi = w[i] if has_w else 1.0
+        if wi == 0.0:
+            continue
+        gi = g[i] if has_g else 0
+        ui = u[i]
+        vi = v[i]
+        yi = y[i]
+        zi = z[i] if has_z else 0.0
+        if not (wi > 0.0 and math.isfinite(wi) and math.isfinite(ui) and math.isfinite(vi)
+                and math.isfinite(yi) and math.isfinite(zi)):
+            return i
+        if m == B or (gi != cur and m > 0):
+            _flush(m, bu, bv, by, bz, bw, has_z, pu, pv, wpu, ypu, zpu, M[cur], Y[cur], Z[cur], S[cur], nm, nq)
+            m = 0
+        cur = gi
+        bu[m] = ui
+        bv[m] = vi
+        by[m] = yi
+        bz[m] = zi
+        bw[m] = wi
+        m += 1
+    if m > 0:
+        _flush(m, bu, bv, by, bz, bw, has_z, pu, pv, wpu, ypu, zpu, M[cur], Y[cur], Z[cur], S[cur], nm, nq)
+    return -1
+
+
+@nb.njit(cache=True, nogil=True)
+def _predict(coef, u, v, z, has_z, out):
+    for i in range(u.shape[0]):
+        ui = u[i]
+        vi = v[i]
+        acc = 0.0
+        for a in range(3, -1, -1):
+            inner = 0.0
+            for b in range(3, -1, -1):
+                inner = inner * vi + coef[a * 4 + b]
+            acc = acc * ui + inner
+        if has_z:
+            acc += coef[16] * z[i]
+        out[i] = acc
+
+
+def _scratch(groups):
+    S = np.zeros((groups, _NS))
+    S[:, _UMIN] = S[:, _VMIN] = np.inf
+    S[:, _UMAX] = S[:, _VMAX] = -np.inf
+    return np.zeros((groups, _NM, _NM)), np.zeros((groups, _NQ, _NQ)), np.zeros((groups, _NQ, _NQ)), S
+
+
+def _as_arrays(u, v, z, y, w, g=None):
+    """Check shapes; return the arrays (not converted) and n."""
+    arrs = {"u": u, "v": v, "y": y}
+    if z is not None:
+        arrs["z"] = z
+    if w is not None:
+        arrs["w"] = w
+    if g is not None:
+        arrs["groups"] = g
+    out = {}
+    n = None
+    for key, a in arrs.items():
+        a = np.asarray(a)
+        if a.ndim != 1:
+            raise ValueError(f"fit input {key!r} must be a 1-D array, got shape {a.shape}")
+        if key != "groups" and not (np.issubdtype(a.dtype, np.number) or a.dtype == bool):
+            raise ValueError(f"fit input {key!r} must be numeric, got dtype {a.dtype}")
+        if n is None:
+            n = a.shape[0]
+        elif a.shape[0] != n:
+            raise ValueError(f"fit input {key!r} has {a.shape[0]} samples, 'u' has {n}")
+        out[key] = a
+    return out, n
+
+
+def _run_kernel(arrs, n, gidx, groups):
+    """Stream the arrays chunk by chunk into fresh sums; raise ValueError on bad samples."""
+    M, Y, Z, S = _scratch(groups)
+    has_z, has_w, has_g = "z" in arrs, "w" in arrs, gidx is not None
+    dummy = np.zeros(1)
+    dummy_g = np.zeros(1, dtype=np.int64)
+    for s in range(0, n, CHUNK):
+        e = min(n, s + CHUNK)
+        f = {k: np.ascontiguousarray(arrs[k][s:e], dtype=np.float64) for k in ("u", "v", "y")}
+        zc = np.ascontiguousarray(arrs["z"][s:e], dtype=np.float64) if has_z else dummy
+        wc = np.ascontiguousarray(arrs["w"][s:e], dtype=np.float64) if has_w else dummy
+        gc = gidx[s:e] if has_g else dummy_g
+        bad = _accumulate(f["u"], f["v"], zc, f["y"], wc, gc, has_z, has_w, has_g, M, Y, Z, S, _NM, _NQ)
+        if bad >= 0:
+            i = s + bad
+            vals = {"w": wc[bad] if has_w else 1.0, "u": f["u"][bad], "v": f["v"][bad],
+                    "z": zc[bad] if has_z else 0.0, "y": f["y"][bad]}
+            if not (vals["w"] >= 0):
+                raise ValueError(f"fit input 'w' is {vals['w']} at sample {i}: weights must be finite and >= 0")
+            which = next(k for k in ("w", "u", "v", "z", "y") if not math.isfinite(vals[k]))
+            raise ValueError(f"fit input {which!r} is {vals[which]} at sample {i}, which has w != 0: "
+                             f"non-finite samples must be masked with w = 0")
+    return M, Y, Z, S
+
+
+# ---------------------------------------------------------------------------------------------
+# accumulator
+# ---------------------------------------------------------------------------------------------
+class Accumulator:
+    """Mergeable sufficient statistics of the 17-term model (see module docstring).
+
+    ``acc.add(u, v, z, y, w)`` streams samples in; ``a + b`` / ``a.merge(b)`` combine runs,
+    devices or chunks; ``a - b`` removes a part (cross-validation).  ``n`` = samples used
+    (w > 0), ``sum_w`` = their total weight, ``has_z`` = some z was non-zero."""
+
+    __slots__ = ("M", "Y", "Z", "S")
+
+    def __init__(self):
+        M, Y, Z, S = _scratch(1)
+        self.M, self.Y, self.Z, self.S = M[0], Y[0], Z[0], S[0]
+
+    def add(self, u, v, z, y, w=None) -> "Accumulator":
+        """Accumulate samples (arrays of one length; z, w may be None).  Returns self.  On a bad
+        sample it raises ValueError and leaves the accumulator unchanged."""
+        arrs, n = _as_arrays(u, v, z, y, w)
+        M, Y, Z, S = _run_kernel(arrs, n, None, 1)
+        part = Accumulator._from_arrays(M[0], Y[0], Z[0], S[0])
+        self._iadd(part, 1.0)
+        return self
+
+    @classmethod
+    def _from_arrays(cls, M, Y, Z, S):
+        acc = cls.__new__(cls)
+        acc.M, acc.Y, acc.Z, acc.S = M, Y, Z, S
+        return acc
+
+    def copy(self) -> "Accumulator":
+        return Accumulator._from_arrays(self.M.copy(), self.Y.copy(), self.Z.copy(), self.S.copy())
+
+    def _iadd(self, other, sign):
+        if not isinstance(other, Accumulator):
+            raise TypeError(f"cannot combine Accumulator with {type(other).__name__}")
+        self.M += sign * other.M
+        self.Y += sign * other.Y
+        self.Z += sign * other.Z
+        for k in (_SW, _N, _YY, _ZY, _ZZ):
+            self.S[k] += sign * other.S[k]
+        if sign > 0:  # ranges merge; a difference keeps the ranges of the minuend
+            self.S[_UMIN] = min(self.S[_UMIN], other.S[_UMIN])
+            self.S[_VMIN] = min(self.S[_VMIN], other.S[_VMIN])
+            self.S[_UMAX] = max(self.S[_UMAX], other.S[_UMAX])
+            self.S[_VMAX] = max(self.S[_VMAX], other.S[_VMAX])
+        return self
+
+    def merge(self, other) -> "Accumulator":
+        """New accumulator holding the samples of both."""
+        return self.copy()._iadd(other, 1.0)
+
+    __add__ = merge
+
+    def __radd__(self, other):  # lets sum(list_of_accumulators) work
+        if other == 0:
+            return self.copy()
+        return self.merge(other)
+
+    def __iadd__(self, other):
+        return self._iadd(other, 1.0)
+
+    def __sub__(self, other) -> "Accumulator":
+        """Samples of self not in other (other must be a part of self); ranges stay those of self."""
+        return self.copy()._iadd(other, -1.0)
+
+    @property
+    def n(self) -> int:
+        return int(round(self.S[_N]))
+
+    @property
+    def sum_w(self) -> float:
+        return float(self.S[_SW])
+
+    @property
+    def has_z(self) -> bool:
+        return bool(self.S[_ZZ] > 0)
+
+    @property
+    def u_range(self) -> tuple:
+        return (float(self.S[_UMIN]), float(self.S[_UMAX]))
+
+    @property
+    def v_range(self) -> tuple:
+        return (float(self.S[_VMIN]), float(self.S[_VMAX]))
+
+    def system(self):
+        """(G, b, yy): Gram matrix (17 x 17) and X^T W y (17) in the internal basis
+        q_k = P_i(u) P_j(v) (k7: z), and sum w y^2."""
+        gp = np.einsum("acx,bdy,xy->abcd", _LIN, _LIN, self.M)
+        G = np.zeros((N_TERMS, N_TERMS))
+        b = np.zeros(N_TERMS)
+        for k in _POLY_TERMS:
+            i, j = TERM_POWERS[k]
+            b[k] = self.Y[i, j]
+            G[K_AUX, k] = G[k, K_AUX] = self.Z[i, j]
+            for k2 in _POLY_TERMS:
+                i2, j2 = TERM_POWERS[k2]
+                G[k, k2] = gp[i, j, i2, j2]
+        G[K_AUX, K_AUX] = self.S[_ZZ]
+        b[K_AUX] = self.S[_ZY]
+        return G, b, float(self.S[_YY])
+
+    def to_dict(self) -> dict:
+        """JSON-serializable state (lists of floats); inverse of :meth:`from_dict`."""
+        s = [float(x) if math.isfinite(x) else None for x in self.S]
+        return {"format": "hdrg-fit-accumulator-1", "M": self.M.tolist(), "Y": self.Y.tolist(),
+                "Z": self.Z.tolist(), "S": s}
+
+    @classmethod
+    def from_dict(cls, d) -> "Accumulator":
+        if d.get("format") != "hdrg-fit-accumulator-1":
+            raise ValueError(f"not an hdrg fit accumulator: format {d.get('format')!r}")
+        acc = cls()
+        acc.M[:] = d["M"]
+        acc.Y[:] = d["Y"]
+        acc.Z[:] = d["Z"]
+        acc.S[:] = [x if x is not None else (np.inf if i in (_UMIN, _VMIN) else -np.inf)
+                    for i, x in enumerate(d["S"])]
+        return acc
+
+    def __repr__(self):
+        return f"Accumulator(n={self.n}, sum_w={self.sum_w:g}, has_z={self.has_z})"
+
+
+def accumulate_groups(u, v, z, y, w=None, groups=None) -> dict:
+    """One pass over the arrays into one :class:`Accumulator` per distinct value of ``groups``
+    (run index, time block, ...; any 1-D array of length n).  Returns {group value: Accumulator}
+    in sorted order of the values.  groups=None gives {0: Accumulator}.  Contiguous groups are
+    fastest (interleaved groups are correct but slower)."""
+    arrs, n = _as_arrays(u, v, z, y, w, groups)
+    if groups is None:
+        M, Y, Z, S = _run_kernel(arrs, n, None, 1)
+        keys = [0]
+    else:
+        keys, gidx = np.unique(arrs.pop("groups"), return_inverse=True)
+        M, Y, Z, S = _run_kernel(arrs, n, gidx.astype(np.int64).ravel(), len(keys))
+        keys = keys.tolist()
+    return {k: Accumulator._from_arrays(M[i], Y[i], Z[i], S[i]) for i, k in enumerate(keys)}
+
+
+def block_groups(n: int, n_blocks: int) -> np.ndarray:
+    """Group ids 0..n_blocks-1 for n samples in contiguous, equal-length time blocks."""
+    if n_blocks < 1:
+        raise ValueError(f"cv_blocks must be >= 1, got {n_blocks}")
+    return (np.arange(n, dtype=np.int64) * n_blocks) // max(n, 1)
+
+
+# ---------------------------------------------------------------------------------------------
+# the solve
+# ---------------------------------------------------------------------------------------------
+class _Factor:
+    """Diagonally pivoted Cholesky G = R^T R (R: rank x 17) of an internal-basis system
+    (G, b, yy), stopped when the largest remaining diagonal of the unit-diagonal scaled G is
+    <= _BASIS_TOL; and t with R^T t = b, so that ||X w - y||^2 = ||R w - t||^2 + yy - t.t."""
+
+    def __init__(self, G, b, yy):
+        d = np.sqrt(np.clip(np.diag(G), 0.0, None))
+        live = np.flatnonzero(d > 0)               # all-zero regressors stay out
+        work = G[np.ix_(live, live)] / np.outer(d[live], d[live])
+        m = len(live)
+        perm = np.arange(m)
+        L = np.zeros((m, m))
+        r = 0
+        while r < m:
+            p = r + int(np.argmax(np.diag(work)[r:]))
+            if work[p, p] <= _BASIS_TOL:
+                break
+            work[[r, p], :] = work[[p, r], :]
+            work[:, [r, p]] = work[:, [p, r]]
+            L[[r, p], :] = L[[p, r], :]
+            perm[[r, p]] = perm[[p, r]]
+            L[r, r] = math.sqrt(work[r, r])
+            L[r + 1:, r] = work[r + 1:, r] / L[r, r]
+            work[r + 1:, r + 1:] -= np.outer(L[r + 1:, r], L[r + 1:, r])
+            r += 1
+        cols = live[perm]
+        self.R = np.zeros((r, N_TERMS))
+        self.R[:, cols] = L[:, :r].T * d[cols]
+        self.t = np.linalg.solve(self.R[:, cols[:r]].T, b[cols[:r]]) if r else np.zeros(0)
+        self.yy = yy
+
+
+def _factor(acc: Accumulator) -> _Factor:
+    return _Factor(*acc.system())
+
+
+def _solve_terms(fac: _Factor, terms, rcond, explain=True):
+    """Least squares over the monomial terms (sorted indices): min ||W c - t|| with W = R A_S.
+    Columns are scaled to unit norm and taken in order; a column whose residual after the kept
+    ones is <= rcond is dropped (QR pivoting of deficient columns only).  Returns a dict: coef
+    (17), kept, collinear {dropped: kept terms it is a combination of (if explain)}, Rk (R of
+    the scaled kept columns), norms (their norms), rss."""
+    terms = list(terms)
+    W = fac.R @ _A[:, terms]
+    norms = np.sqrt(np.einsum("ij,ij->j", W, W))
+    keep = [j for j in range(len(terms)) if norms[j] > 0]
+    dropped = [j for j in range(len(terms)) if norms[j] == 0]
+    while keep:
+        diag = np.abs(np.diag(np.linalg.qr(W[:, keep] / norms[keep], mode="r")))
+        bad = np.flatnonzero(diag <= rcond)
+        if len(bad):
+            dropped.append(keep.pop(int(bad[0])))
+        elif len(keep) > len(diag):               # more columns than the rank of R
+            dropped.append(keep.pop(len(diag)))
+        else:
+            break
+    coef = np.zeros(N_TERMS)
+    kept = [terms[j] for j in keep]
+    Rk = np.zeros((0, 0))
+    qt = np.zeros(0)
+    if keep:
+        Q, Rk = np.linalg.qr(W[:, keep] / norms[keep])
+        qt = Q.T @ fac.t
+        coef[kept] = np.linalg.solve(Rk, qt) / norms[keep]
+    collinear = {}
+    for j in sorted(dropped):
+        with_ = ()
+        if explain and norms[j] > 0 and keep:
+            x = np.linalg.lstsq(W[:, keep], W[:, j], rcond=None)[0]
+            with_ = tuple(kept[i] for i in np.flatnonzero(np.abs(x) * norms[keep] > 1e-3 * norms[j]))
+        collinear[terms[j]] = with_
+    return {"coef": coef, "kept": tuple(kept), "collinear": collinear, "Rk": Rk,
+            "norms": norms[keep], "rss": max(fac.yy - float(qt @ qt), 0.0)}
+
+
+def _unidentifiable_message(collinear):
+    parts = []
+    for k, with_ in collinear.items():
+        if not with_:
+            parts.append(f"{_name(k)} is zero on all used samples" + (" (no z given)" if k == K_AUX else ""))
+        else:
+            parts.append(f"{_name(k)} is collinear with " + ", ".join(_name(j) for j in with_))
+    hint = ""
+    if any(TERM_POWERS[k] is not None and TERM_POWERS[k][1] > 0 for k in collinear):
+        hint = ("  Typical cause: too few distinct rates, e.g. one run at one constant rate (the rate "
+                "terms then repeat the constant and temperature terms); fit runs at several rates.")
+    return ("the data cannot identify " + ", ".join(_name(k) for k in collinear) + ": "
+            + "; ".join(parts) + "." + hint + "  Select fewer terms or pass drop_unidentifiable=True.")
+
+
+def _check_terms(terms, acc_has_z):
+    if terms is None or (isinstance(terms, str) and terms.strip().lower() == "all"):
+        return tuple(sorted(PAPER_TERMS + ((K_AUX,) if acc_has_z else ())))
+    if isinstance(terms, str):
+        return parse_terms(terms)
+    out = []
+    for k in terms:
+        if isinstance(k, str) or not float(k).is_integer() or not 0 <= int(k) < N_TERMS:
+            raise ValueError(f"unknown term {k!r}: terms are indices 0..{N_TERMS - 1}")
+        out.append(int(k))
+    if not out:
+        raise ValueError("empty term selection")
+    if len(set(out)) != len(out):
+        raise ValueError(f"duplicate terms in {tuple(terms)}")
+    return tuple(sorted(out))
+
+
+@dataclass
+class FitResult:
+    """A fitted model.  coef: 17 coefficients in deg/h (per unit of z for k7), 0 for terms not
+    enabled; terms: enabled (fitted) term indices; requested: the terms asked for (or the
+    candidates of 'auto'); dropped: requested terms dropped as unidentifiable, collinear:
+    {dropped term: kept terms it is collinear with}; stderr: 17 standard errors in deg/h (0 for
+    terms not enabled; they assume white residuals with the weights as inverse variances, and are
+    optimistic, often by a large factor, for autocorrelated data such as drift records);
+    cond: 2-norm condition number of the enabled design with unit-norm columns; rms: weighted
+    residual RMS, deg/h; sigma: residual scale sqrt(RSS_w / (n - p) * n / sum_w) in deg/h
+    (sqrt(RSS / (n - p)) for a mask); n: samples used
+    (w > 0); sum_w: their total weight; dof = n - p; u_range, v_range: data ranges; cv: None or
+    the cross-validation record (method, groups, path, cv_rms); extra: free metadata for the
+    caller (device, files, normalization), kept in to_dict()."""
+
+    coef: np.ndarray
+    terms: tuple
+    requested: tuple
+    dropped: tuple
+    collinear: dict
+    stderr: np.ndarray
+    cond: float
+    rms: float
+    sigma: float
+    n: int
+    sum_w: float
+    dof: int
+    u_range: tuple
+    v_range: tuple
+    cv: dict | None = None
+    rcond: float = RCOND
+    extra: dict = field(default_factory=dict)
+
+    def predict(self, u, v, z=None) -> np.ndarray:
+        """Model bias in deg/h at (u, v, z)."""
+        return predict(self.coef, u, v, z)
+
+    def to_dict(self) -> dict:
+        """Plain JSON-serializable dict (non-finite floats become None)."""
+        return _jsonable({
+            "model": "hdrg-17-term", "coef": self.coef, "terms": self.terms,
+            "term_names": [TERM_NAMES[k] for k in range(N_TERMS)], "requested": self.requested,
+            "dropped": self.dropped, "collinear": {f"k{k}": [int(j) for j in v] for k, v in self.collinear.items()},
+            "stderr": self.stderr, "cond": self.cond, "rms": self.rms, "sigma": self.sigma, "n": self.n,
+            "sum_w": self.sum_w, "dof": self.dof, "u_range": self.u_range, "v_range": self.v_range,
+            "cv": self.cv, "rcond": self.rcond, "extra": self.extra,
+            "stderr_note": "assumes white residuals; optimistic for autocorrelated data",
+        })
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return [_jsonable(v) for v in x.tolist()]
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(x) else None
+    return x
+
+
+def _result(sol, requested, n, sum_w, u_range, v_range, rcond, cv=None):
+    kept = sol["kept"]
+    p = len(kept)
+    dof = n - p
+    rss = sol["rss"]
+    rms = math.sqrt(rss / sum_w) if sum_w > 0 else math.nan
+    sigma = math.sqrt(rss / dof * n / sum_w) if dof > 0 and sum_w > 0 else math.nan
+    stderr = np.zeros(N_TERMS)
+    cond = math.nan
+    if p:
+        Rk = sol["Rk"]
+        rinv = np.linalg.solve(Rk, np.eye(p))  # scaled-column covariance factor
+        # weighted: cov = s2 (X^T W X)^-1 with s2 = RSS/dof (weights as relative inverse variances)
+        s2 = rss / dof if dof > 0 else math.nan
+        stderr[list(kept)] = math.sqrt(s2) * np.sqrt(np.einsum("ij,ij->i", rinv, rinv)) / sol["norms"]
+        sv = np.linalg.svd(Rk, compute_uv=False)
+        cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
+    return FitResult(coef=sol["coef"], terms=tuple(kept), requested=tuple(requested),
+                     dropped=tuple(sol["collinear"]), collinear=sol["collinear"], stderr=stderr,
+                     cond=cond, rms=rms, sigma=sigma, n=n, sum_w=sum_w, dof=dof, u_range=u_range,
+                     v_range=v_range, cv=cv, rcond=rcond)
+
+
+def solve(acc: Accumulator, terms=None, *, drop_unidentifiable=False, rcond=RCOND) -> FitResult:
+    """Fit the terms to the accumulated data.  terms: None or 'all' (the paper's 16 terms, plus
+    k7 when some z was non-zero), 'paper', a spec for ``parse_terms`` ('k0,k1,k4', 'const,temp'),
+    or a sequence of indices.  Raises :class:`UnidentifiableError` (a ValueError) when the data
+    cannot identify some term (relative column residual <= rcond), unless drop_unidentifiable,
+    which drops such terms (in index order, later terms first to go) and lists them."""
+    if not isinstance(acc, Accumulator):
+        raise TypeError(f"solve needs an Accumulator, got {type(acc).__name__}")
+    if isinstance(terms, str) and terms.strip().lower() == "auto":
+        raise ValueError("terms='auto' needs groups: use fit(..., groups=...) or fit_accumulators({run: acc, ...})")
+    terms = _check_terms(terms, acc.has_z)
+    if acc.n == 0:
+        raise ValueError("no samples to fit: every w is 0 (or no data was added)")
+    fac = _factor(acc)
+    sol = _solve_terms(fac, terms, rcond)
+    if sol["collinear"] and not drop_unidentifiable:
+        raise UnidentifiableError(_unidentifiable_message(sol["collinear"]), sol["collinear"])
+    return _result(sol, terms, acc.n, acc.sum_w, acc.u_range, acc.v_range, rcond)
+
+
+# ---------------------------------------------------------------------------------------------
+# cross-validation and term selection
+# ---------------------------------------------------------------------------------------------
+def _heldout_sse(coef, G, b, yy):
+    """sum w (y - X c)^2 on a held-out system, from its internal-basis sums."""
+    d = _A @ coef
+    return max(yy - 2.0 * float(d @ b) + float(d @ G @ d), 0.0)
+
+
+class _CV:
+    def __init__(self, accs, rcond):
+        self.accs = list(accs)
+        if len(self.accs) < 2:
+            raise ValueError(f"cross-validation needs at least 2 groups (runs or time blocks), got {len(self.accs)}")
+        total = sum(self.accs)
+        self.total = total
+        self.tests = [a.system() for a in self.accs]
+        self.trains = [_factor(total - a) if total.n - a.n > 0 else None for a in self.accs]
+        self.sum_w = total.sum_w
+        self.rcond = rcond
+        self.cache = {}
+
+    def sse(self, terms):
+        key = tuple(sorted(terms))
+        if key not in self.cache:
+            out = np.zeros(len(self.accs))
+            for f, (fac, test) in enumerate(zip(self.trains, self.tests)):
+                coef = np.zeros(N_TERMS)
+                if fac is not None:
+                    coef = _solve_terms(fac, key, self.rcond, explain=False)["coef"]
+                out[f] = _heldout_sse(coef, *test)
+            self.cache[key] = out
+        return self.cache[key]
+
+    def rms(self, terms):
+        return math.sqrt(float(self.sse(terms).sum()) / self.sum_w)
+
+
+def _cv_se(e, sw):
+    """Standard error of the CV mean squared error sum(e) / sum(sw) from the spread of the
+    per-fold MSEs e_f / sw_f (folds weighted by their total weight sw_f)."""
+    mse = e.sum() / sw.sum()
+    g = len(e)
+    return math.sqrt(g / (g - 1) * float(np.sum(sw ** 2 * (e / np.where(sw > 0, sw, 1) - mse) ** 2))) / sw.sum()
+
+
+def select_terms(accs, candidates=None, *, start=(0,), significance=1.0, min_gain=0.02, rcond=RCOND):
+    """Term selection by cross-validation over groups: a forward stepwise path, the smallest
+    model on it whose CV error is within a tolerance of the best one, then backward pruning.
+
+    accs: sequence or mapping of per-group :class:`Accumulator` (runs, or contiguous time blocks
+    of one run; at least 2).  Fold f trains on total - group f and is scored by the group's
+    held-out weighted squared error e_f (from its sums); CV MSE = sum_f e_f / sum w.  From
+    ``start`` (default {k0}, always kept) the candidate that lowers the CV MSE most is added,
+    step by step, until no candidate is left; let b be the step of least CV MSE.  Tolerance =
+    max(``min_gain`` x MSE_b, ``significance`` x SE_b), SE_b the standard error of MSE_b from
+    the spread of the per-fold MSEs (the one-standard-error rule; min_gain guards against tiny
+    gains when folds agree too well).  The first step within MSE_b + tolerance is selected
+    (scoring the path against b, not each step alone, keeps pairs of terms that only help
+    together, e.g. v and u*v); then terms are removed one at a time (least harmful first) while
+    the smaller model stays within the tolerance (this undoes early greedy picks such as v^3
+    standing in for v).  Terms unidentifiable on a training fold are dropped in that fold.
+    Returns (terms, cv): cv = {"method", "groups", "significance", "min_gain", "tolerance_mse"
+    (deg/h)^2, "path": [{"step", "added" or "removed", "terms", "cv_rms" (deg/h), "excess" (CV
+    MSE above b in tolerances), "candidates": {"k<i>": cv_rms} (forward steps)}],
+    "selected_step", "cv_rms"}."""
+    accs = list(accs.values()) if isinstance(accs, Mapping) else list(accs)
+    cv = _CV(accs, rcond)
+    has_z = cv.total.has_z
+    cand = _check_terms(candidates, has_z)
+    fixed = tuple(sorted(_check_terms(start, has_z))) if start else ()
+    chosen = fixed
+    g = len(accs)
+    errs = [cv.sse(chosen) if chosen else np.array([a.system()[2] for a in accs])]
+    path = [{"step": 0, "added": None, "terms": list(chosen)}]
+    while True:
+        rest = [k for k in cand if k not in chosen]
+        if not rest:
+            break
+        trials = {k: cv.sse(chosen + (k,)) for k in rest}
+        best = min(rest, key=lambda k: trials[k].sum())
+        chosen = tuple(sorted(chosen + (best,)))
+        errs.append(trials[best])
+        path.append({"step": len(path), "added": best, "terms": list(chosen),
+                     "candidates": {f"k{k}": math.sqrt(trials[k].sum() / cv.sum_w) for k in rest}})
+    eb = errs[int(np.argmin([e.sum() for e in errs]))]
+    sw = np.array([a.sum_w for a in accs])
+    tol = max(min_gain * eb.sum() / cv.sum_w, significance * _cv_se(eb, sw))  # in MSE
+
+    def excess(e):  # CV MSE above the best, in units of the tolerance
+        return float((e.sum() - eb.sum()) / cv.sum_w / tol) if tol > 0 else 0.0
+
+    selected = None
+    for j, e in enumerate(errs):
+        path[j].update(cv_rms=math.sqrt(e.sum() / cv.sum_w), excess=excess(e))
+        if selected is None and excess(e) <= 1.0:
+            selected = j
+    terms = tuple(path[selected]["terms"])
+    while True:  # backward pruning
+        trials = {k: cv.sse(tuple(x for x in terms if x != k)) for k in terms if k not in fixed}
+        ok = [k for k, e in trials.items() if excess(e) <= 1.0]
+        if not ok:
+            break
+        k = min(ok, key=lambda k: trials[k].sum())
+        terms = tuple(x for x in terms if x != k)
+        path.append({"step": len(path), "removed": k, "terms": list(terms),
+                     "cv_rms": math.sqrt(trials[k].sum() / cv.sum_w), "excess": excess(trials[k])})
+        selected = len(path) - 1
+    return terms, {"method": "forward-stepwise+prune", "groups": g, "significance": significance,
+                   "min_gain": min_gain, "tolerance_mse": tol, "path": path,
+                   "selected_step": selected, "cv_rms": path[selected]["cv_rms"]}
+
+
+def fit_accumulators(accs, terms=None, *, drop_unidentifiable=False, rcond=RCOND, significance=1.0,
+                     min_gain=0.02, candidates=None) -> FitResult:
+    """Fit from one Accumulator, or a sequence/mapping of per-group Accumulators (runs, devices,
+    time blocks) which are merged.  terms as in :func:`solve`, or 'auto' (needs >= 2 groups;
+    :func:`select_terms` over ``candidates``, default all terms).  With >= 2 groups the result's
+    cv holds the cross-validated RMS of the final term set (and the selection path for 'auto')."""
+    if isinstance(accs, Accumulator):
+        groups = [accs]
+    else:
+        groups = list(accs.values()) if isinstance(accs, Mapping) else list(accs)
+    if not groups:
+        raise ValueError("no accumulators to fit")
+    total = sum(groups)
+    cv = None
+    if isinstance(terms, str) and terms.strip().lower() == "auto":
+        if len(groups) < 2:
+            raise ValueError("terms='auto' needs at least 2 groups (runs or time blocks) to cross-validate")
+        if total.n == 0:
+            raise ValueError("no samples to fit: every w is 0 (or no data was added)")
+        terms, cv = select_terms(groups, candidates, significance=significance, min_gain=min_gain, rcond=rcond)
+        res = solve(total, terms, drop_unidentifiable=True, rcond=rcond)
+        res.requested = _check_terms(candidates, total.has_z)
+    else:
+        res = solve(total, terms, drop_unidentifiable=drop_unidentifiable, rcond=rcond)
+        if len(groups) >= 2:
+            cvo = _CV(groups, rcond)
+            cv = {"method": "fixed", "groups": len(groups), "cv_rms": cvo.rms(res.terms)}
+    res.cv = cv
+    return res
+
+
+def fit(u, v, z, y, w=None, *, terms=None, groups=None, cv_blocks=8, drop_unidentifiable=False,
+        rcond=RCOND, significance=1.0, min_gain=0.02, candidates=None) -> FitResult:
+    """Fit the 17-term model to arrays in one pass (see the module docstring for the inputs).
+    groups: per-sample group ids (runs) for cross-validation; if None and terms='auto', the
+    samples are split into ``cv_blocks`` contiguous time blocks."""
+    auto = isinstance(terms, str) and terms.strip().lower() == "auto"
+    if groups is None and auto:
+        groups = block_groups(np.asarray(u).shape[0], cv_blocks)
+    accs = accumulate_groups(u, v, z, y, w, groups)
+    return fit_accumulators(accs, terms, drop_unidentifiable=drop_unidentifiable, rcond=rcond,
+                            significance=significance, min_gain=min_gain, candidates=candidates)
+
+
+def predict(coef, u, v, z=None) -> np.ndarray:
+    """Evaluate the model sum_k coef[k] x_k(u, v, z) (deg/h) at arrays u, v (and z for k7)."""
+    coef = np.asarray(coef, dtype=np.float64)
+    if coef.shape != (N_TERMS,):
+        raise ValueError(f"coef must have {N_TERMS} entries, got shape {coef.shape}")
+    u = np.ascontiguousarray(u, dtype=np.float64)
+    v = np.ascontiguousarray(v, dtype=np.float64)
+    if u.shape != v.shape or u.ndim != 1:
+        raise ValueError(f"u and v must be 1-D arrays of one length, got {u.shape} and {v.shape}")
+    # coefficient grid c[i*4 + j] of u^i v^j, and k7 at slot 16
+    flat = np.zeros(17)
+    for k, pw in enumerate(TERM_POWERS):
+        if pw is not None:
+            flat[pw[0] * 4 + pw[1]] = coef[k]
+    flat[16] = coef[K_AUX]
+    has_z = z is not None
+    zz = np.ascontiguousarray(z, dtype=np.float64) if has_z else np.zeros(1)
+    if has_z and zz.shape != u.shape:
+        raise ValueError(f"z has shape {zz.shape}, u has {u.shape}")
+    if not has_z and coef[K_AUX] != 0:
+        raise ValueError("coef has a non-zero k7 (z) term but no z was given")
+    out = np.empty_like(u)
+    _predict(flat, u, v, zz, has_z, out)
+    return out
+
+
+def design_matrix(u, v, z=None, terms=range(N_TERMS)) -> np.ndarray:
+    """The explicit n x len(terms) monomial design, Fortran order (for tests, references and
+    small data only: 8 * 17 * n bytes)."""
+    u = np.asarray(u, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    up = [np.ones_like(u), u, u * u, u * u * u]
+    vp = [np.ones_like(v), v, v * v, v * v * v]
+    terms = list(terms)
+    X = np.empty((len(u), len(terms)), order="F")
+    for col, k in enumerate(terms):
+        pw = TERM_POWERS[k]
+        if pw is None:
+            X[:, col] = 0.0 if z is None else np.asarray(z, dtype=np.float64)
+        else:
+            np.multiply(up[pw[0]], vp[pw[1]], out=X[:, col])
+    return X
+
+
+# -- run-log glue and the `hdrg fit` command ------------------------------------------------------
+
+def fit_logs(logs, config, terms="all", *, drop_unidentifiable=False, cv_blocks=8, significance=1.0,
+             min_gain=0.02):
+    """Fit a :class:`host_tools.model.BiasModel` with ``config`` (a ModelConfig) to RunLogs.
+
+    Each log goes through the golden pipeline (:func:`host_tools.compensate.prepare`): only its
+    valid samples enter (exchange samples, rate-estimator warm-up and the samples before the
+    first valid mode-reversal output never do).  One accumulator per run; with a single run and
+    ``terms='auto'`` the run is cut into ``cv_blocks`` contiguous time blocks for the
+    cross-validation.  Returns (model, FitResult)."""
+    from host_tools.compensate import prepare
+    from host_tools.model import BiasModel
+
+    auto = isinstance(terms, str) and terms.strip().lower() == "auto"
+    accs = {}
+    for i, log in enumerate(logs):
+        pr = prepare(log, config)
+        if not pr.valid.any():
+            raise ValueError(f"{log.source}: no valid sample to fit (all exchange, warm-up or before the first pair)")
+        if auto and len(logs) == 1:
+            groups = block_groups(len(pr.y), cv_blocks)
+            for g, acc in accumulate_groups(pr.u, pr.v, pr.z, pr.y, pr.valid, groups).items():
+                accs[f"{log.source}#block{g}"] = acc
+        else:
+            accs[f"{log.source}#{i}"] = Accumulator().add(pr.u, pr.v, pr.z, pr.y, pr.valid)
+    res = fit_accumulators(accs, terms, drop_unidentifiable=drop_unidentifiable,
+                           significance=significance, min_gain=min_gain)
+    info = res.to_dict()
+    info["train"] = [log.source for log in logs]
+    # terms the data do not support: |coef| < 2 standard errors (the standard errors are already
+    # optimistic for autocorrelated residuals, so these are certainly not identified)
+    info["insignificant"] = [int(k) for k in res.terms
+                             if k != 0 and abs(res.coef[k]) < 2.0 * res.stderr[k]]
+    model = BiasModel(config, tuple(res.terms), np.asarray(res.coef, np.float64), info)
+    return model, res
+
+
+def configure_cli(parser) -> None:
+    parser.add_argument("runs", metavar="RUN", nargs="+", help="training run logs (CSV or .npz)")
+    parser.add_argument("-o", "--output", required=True, help="model JSON to write")
+    parser.add_argument("--proxy", choices=("freq", "temp"), default=None,
+                        help="temperature proxy: freq (drive frequency, default when present) or temp (temp_c)")
+    parser.add_argument("--rate-estimator", default="diff", choices=("diff", "diffn", "lsq", "iir"),
+                        help="proxy-rate estimator (default: diff, the paper's consecutive difference)")
+    parser.add_argument("--rate-n", type=int, default=8, help="window length n of diffn/lsq [samples]")
+    parser.add_argument("--rate-shift", type=int, default=4, help="iir coefficient 2^-shift")
+    parser.add_argument("--terms", default="all",
+                        help="all (the paper's 16 terms) | auto (cross-validated selection) | k0,k1,... | groups const,temp,rate,cross")
+    parser.add_argument("--combiner", choices=("pair", "trend"), default="trend",
+                        help="mode-reversal combiner (mode-reversal logs only): pair (the paper) or trend (ours, default)")
+    parser.add_argument("--settle", type=float, default=0.0, help="settling time excluded after each exchange [s]")
+    parser.add_argument("--proxy-range", default=None, help="declared proxy range LO,HI in proxy units (default: training range +10%%)")
+    parser.add_argument("--rate-range", default=None, help="declared largest |d proxy/dt| [proxy units/s] (default: from data)")
+    parser.add_argument("--drop-unidentifiable", action="store_true",
+                        help="drop terms the data cannot identify (and report them) instead of refusing")
+    parser.add_argument("--cv-blocks", type=int, default=8, help="time blocks for 'auto' on a single run")
+
+
+def run_cli(args) -> int:
+    from host_tools import runlog
+    from host_tools.compensate import fit_config_from_logs
+
+    logs = [runlog.read(p) for p in args.runs]
+    reversal = ({"combiner": args.combiner, "settle_s": args.settle}
+                if any(log.reversal for log in logs) else None)
+    cfg = fit_config_from_logs(logs, proxy_kind=args.proxy, rate_estimator=args.rate_estimator,
+                               n=args.rate_n, shift=args.rate_shift, proxy_range=args.proxy_range,
+                               rate_range=args.rate_range, reversal=reversal)
+    model, res = fit_logs(logs, cfg, args.terms, drop_unidentifiable=args.drop_unidentifiable,
+                          cv_blocks=args.cv_blocks)
+    model.to_json(args.output)
+    print(f"{args.output}: {len(res.terms)} terms {['k%d' % k for k in res.terms]}, n={res.n}, "
+          f"rms={res.rms:.4g} deg/h, cond={res.cond:.3g}")
+    if res.dropped:
+        print(f"dropped as unidentifiable: {['k%d' % k for k in res.dropped]} (collinear: {res.collinear})")
+    weak = model.fit.get("insignificant", [])
+    if weak:
+        print(f"warning: the data do not identify {['k%d' % k for k in weak]} (|coef| < 2 standard errors); "
+              f"they fit noise: consider --terms auto")
+    if res.cv:
+        print(f"cross-validated rms: {res.cv['cv_rms']:.4g} deg/h over {res.cv['groups']} groups")
+    for k in res.terms:
+        print(f"  k{k:<2d} {TERM_NAMES[k]:>9s} = {res.coef[k]: .6g} +- {res.stderr[k]:.2g} deg/h")
+    return 0
