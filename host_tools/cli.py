@@ -17,9 +17,13 @@ COMMANDS = {
     "simulate": ("host_tools.sim", "generate a simulated run log (virtual gyroscope in a chamber)"),
     "metrics": ("host_tools.metrics", "the paper's figures of merit of run logs or compensated outputs"),
     "fit": ("host_tools.fit", "fit the 17-coefficient bias model to run logs"),
+    "quantize": ("host_tools.quantize", "quantize a bias model into the fixed-point coefficient table (table.json)"),
     "compensate": ("host_tools.compensate", "apply a bias model to a run log (float golden or fixed point)"),
     "report": ("host_tools.report", "before/after tables and figures of a model on run logs"),
     "paper": ("host_tools.paper", "reproduce every experiment of Chen et al. 2022 on the simulator"),
+    "capture": ("host_tools.serial_link", "record a run log from the gyroscope's controller over a serial port"),
+    "upload": ("host_tools.serial_link", "load a coefficient table into the controller (ack, read back, compare)"),
+    "device": ("host_tools.device", "virtual gyroscope controller on a pseudo-terminal or a pyserial URL"),
     "demo": ("host_tools.demo", "simulate -> fit -> compensate -> report on embedded defaults"),
 }
 

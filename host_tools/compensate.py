@@ -141,18 +141,24 @@ def _hold(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
 
 
 def check_impl(impl: str) -> None:
-    """Refuse an implementation that is not available: only 'float' for now."""
-    if impl == "fixed":
-        raise ValueError("--impl fixed: the fixed-point implementation is not available yet "
-                         "(it comes with the firmware reference); use --impl float")
-    if impl != "float":
+    """Refuse an implementation that is not one of IMPLS ('float', 'fixed')."""
+    if impl not in IMPLS:
         raise ValueError(f"--impl must be one of {IMPLS}, not {impl!r}")
 
 
-def compensate(log, model: BiasModel, impl: str = "float") -> rl.RunLog:
+def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.RunLog:
     """The compensated run log (see the module doc): ``rate_dph = y - B``, ``bias_dph = B``,
-    ``valid`` 1/0, other columns and metadata kept, ``compensated: yes`` added."""
+    ``valid`` 1/0, other columns and metadata kept, ``compensated: yes`` added.
+
+    ``impl='fixed'``: the bit-accurate fixed-point firmware reference
+    (firmware_ref.compensate.compensate_log; ``table`` a firmware_ref.table.Table, or None to
+    quantize the model on the fly); same columns, output words converted back to deg/h."""
     check_impl(impl)
+    if impl == "fixed":
+        from firmware_ref.compensate import compensate_log
+        return compensate_log(log, model, table=table)
+    if table is not None:
+        raise ValueError("a coefficient table is only used with --impl fixed")
     if str(log.metadata.get("compensated", "")).strip().lower() == "yes" or "bias_dph" in log:
         raise ValueError(f"{log.source}: the log is already compensated (metadata 'compensated: yes' "
                          f"or a 'bias_dph' column)")
@@ -238,14 +244,23 @@ def configure_cli(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--output", required=True, help="compensated run log to write (CSV or .npz)")
     parser.add_argument("--impl", choices=IMPLS, default="float",
                         help="float: the float64 golden model (default); fixed: the bit-accurate "
-                             "fixed-point reference (not available yet)")
+                             "fixed-point firmware reference")
+    parser.add_argument("--table", metavar="TABLE",
+                        help="with --impl fixed: coefficient table (table.json from hdrg quantize, .bin or "
+                             ".memh) instead of quantizing the model on the fly")
 
 
 def run_cli(args) -> int:
     check_impl(args.impl)
     model = BiasModel.from_json(args.model)
+    table = None
+    if getattr(args, "table", None):
+        if args.impl != "fixed":
+            raise ValueError("--table needs --impl fixed")
+        from host_tools.quantize import read_table
+        table = read_table(args.table)
     log = rl.read(args.run)
-    out = compensate(log, model, impl=args.impl)
+    out = compensate(log, model, impl=args.impl, table=table)
     rl.write(out, args.output)
     nvalid = int(np.count_nonzero(out["valid"]))
     print(f"{args.output}: {len(out)} samples, {nvalid} valid ({100.0 * nvalid / len(out):.1f} %)")

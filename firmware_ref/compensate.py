@@ -1,0 +1,198 @@
+"""Compensated output and status flags in fixed point: the whole per-sample pipeline.
+
+Per sample (Python-integer reference :class:`Pipeline`; the numba kernel firmware_ref.kernel is
+bit-identical)::
+
+    state/mode  = sequencer timer (self-timed) or the logged mode
+    u, uc       = proxy_u(P)                          (firmware_ref.proxy)
+    v, vc, warm = rate.step(P, restart)               (firmware_ref.rate)
+    cvalid, y   = combiner.step(mode, R, restart)     (firmware_ref.sequencer; y held)
+    B, zc       = evaluate(u, v, Z)                   (firmware_ref.evaluator, every sample)
+    valid       = cvalid and not warm and mode != 3
+    if valid:   OUT = symsat32(RHU(y - B, 11)); BIAS = symsat32(RHU(B, 11))   (held otherwise;
+                                                                             0 before the first)
+    flags       = 1 uc | 2 vc | 4 warm | 8 (mode == 3) | 16 (not cvalid and mode != 3)
+                  | 32 zc | 128 (any saturation: window count, trend, OUT, BIAS)
+
+OUT and BIAS are int32 words, LSB 2^-10 deg/h; the hold is not reset at restarts (as the golden
+host_tools.compensate).  Bit 64 (an input value saturated when converted to a word) is added by
+the host side (:func:`compensate_log`).
+
+:func:`compensate_log` is ``hdrg compensate --impl fixed``: run log + model (+ optional table)
+-> compensated run log with the same columns as the float path.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from firmware_ref import formats as F
+from firmware_ref import inputs
+from firmware_ref.arith import rshift_round, sat_signed
+from firmware_ref.evaluator import evaluate
+from firmware_ref.proxy import proxy_u
+from firmware_ref.rate import RateState
+from firmware_ref.sequencer import Sequencer
+
+
+@dataclass
+class Sample:
+    """One sample of the pipeline's outputs (words) and intermediates."""
+
+    out: int
+    bias: int
+    valid: bool
+    flags: int
+    u: int
+    v: int
+    b: int
+    y: int
+    s: int
+    state: int
+    vs: int
+    sign: int
+    acc: int
+    cnt: int
+
+
+class Pipeline:
+    """The per-sample reference (see the module doc)."""
+
+    def __init__(self, table, self_timed: bool = False):
+        self.table = table
+        self.rate = RateState(table)
+        self.seq = Sequencer(table, self_timed)
+        self.out_hold = 0
+        self.bias_hold = 0
+
+    def step(self, p: int, r: int, mode, restart: bool = False, z: int = 0) -> Sample:
+        t = self.table
+        so = self.seq.step(mode, r, restart)
+        mode = so.mode
+        u, uc = proxy_u(p, t)
+        v, vc, warm, s = self.rate.step(p, restart)
+        b, zc = evaluate(u, v, z, t)
+        valid = so.valid and not warm and mode != 3
+        sat = so.sat
+        if valid:
+            o, s1 = sat_signed(rshift_round(so.y - b, F.OUT_SHIFT), 32)
+            bw, s2 = sat_signed(rshift_round(b, F.OUT_SHIFT), 32)
+            sat = sat or s1 or s2
+            self.out_hold, self.bias_hold = o, bw
+        flags = ((F.FLAG_PROXY_CLAMPED if uc else 0) | (F.FLAG_RATE_CLAMPED if vc else 0)
+                 | (F.FLAG_WARMUP if warm else 0) | (F.FLAG_EXCHANGE if mode == 3 else 0)
+                 | (F.FLAG_STALE if (not so.valid and mode != 3) else 0)
+                 | (F.FLAG_AUX_CLAMPED if zc else 0) | (F.FLAG_SAT if sat else 0))
+        return Sample(self.out_hold, self.bias_hold, valid, flags, u, v, b, so.y, s, so.state, so.vs, so.sign,
+                      so.acc, so.cnt)
+
+
+def run_reference(table, p, r, mode=None, restart=None, z=None, self_timed: bool = False) -> dict:
+    """The Python reference over arrays; returns the same dict as firmware_ref.kernel.run_words
+    with ``detail=True`` (plus ``vs``, ``sign``, ``acc``, ``cnt``), as int64/uint8 arrays."""
+    n = len(p)
+    pipe = Pipeline(table, self_timed)
+    cols = {name: [] for name in ("out", "bias", "valid", "flags", "u", "v", "b", "y", "s", "state", "vs", "sign",
+                                  "acc", "cnt")}
+    for i in range(n):
+        s = pipe.step(int(p[i]), int(r[i]), None if mode is None else int(mode[i]),
+                      bool(i == 0 or (restart is not None and restart[i])), 0 if z is None else int(z[i]))
+        for name in cols:
+            cols[name].append(int(getattr(s, name)))
+    out = {name: np.array(vals, np.int64) for name, vals in cols.items()}
+    out["valid"] = out["valid"].astype(np.uint8)
+    out["flags"] = out["flags"].astype(np.uint8)
+    return out
+
+
+# -- host side: run logs --------------------------------------------------------------------------
+
+def log_words(log, config) -> dict:
+    """Input words of a run log under a ModelConfig: ``p``, ``r``, ``mode``, ``restart``, ``z``
+    (int64/uint8 arrays) and ``input_sat`` (bool[n]: some input value was saturated)."""
+    from host_tools.regressors import aux_regressor
+
+    _, pcol = log.proxy(config.proxy.kind)
+    p, psat = inputs.proxy_words(pcol, config.proxy.kind)
+    r, rsat = inputs.rate_words(log.rate_dph)
+    z, zsat = inputs.aux_words(aux_regressor(log, config.aux))
+    restart = np.zeros(len(log), np.uint8)
+    restart[np.asarray(log.segments, np.int64)] = 1
+    if len(log):
+        restart[0] = 1
+    return {"p": p, "r": r, "mode": np.asarray(log.mode, np.int64), "restart": restart, "z": z,
+            "input_sat": psat | rsat | zsat}
+
+
+def check_table_matches(table, model) -> None:
+    """Refuse a table whose data flow differs from the model's (a table of another model)."""
+    from host_tools.quantize import quantize
+
+    expect = quantize(model).table
+    diffs = [name for name in ("proxy_kind", "p_ref", "g_u", "u_off", "sh_u", "rate_est", "rate_n", "rate_shift",
+                               "rate_warmup", "g_v", "sh_v", "combiner", "settle_n", "max_stale_n", "mant",
+                               "e_row", "e_7", "e_acc")
+             if getattr(table, name) != getattr(expect, name)]
+    if diffs:
+        raise ValueError(f"--table: the table does not match the model {model.source} "
+                         f"(fields differ: {', '.join(diffs)}); quantize this model again")
+
+
+def compensate_log(log, model, table=None, impl: str = "numba", return_flags: bool = False):
+    """``hdrg compensate --impl fixed``: the compensated run log computed in fixed point.
+
+    ``table``: a firmware_ref.table.Table (checked against the model) or None (the model is
+    quantized on the fly by host_tools.quantize).  The log is converted to words
+    (firmware_ref.inputs), run through the kernel (``impl='numba'``) or the Python reference
+    (``'python'``), and the output words are written back in deg/h: ``rate_dph`` (OUT),
+    ``bias_dph`` (BIAS), ``valid`` 1.0/0.0, the same columns as the float path; the metadata adds
+    ``compensation_table_crc``.  Model/log mismatches are refused as in the float path.  With
+    ``return_flags`` returns ``(log, flags)``, flags uint8[n] (formats.FLAGS bits)."""
+    from host_tools import compensate as hc
+    from host_tools import runlog as rl
+    from host_tools.quantize import quantize
+
+    if str(log.metadata.get("compensated", "")).strip().lower() == "yes" or "bias_dph" in log:
+        raise ValueError(f"{log.source}: the log is already compensated (metadata 'compensated: yes' "
+                         f"or a 'bias_dph' column)")
+    cfg = model.config
+    hc.check_sample_rate(log, cfg.rate.fs)
+    if cfg.reversal is None and log.reversal:
+        raise ValueError(f"{log.source}: the model is for force-to-rebalance (no mode reversal) "
+                         f"but the log uses mode reversal (modes 1/2/3)")
+    if cfg.reversal is not None and not log.reversal:
+        raise ValueError(f"{log.source}: the model is for mode reversal "
+                         f"(combiner {cfg.reversal.combiner!r}) but the log is FTR (all mode 0)")
+    if cfg.reversal is not None and np.any(np.asarray(log.mode) == rl.MODE_FTR):
+        row = int(np.argmax(np.asarray(log.mode) == rl.MODE_FTR))
+        raise ValueError(f"{log.source}: row {row}: mode 0 (FTR) sample in a mode-reversal log")
+    if table is None:
+        table = quantize(model).table
+    else:
+        check_table_matches(table, model)
+    w = log_words(log, cfg)
+    if impl == "numba":
+        from firmware_ref.kernel import run_words
+        res = run_words(table, w["p"], w["r"], w["mode"], w["restart"], w["z"])
+    elif impl == "python":
+        res = run_reference(table, w["p"], w["r"], w["mode"], w["restart"], w["z"])
+    else:
+        raise ValueError(f"impl must be 'numba' or 'python', not {impl!r}")
+    valid = res["valid"].astype(bool)
+    flags = res["flags"] | np.where(w["input_sat"], F.FLAG_INPUT_SAT, 0).astype(np.uint8)
+    out = log.with_columns(rate_dph=inputs.out_dph(res["out"]), bias_dph=inputs.out_dph(res["bias"]),
+                           valid=valid.astype(np.float64))
+    nvalid = int(np.count_nonzero(valid))
+    out.metadata.update({
+        "compensated": "yes",
+        "compensation_model": model.source,
+        "compensation_impl": "fixed",
+        "compensation_terms": ",".join(f"k{k}" for k in model.terms),
+        "compensation_valid": f"{nvalid} of {len(log)} samples",
+        "compensation_table_crc": f"0x{table.crc:08x}",
+    })
+    nsat = int(np.count_nonzero(flags & (F.FLAG_SAT | F.FLAG_INPUT_SAT)))
+    if nsat:
+        out.metadata["compensation_saturated"] = f"{nsat} samples"
+    return (out, flags) if return_flags else out

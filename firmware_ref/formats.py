@@ -1,0 +1,413 @@
+"""Every fixed-point signal of the firmware reference: the one module that the code and the docs
+(firmware_ref/FORMATS.md) share.
+
+The constants below are used by the Python reference, the numba kernel, the quantizer and the
+table layout; :func:`render_blocks` renders the tables of FORMATS.md from them (the generated
+blocks between ``<!-- BEGIN name -->`` and ``<!-- END name -->``; ``python -m
+firmware_ref.formats --update`` rewrites them, tests/test_fixed_formats.py checks they agree).
+
+Conventions: ``Qm.f`` is a signed word with f fractional bits; "LSB" is the value of one unit;
+**RHU** is round-half-up by add-then-arithmetic-shift, ``(x + 2**(s-1)) >> s`` (apytypes
+``QuantizationMode.TIES_POS``; ARM SMMULR rounds the same way); **sym-sat** is symmetric
+saturation ``[-(2**(w-1) - 1), 2**(w-1) - 1]`` (so negation never overflows).
+"""
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+
+# -- input words ---------------------------------------------------------------------------------
+FREQ_FRAC = 18            # drive-frequency word: uint32, LSB 2^-18 Hz, 0 .. 16384 Hz
+TEMP_FRAC = 16            # temperature word: int32, LSB 2^-16 degC
+RATE_FRAC = 10            # raw rate word: int32, LSB 2^-10 deg/h (+-2^21 deg/h = +-582.5 deg/s)
+Q = 30                    # u, v, z: int32 Q1.30, 1.0 = 2^30
+ONE = 1 << Q
+WORD_BITS = 32
+INT32_SYM = (1 << 31) - 1          # symmetric int32 saturation limit
+UINT32_MAX = (1 << 32) - 1
+
+# -- proxy / rate -----------------------------------------------------------------------------------
+DP_CLAMP = (1 << 31) - 1  # |P - P_ref| clamped to int32 before the gain product (u saturates anyway)
+SPAN_LSB_MAX = 1 << 30     # largest proxy span in word LSB (a clamped dP still clamps u)
+GAIN_BITS = 31            # gains are positive int32 (< 2^31)
+IIR_FRAC = 24             # iir state: 24 fractional bits below the proxy LSB (>= MAX_SHIFT)
+N_HIST_MAX = 4096         # longest diffn/lsq window: the history buffer holds n + 1 words
+S_BITS_MAX = 55           # rate sum clamp |S| <= 2^SB - 1 with SB <= 55 (gain keeps >= 7 bits)
+MIN_GAIN_BITS = 16        # quantizer refuses a proxy or rate gain with fewer significant bits
+
+# -- sequencer / combiner ----------------------------------------------------------------------------
+MEAN_EXTRA = 10           # window mean W: 10 more fractional bits than the rate word
+W_FRAC = RATE_FRAC + MEAN_EXTRA      # 20: W LSB 2^-20 deg/h
+Y_FRAC = W_FRAC + 1                  # 21: combined output y LSB 2^-21 deg/h (y = c + W_o [+ T] in W units)
+SLOPE_EXTRA = 16                     # trend slope: 16 more fractional bits than W
+SLOPE_FRAC = W_FRAC + SLOPE_EXTRA    # 36: LSB 2^-36 deg/h per half-sample
+SLOPE_MAX = (1 << 40) - 1            # |slope| <= 2^40 - 1 (16 deg/h per half-sample)
+D_MAX = (1 << 22) - 1                # trend distance (half-samples) clamp: |slope * d| < 2^62
+COUNT_MAX = (1 << 31) - 1            # window count, sample ages: saturating uint32 at 2^31 - 1
+TIMER_MAX = (1 << 31) - 1            # sequencer timing fields (samples) at most 2^31 - 1
+
+# -- evaluator / output --------------------------------------------------------------------------------
+ACC_LIMIT = (1 << 31) - 1  # every Horner accumulator |.| <= 2^31 - 1 (quantizer interval analysis)
+EXP_MIN, EXP_MAX = 0, 52   # legal coefficient exponents: c = m * 2^-e
+ALIGN_MAX = 31             # e_group - E in 0..31 (row and aux alignment shifts)
+OUT_FRAC = 10              # compensated output and bias words: int32, LSB 2^-10 deg/h
+OUT_SHIFT = Y_FRAC - OUT_FRAC        # 11: the one final rounding
+
+# -- status flags (uint8; bits 1..16 are host_tools.compensate's) ----------------------------------------
+FLAG_PROXY_CLAMPED = 1
+FLAG_RATE_CLAMPED = 2
+FLAG_WARMUP = 4
+FLAG_EXCHANGE = 8
+FLAG_STALE = 16
+FLAG_AUX_CLAMPED = 32      # z outside [-2^30, 2^30] was clamped
+FLAG_INPUT_SAT = 64        # an input value beyond its word's range was saturated (inputs stage, host side)
+FLAG_SAT = 128             # a saturation inside the pipeline (window count, trend slope/distance, output words)
+FLAGS = {
+    FLAG_PROXY_CLAMPED: ("proxy_clamped", "u outside [-1, 1] was clamped (golden: same rule, |u_raw| > 1)"),
+    FLAG_RATE_CLAMPED: ("rate_clamped", "v outside [-1, 1] was clamped"),
+    FLAG_WARMUP: ("warmup", "rate estimator in warm-up (v = 0)"),
+    FLAG_EXCHANGE: ("exchange", "mode 3 (exchange or power-on)"),
+    FLAG_STALE: ("stale", "mode 1/2 sample without a valid combination (settling, no window, too old)"),
+    FLAG_AUX_CLAMPED: ("aux_clamped", "z word outside [-2^30, 2^30] was clamped"),
+    FLAG_INPUT_SAT: ("input_saturated", "a float input beyond its word's range was saturated (host)"),
+    FLAG_SAT: ("saturated", "saturation in the pipeline: window count, trend slope/distance, output word"),
+}
+
+# -- sequencer states and virtual-switch control bits (paper Fig. 3c) -------------------------------------
+ST_POWER_ON, ST_EXCH_TO_1, ST_MODE_1, ST_EXCH_TO_2, ST_MODE_2, ST_FTR = range(6)
+STATE_NAMES = ("power_on", "exchange_to_1", "mode_1", "exchange_to_2", "mode_2", "ftr")
+STATE_MODE = (3, 3, 1, 3, 2, 0)      # run-log mode of each state
+VS_DRV_X = 1      # AGC (drive) loop closed on the x electrodes: x is the drive axis
+VS_DRV_Y = 2      # AGC loop closed on y
+VS_SNS_Y = 4      # FTR (sense) loop closed on y: y senses, output valid for integration
+VS_SNS_X = 8      # FTR loop closed on x
+VS_NEG = 16       # rate sign negative (mode 2: the loop output is negated before combination)
+VS_BITS = {
+    VS_DRV_X: ("DRV_X", "AGC drive loop closed on x (drive electrodes x)"),
+    VS_DRV_Y: ("DRV_Y", "AGC drive loop closed on y"),
+    VS_SNS_Y: ("SNS_Y", "FTR rebalance loop closed on y (y is the sense axis)"),
+    VS_SNS_X: ("SNS_X", "FTR rebalance loop closed on x"),
+    VS_NEG: ("NEG", "output sign -1 (mode 2)"),
+}
+STATE_VS = (
+    VS_DRV_X,                       # power-on: drive starts on x, sense loop open
+    VS_DRV_X,                       # exchange to mode 1: drive re-established on x, sense open
+    VS_DRV_X | VS_SNS_Y,            # mode 1: x drives, y senses
+    VS_DRV_Y,                       # exchange to mode 2: drive moved to y, sense open
+    VS_DRV_Y | VS_SNS_X | VS_NEG,   # mode 2: y drives, x senses, sign -1
+    VS_DRV_X | VS_SNS_Y,            # FTR: as mode 1, forever
+)
+STATE_SIGN = (0, 0, 1, 0, -1, 1)
+MODE_SIGN = (1, 1, -1, 0)           # rate sign per run-log mode 0..3
+
+COMBINERS = ("ftr", "pair", "trend")  # table combiner id 0, 1, 2
+ESTIMATORS = ("diff", "diffn", "lsq", "iir")
+PROXY_KINDS = ("freq", "temp")
+AUX_GENERATORS = ("none",)
+
+
+@dataclass(frozen=True)
+class Fmt:
+    """One signal: name, C type, fractional bits (text), LSB (text), range, rounding, overflow rule."""
+
+    name: str
+    ctype: str
+    frac: str
+    lsb: str
+    range: str
+    rounding: str
+    overflow: str
+    stage: str
+
+
+def _p2(e: int) -> str:
+    return f"2^{e}"
+
+
+SIGNALS = (
+    # inputs
+    Fmt("F (drive frequency word)", "uint32", str(FREQ_FRAC), f"2^-{FREQ_FRAC} Hz = {2.0 ** -FREQ_FRAC:.4g} Hz",
+        "0 .. 16384 Hz", "RHU from float", "sat [0, 2^32-1], FLAG_INPUT_SAT", "inputs"),
+    Fmt("T (temperature word)", "int32", str(TEMP_FRAC), f"2^-{TEMP_FRAC} degC = {2.0 ** -TEMP_FRAC:.4g} degC",
+        "+-32768 degC", "RHU from float", "sym-sat, FLAG_INPUT_SAT", "inputs"),
+    Fmt("R (raw rate word)", "int32", str(RATE_FRAC), f"2^-{RATE_FRAC} deg/h = {2.0 ** -RATE_FRAC:.4g} deg/h",
+        "+-2^21 deg/h = +-582.5 deg/s", "RHU from float", "sym-sat, FLAG_INPUT_SAT", "inputs"),
+    Fmt("mode, restart", "uint8", "-", "-", "mode 0..3; restart 0/1", "-", "mode outside 0..3: host error", "inputs"),
+    Fmt("Z (aux regressor word)", "int32", str(Q), "2^-30 (Q1.30)", "[-1, 1]", "RHU from float",
+        "clamp [-2^30, 2^30], FLAG_AUX_CLAMPED", "inputs"),
+    # proxy
+    Fmt("P_REF (proxy centre)", "same as P", "as P", "as P", "as P", "RHU from ref", "quantizer refuses", "table"),
+    Fmt("dP = P - P_REF", "int64 -> int32", "as P", "as P", "|dP| <= 2^31 - 1", "exact", "clamp +-(2^31 - 1) (u clamps anyway)", "proxy"),
+    Fmt("G_U, SH_U (proxy gain)", "int32 > 0, uint8", "-", "u = RHU(dP G_U, SH_U)", "2^30 <= G_U < 2^31 when SH_U > 0",
+        "RHU from 2^(30+SH_U) LSB/span", "quantizer refuses span < LSB or > 2^30 LSB", "table"),
+    Fmt("u", "int32", str(Q), "2^-30", "[-2^30, 2^30]", "RHU (1 shift)", "clamp, FLAG_PROXY_CLAMPED", "proxy"),
+    # rate
+    Fmt("history", "n+1 proxy words", "as P", "as P", "as P", "-", "-", "rate"),
+    Fmt("S (estimator sum)", "int64", f"as P (iir: +{IIR_FRAC})", "P LSB (iir: 2^-24 P LSB)", "|S| < 2^57",
+        "exact (iir: RHU per update)", "clamp +-(2^SB - 1), then v clamps", "rate"),
+    Fmt("y (iir state)", "int64", f"P + {IIR_FRAC}", "2^-24 P LSB", "|y| < 2^56", "RHU (y += RHU(d 2^24 - y, shift))",
+        "cannot overflow (|d| < 2^32)", "rate"),
+    Fmt("G_V, SH_V (rate gain)", "int32 > 0, uint8", "-", "v = RHU(S G_V, SH_V)", "G_V < 2^min(31, 62-SB)",
+        "RHU from 2^(30+SH_V) / S_span", "quantizer refuses (see quantize)", "table"),
+    Fmt("v", "int32", str(Q), "2^-30", "[-2^30, 2^30]", "RHU (1 shift)", "clamp, FLAG_RATE_CLAMPED", "rate"),
+    Fmt("k (warm-up counter)", "uint32", "0", "1 sample", "0 .. W", "-", "saturates at W", "rate"),
+    # sequencer
+    Fmt("c = s R (rate-corrected)", "int32", str(RATE_FRAC), f"2^-{RATE_FRAC} deg/h", "sym int32", "exact",
+        "cannot overflow (R sym-sat)", "sequencer"),
+    Fmt("acc (window sum)", "int64", str(RATE_FRAC), f"2^-{RATE_FRAC} deg/h", "|acc| < 2^62", "exact",
+        "cnt saturates: later samples not added, FLAG_SAT", "sequencer"),
+    Fmt("cnt, pos, age[o], span[o]", "uint32", "0", "1 sample", "0 .. 2^31-1", "-", "saturate at 2^31-1", "sequencer"),
+    Fmt("W[o] (window mean)", "int64", str(W_FRAC), f"2^-{W_FRAC} deg/h", "|W| < 2^41", "RHU division, once per window",
+        "cannot overflow", "sequencer"),
+    Fmt("slope[o] (trend)", "int64", str(SLOPE_FRAC), f"2^-{SLOPE_FRAC} deg/h per half-sample", "|.| <= 2^40-1",
+        "RHU division, once per window", "clamp, FLAG_SAT", "sequencer"),
+    Fmt("d (trend distance)", "uint32", "1", "half a sample", "0 .. 2^22-1", "exact", "clamp, FLAG_SAT", "sequencer"),
+    Fmt("T (trend term)", "int64", str(W_FRAC), f"2^-{W_FRAC} deg/h", "|T| < 2^46", "RHU (1 shift)", "cannot overflow",
+        "sequencer"),
+    Fmt("y (combined output)", "int64", str(Y_FRAC), f"2^-{Y_FRAC} deg/h", "|y| < 2^47", "exact (c 2^10 + W + T)",
+        "cannot overflow", "sequencer"),
+    # evaluator
+    Fmt("m_k (coefficient mantissas)", "int32", "e_g (per group)", "2^-e_g deg/h", "sum_j |m_gj| <= 2^31-1",
+        "RHU from float", "quantizer refuses", "table"),
+    Fmt("e_0..e_3, e_7, E (exponents)", "uint8", "-", "-", f"{EXP_MIN}..{EXP_MAX}; e_g - E in 0..{ALIGN_MAX}", "-",
+        "quantizer refuses", "table"),
+    Fmt("p, q_i (inner Horner)", "int64", "e_i", "2^-e_i deg/h", "|.| <= 2^31-1 (proved)", "RHU per product",
+        "cannot overflow", "evaluator"),
+    Fmt("t (outer Horner + k7 z)", "int64", "E", "2^-E deg/h", "|.| <= 2^31-1 (proved)", "RHU per product/alignment",
+        "cannot overflow", "evaluator"),
+    Fmt("B (bias)", "int64", str(Y_FRAC), f"2^-{Y_FRAC} deg/h", "|B| < 2^52", "RHU (E > 21) or exact",
+        "cannot overflow", "evaluator"),
+    # output
+    Fmt("OUT (compensated rate word)", "int32", str(OUT_FRAC), f"2^-{OUT_FRAC} deg/h", "+-2^21 deg/h",
+        f"RHU (y - B) >> {OUT_SHIFT}: the one final rounding", "sym-sat, FLAG_SAT", "compensate"),
+    Fmt("BIAS (bias word)", "int32", str(OUT_FRAC), f"2^-{OUT_FRAC} deg/h", "+-2^21 deg/h", f"RHU B >> {OUT_SHIFT}",
+        "sym-sat, FLAG_SAT", "compensate"),
+    Fmt("flags", "uint8", "-", "-", "bits below", "-", "-", "compensate"),
+)
+
+
+# -- the input-format derivation -------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class NoiseFigures:
+    """The stated figures the input formats are derived against (host_tools.sim defaults when this
+    was written): drive frequency f0 [Hz], its temperature coefficient [1/degC], white frequency
+    noise [Hz, 1 sigma per sample], PLL step [Hz]; ARW [deg/sqrt(h)]; board-sensor noise [degC];
+    sample rate [Hz]; the rate the rate term must resolve [degC/min]; allowed noise increase."""
+
+    f0_hz: float = 6227.386
+    k_per_c: float = -20.9e-6
+    sigma_f_hz: float = 1.0e-4
+    pll_lsb_hz: float = 100e6 / 2 ** 48
+    arw_deg_sqrt_h: float = 0.003
+    sigma_t_c: float = 0.02
+    fs_hz: float = 1.0
+    rate_c_per_min: float = 1.0
+    max_noise_increase: float = 0.01
+
+
+def max_lsb_for_noise(sigma: float, increase: float = 0.01) -> float:
+    """Largest quantization step q whose uniform noise q/sqrt(12), added in quadrature, raises a
+    white noise floor sigma by at most ``increase`` (relative): q = sigma sqrt(12 ((1+i)^2 - 1))."""
+    return sigma * math.sqrt(12.0 * ((1.0 + increase) ** 2 - 1.0))
+
+
+def noise_increase(sigma: float, lsb: float) -> float:
+    """Relative increase of a white noise floor sigma by adding quantization noise lsb/sqrt(12)."""
+    return math.sqrt(1.0 + (lsb / math.sqrt(12.0) / sigma) ** 2) - 1.0
+
+
+def derivation(fig: NoiseFigures = NoiseFigures()) -> dict:
+    """The numbers of the input-format derivation (see FORMATS.md)."""
+    lsb_f = 2.0 ** -FREQ_FRAC
+    lsb_t = 2.0 ** -TEMP_FRAC
+    lsb_r = 2.0 ** -RATE_FRAC
+    df_dt = abs(fig.f0_hz * fig.k_per_c) * fig.rate_c_per_min / 60.0           # Hz/s at the stated rate
+    q_f = max_lsb_for_noise(fig.sigma_f_hz, fig.max_noise_increase)
+    sigma_rate = 60.0 * fig.arw_deg_sqrt_h * math.sqrt(fig.fs_hz)                # deg/h per sample
+    return {
+        "df_dt_hz_per_s": df_dt,
+        "df_per_sample_hz": df_dt / fig.fs_hz,
+        "df_per_sample_lsb": df_dt / fig.fs_hz / lsb_f,
+        "rate_resolution_c_per_min": lsb_f * fig.fs_hz / (df_dt / fig.rate_c_per_min),
+        "q_f_max_hz": q_f,
+        "f_frac_min": math.ceil(-math.log2(q_f)),
+        "f_noise_increase": noise_increase(fig.sigma_f_hz, lsb_f),
+        "f_noise_increase_diff": noise_increase(fig.sigma_f_hz * math.sqrt(2), lsb_f * math.sqrt(2)),
+        "f_range_hz": (1 << 32) * lsb_f,
+        "pll_lsb_hz": fig.pll_lsb_hz,
+        "sigma_rate_dph": sigma_rate,
+        "q_r_max_dph": max_lsb_for_noise(sigma_rate, fig.max_noise_increase),
+        "r_noise_increase": noise_increase(sigma_rate, lsb_r),
+        "r_range_dps": (1 << 31) * lsb_r / 3600.0,
+        "q_t_max_c": max_lsb_for_noise(fig.sigma_t_c, fig.max_noise_increase),
+        "t_noise_increase": noise_increase(fig.sigma_t_c, lsb_t),
+        "out_rounding_dph": 0.5 * 2.0 ** -OUT_FRAC,
+    }
+
+
+# -- operation counts per sample ----------------------------------------------------------------------
+
+def op_counts(estimator: str = "diff", n: int = 1, combiner: str = "pair") -> dict:
+    """Operations per sample of one configuration, counted by construction from the algorithm of
+    FORMATS.md (steady state, valid sample; the once-per-window divisions are listed apart).
+    ``mul``: 32x32->64 (or 64x32) multiplies; ``add``: adds/subtracts/negations; ``shift``;
+    ``cmp``: compares/branches (clamps are 2); ``mem``: 32-bit words read or written from the state
+    and the table (registers not counted); ``div_per_window``: 64/32 divisions per window commit."""
+    c = {"mul": 0, "add": 0, "shift": 0, "cmp": 0, "mem": 0, "div_per_window": 0}
+
+    def add(**kw):
+        for key, val in kw.items():
+            c[key] += val
+
+    # proxy: dP, clamp, product, RHU, clamp; table: P_REF, G_U, SH_U
+    add(add=1, cmp=2, mul=1, shift=1, mem=3)
+    add(add=1, cmp=2)
+    # rate estimator
+    if estimator in ("diff", "diffn"):
+        add(add=1, mem=3)                               # S = P - P[i-n]; history write + read, index
+    elif estimator == "lsq":
+        add(add=2 * n, mul=n, mem=n + 2)                # n differences, n weight products, n sums
+    elif estimator == "iir":
+        add(add=3, shift=2, mem=4)                      # d, d<<24 - y, RHU add, y += ...; y (2 words), P[i-1]
+    else:
+        raise ValueError(f"unknown estimator {estimator!r}")
+    add(cmp=1, add=1, mem=1)                            # warm-up counter compare + increment
+    add(cmp=2, mul=1, add=1, shift=1, mem=3)            # clamp S, product, RHU; table G_V, SH_V, SB
+    add(cmp=2)                                          # clamp v
+    # sequencer / combiner
+    if combiner == "ftr":
+        add(shift=1)                                    # y = R << 11
+    else:
+        add(cmp=3, add=1, mem=2)                        # mode change, settle, staleness; sign
+        add(add=2, mem=3)                               # acc += c (2 words), cnt++
+        add(add=2, mem=2)                               # age[1], age[2] increments
+        add(shift=1, add=1, mem=2)                      # y = (c << 10) + W[o]
+        c["div_per_window"] += 1
+        if combiner == "trend":
+            add(shift=1, add=1, cmp=1, mem=3)           # d = 2 age + span, clamp; slope (2 words)
+            add(mul=1, add=2, shift=1)                  # T = RHU(slope d), other += T
+            c["div_per_window"] += 1
+    # evaluator: 15 Horner multiply-adds + k7 z, each product rounded (add + shift)
+    add(mul=16, add=16 + 16, shift=16, mem=17 + 6)      # 17 mantissas + 6 exponents
+    add(add=4, shift=4)                                 # row alignments (RHU)
+    add(add=1, shift=1, cmp=2)                          # B = RHU(t, E - 21); z clamp
+    # compensate: y - B, two RHU, two saturations, hold (2 words)
+    add(add=3, shift=2, cmp=5, mem=2)
+    return c
+
+
+OP_CONFIGS = (("diff", 1, "ftr"), ("diff", 1, "pair"), ("diff", 1, "trend"), ("diffn", 8, "pair"),
+              ("lsq", 8, "pair"), ("lsq", 32, "trend"), ("iir", 4, "pair"))
+
+
+# -- rendering of the generated blocks of FORMATS.md ---------------------------------------------------
+
+def _md_table(header, rows) -> str:
+    out = ["| " + " | ".join(header) + " |", "| " + " | ".join("---" for _ in header) + " |"]
+    out += ["| " + " | ".join(str(x) for x in row) + " |" for row in rows]
+    return "\n".join(out)
+
+
+def render_blocks() -> dict:
+    """name -> markdown text of every generated block of FORMATS.md."""
+    from firmware_ref import table as tbl  # the layout lives with pack/unpack
+
+    blocks = {}
+    blocks["constants"] = _md_table(
+        ("constant", "value", "meaning"),
+        [(name, globals()[name], doc) for name, doc in (
+            ("FREQ_FRAC", "fractional bits of the drive-frequency word"),
+            ("TEMP_FRAC", "fractional bits of the temperature word"),
+            ("RATE_FRAC", "fractional bits of the raw rate word"),
+            ("Q", "fractional bits of u, v, z (Q1.30)"),
+            ("DP_CLAMP", "|P - P_REF| clamp"),
+            ("SPAN_LSB_MAX", "largest proxy span (word LSB)"),
+            ("IIR_FRAC", "extra fractional bits of the iir state"),
+            ("N_HIST_MAX", "longest diffn/lsq window n"),
+            ("S_BITS_MAX", "largest rate-sum clamp exponent SB"),
+            ("MIN_GAIN_BITS", "fewest significant bits of G_U, G_V"),
+            ("W_FRAC", "fractional bits of the window mean W"),
+            ("Y_FRAC", "fractional bits of y and B"),
+            ("SLOPE_FRAC", "fractional bits of the trend slope (per half-sample)"),
+            ("SLOPE_MAX", "trend slope clamp"),
+            ("D_MAX", "trend distance clamp (half-samples)"),
+            ("COUNT_MAX", "saturation of cnt, pos, age, span"),
+            ("TIMER_MAX", "largest sequencer timing field"),
+            ("ACC_LIMIT", "bound of every Horner accumulator"),
+            ("EXP_MIN", "smallest coefficient exponent"),
+            ("EXP_MAX", "largest coefficient exponent"),
+            ("ALIGN_MAX", "largest alignment shift e_g - E"),
+            ("OUT_FRAC", "fractional bits of the output words"),
+            ("OUT_SHIFT", "the final rounding shift (Y_FRAC - OUT_FRAC)"),
+        )])
+    blocks["signals"] = _md_table(("signal", "type", "frac bits", "LSB", "range", "rounding", "overflow", "stage"),
+                                  [(s.name, s.ctype, s.frac, s.lsb, s.range, s.rounding, s.overflow, s.stage)
+                                   for s in SIGNALS])
+    blocks["flags"] = _md_table(("bit", "name", "meaning"),
+                                [(bit, name, text) for bit, (name, text) in FLAGS.items()])
+    blocks["states"] = _md_table(
+        ("id", "state", "mode", "sign", "VS bits", "switches"),
+        [(i, STATE_NAMES[i], STATE_MODE[i], STATE_SIGN[i], f"0x{STATE_VS[i]:02x}",
+          " ".join(name for bit, (name, _) in VS_BITS.items() if STATE_VS[i] & bit) or "-")
+         for i in range(len(STATE_NAMES))])
+    blocks["vs_bits"] = _md_table(("bit", "name", "meaning"),
+                                  [(f"0x{bit:02x}", name, text) for bit, (name, text) in VS_BITS.items()])
+    d = derivation()
+    fig = NoiseFigures()
+    blocks["derivation"] = _md_table(("quantity", "value"), [
+        ("stated drive-frequency noise sigma_f (sim FreqNoise default)", f"{fig.sigma_f_hz:.3g} Hz per sample"),
+        ("PLL step (sim PllQuant default)", f"{d['pll_lsb_hz']:.3g} Hz"),
+        ("df/dt at 1 degC/min (6227.386 Hz x 20.9 ppm/degC / 60)", f"{d['df_dt_hz_per_s'] * 1e3:.4f} mHz/s"),
+        ("per sample at 1 Hz, in word LSB (2^-18 Hz)", f"{d['df_per_sample_lsb']:.1f} LSB"),
+        ("rate-term resolution of one LSB per sample at 1 Hz", f"{d['rate_resolution_c_per_min']:.2e} degC/min"),
+        ("largest LSB adding <= 1 % to sigma_f: sigma_f sqrt(12((1.01)^2-1))", f"{d['q_f_max_hz']:.3g} Hz (>= {d['f_frac_min']} fractional bits)"),
+        ("noise added by 2^-18 Hz to sigma_f (and to the diff noise)", f"{100 * d['f_noise_increase']:.2e} %"),
+        ("frequency word range", f"0 .. {d['f_range_hz']:.0f} Hz"),
+        ("stated ARW 0.003 deg/sqrt(h): 1-sample sigma at 1 Hz", f"{d['sigma_rate_dph']:.3g} deg/h"),
+        ("largest rate LSB adding <= 1 %", f"{d['q_r_max_dph']:.3g} deg/h"),
+        ("noise added by 2^-10 deg/h", f"{100 * d['r_noise_increase']:.2e} %"),
+        ("rate word range", f"+-{d['r_range_dps']:.1f} deg/s"),
+        ("stated board-sensor noise 0.02 degC: largest LSB adding <= 1 %", f"{d['q_t_max_c']:.3g} degC"),
+        ("noise added by 2^-16 degC", f"{100 * d['t_noise_increase']:.2e} %"),
+        ("final output rounding (half an output LSB)", f"{d['out_rounding_dph']:.3g} deg/h"),
+    ])
+    rows = []
+    for est, n, comb in OP_CONFIGS:
+        k = op_counts(est, n, comb)
+        rows.append((f"{est}" + (f" n={n}" if est in ("diffn", "lsq") else ""),
+                     comb, k["mul"], k["add"], k["shift"], k["cmp"], k["mem"], k["div_per_window"]))
+    blocks["ops"] = _md_table(("rate estimator", "combiner", "mul", "add", "shift", "cmp", "mem words",
+                               "div per window"), rows)
+    blocks["layout"] = _md_table(("word", "field", "type", "meaning"),
+                                 [(i, name, typ, text) for i, (name, typ, text) in enumerate(tbl.LAYOUT)]
+                                 + [("...", "aux params", "int32", "aux_nparams words"),
+                                    ("last", "crc32", "uint32", "zlib.crc32 of all preceding words, little-endian bytes")])
+    return blocks
+
+
+def splice(text: str, blocks: dict) -> str:
+    """Replace every ``<!-- BEGIN name -->...<!-- END name -->`` block of ``text``."""
+    for name, body in blocks.items():
+        begin, end = f"<!-- BEGIN {name} -->", f"<!-- END {name} -->"
+        i, j = text.find(begin), text.find(end)
+        if i < 0 or j < i:
+            raise ValueError(f"FORMATS.md: generated block {name!r} markers missing")
+        text = text[:i + len(begin)] + "\n" + body + "\n" + text[j:]
+    return text
+
+
+def formats_md_path():
+    from pathlib import Path
+    return Path(__file__).with_name("FORMATS.md")
+
+
+if __name__ == "__main__":  # python -m firmware_ref.formats [--update]
+    path = formats_md_path()
+    new = splice(path.read_text(encoding="utf-8"), render_blocks())
+    if "--update" in sys.argv[1:]:
+        path.write_text(new, encoding="utf-8")
+        print(f"{path}: generated blocks updated")
+    else:
+        print(new)

@@ -1,0 +1,453 @@
+"""The fixed-point pipeline as one numba batch kernel over int64 arrays (cache=True).
+
+Bit for bit the same algorithm as the Python-integer reference (firmware_ref.proxy, .rate,
+.sequencer, .evaluator, .compensate) and the pseudo-code of FORMATS.md: every intermediate is an
+int64 whose range the formats prove (no overflow checks here; the reference asserts them).
+
+Batch organization (the per-sample results are unchanged by it): the samples are processed in
+blocks of CHUNK; per block (1) the rate sums, read straight from the word array (the firmware's
+ring of the last n + 1 words holds the same words within a segment), (2) pass A, the sequential
+state (timer, combiner, hold of y), (3) pass B, the stateless rest (u, v, B, the output
+candidates; branch-free so LLVM vectorizes it: products whose operands the formats bound to
+int32 are written as 32 x 32 -> 64 multiplies, vpmuldq) writing the output words and flags,
+(4) pass C, the hold: invalid samples take the last valid output words.
+
+:func:`run_words` is the entry point: table + input words -> output words, valid, flags (and,
+with ``detail``, u, v, B, y, state per sample).
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from firmware_ref import formats as F
+from firmware_ref.table import FIELD_INDEX as FI
+from firmware_ref.terms import POLY_INDEX
+
+_POLY = np.array(POLY_INDEX, np.int64)
+_STATE_MODE = np.array(F.STATE_MODE, np.int64)
+
+# field indices (compile-time constants for numba)
+I_PREF, I_GU, I_UOFF, I_SHU = FI["p_ref"], FI["g_u"], FI["u_off"], FI["sh_u"]
+I_EST, I_N, I_SHIFT, I_WARM = FI["rate_est"], FI["rate_n"], FI["rate_shift"], FI["rate_warmup"]
+I_SB, I_GV, I_SHV = FI["s_bits"], FI["g_v"], FI["sh_v"]
+I_COMB, I_SETTLE, I_STALE = FI["combiner"], FI["settle_n"], FI["max_stale_n"]
+I_PON, I_EXCH, I_DWELL = FI["power_on_n"], FI["exchange_n"], FI["dwell_n"]
+I_E0, I_E7, I_EACC, I_M0 = FI["e_0"], FI["e_7"], FI["e_acc"], FI["m_0"]
+
+_ONE = F.ONE
+_Q = F.Q
+
+
+@numba.njit(cache=True, inline="always")
+def _rshr(x, s):
+    """Round-half-up arithmetic right shift (s >= 0)."""
+    if s == 0:
+        return x
+    return (x + (np.int64(1) << (s - 1))) >> s
+
+
+@numba.njit(cache=True, inline="always")
+def _div_round_scaled(a, b, k):
+    """RHU(a * 2^k / b), b > 0, via quotient and remainder (no a * 2^k)."""
+    q = a // b
+    r = a - q * b
+    return q * (np.int64(1) << k) + (2 * (r << k) + b) // (2 * b)
+
+
+@numba.njit(cache=True, inline="always")
+def _mul32(a, b):
+    """a * b for operands known to fit int32 (the formats prove it): a 32x32 -> 64 product,
+    which LLVM vectorizes (vpmuldq)."""
+    return np.int64(np.int32(a)) * np.int64(np.int32(b))
+
+
+@numba.njit(cache=True)
+def _eval_consts(cfg):
+    """The evaluator's constants from the table, as one int64 tuple: c[i][j] (16, row-major),
+    row alignment shifts s_i and their rounding halves h_i, m_7, its shift and half, the final
+    B shift, its half and whether it is a left shift (E < 21)."""
+    e_acc = cfg[I_EACC]
+    c = np.empty(16, np.int64)
+    for i in range(4):
+        for j in range(4):
+            c[4 * i + j] = cfg[I_M0 + _POLY[i, j]]
+    s0 = cfg[I_E0] - e_acc
+    s1 = cfg[I_E0 + 1] - e_acc
+    s2 = cfg[I_E0 + 2] - e_acc
+    s3 = cfg[I_E0 + 3] - e_acc
+    sh7 = _Q + cfg[I_E7] - e_acc
+    left = 1 if e_acc < F.Y_FRAC else 0
+    b_sh = F.Y_FRAC - e_acc if left else e_acc - F.Y_FRAC
+    hb = 0 if left else (np.int64(1) << b_sh) >> 1
+    one = np.int64(1)
+    return (c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9], c[10], c[11], c[12], c[13], c[14], c[15],
+            s0, s1, s2, s3, (one << s0) >> 1, (one << s1) >> 1, (one << s2) >> 1, (one << s3) >> 1,
+            cfg[I_M0 + 7], sh7, (one << sh7) >> 1, np.int64(b_sh), np.int64(hb), np.int64(left))
+
+
+@numba.njit(cache=True, inline="always")
+def _bias(co, uu, vv, zz):
+    """B (int64, LSB 2^-21 deg/h) by the Horner scheme of firmware_ref.evaluator; u, v, z are
+    Q1.30 words already clamped to [-2^30, 2^30].  Branch-free, so the block loop vectorizes."""
+    hq = np.int64(1) << 29
+    q3 = ((_mul32(((_mul32(((_mul32(co[15], vv) + hq) >> 30) + co[14], vv) + hq) >> 30) + co[13], vv) + hq) >> 30) + co[12]
+    q2 = ((_mul32(((_mul32(((_mul32(co[11], vv) + hq) >> 30) + co[10], vv) + hq) >> 30) + co[9], vv) + hq) >> 30) + co[8]
+    q1 = ((_mul32(((_mul32(((_mul32(co[7], vv) + hq) >> 30) + co[6], vv) + hq) >> 30) + co[5], vv) + hq) >> 30) + co[4]
+    q0 = ((_mul32(((_mul32(((_mul32(co[3], vv) + hq) >> 30) + co[2], vv) + hq) >> 30) + co[1], vv) + hq) >> 30) + co[0]
+    t = ((_mul32((q3 + co[23]) >> co[19], uu) + hq) >> 30) + ((q2 + co[22]) >> co[18])
+    t = ((_mul32(t, uu) + hq) >> 30) + ((q1 + co[21]) >> co[17])
+    t = ((_mul32(t, uu) + hq) >> 30) + ((q0 + co[20]) >> co[16])
+    t += (_mul32(co[24], zz) + co[26]) >> co[25]
+    if co[29]:
+        return t << co[27]
+    return (t + co[28]) >> co[27]
+
+
+@numba.njit(cache=True)
+def _eval_kernel(cfg, u, v, z, out):
+    co = _eval_consts(cfg)
+    one = np.int64(_ONE)
+    for i in range(u.shape[0]):
+        out[i] = _bias(co, u[i], v[i], min(max(z[i], -one), one))
+
+
+CHUNK = 1024  # samples per block
+
+
+@numba.njit(cache=True)
+def _pass_b(co, pb, p_ref, g_u, u_off, sh_u, a_s, g_v, sh_v, a_y, zb, a_f, a_ok, out, bias, flags):
+    """Stateless part of a block, branch-free so LLVM vectorizes it: u, v (from the clamped rate
+    sum), B, the OUT/BIAS words (candidates: pass C replaces them by the held values on invalid
+    samples) and the flags (pass A's | 1 u clamped | 2 v clamped | 32 z clamped | 128 OUT or
+    BIAS saturated on a valid sample)."""
+    one = np.int64(_ONE)
+    lim32 = np.int64(2147483647)
+    h_u = (np.int64(1) << sh_u) >> 1
+    h_v = (np.int64(1) << sh_v) >> 1
+    for jb in range(a_s.shape[0]):
+        dp = min(max(np.int64(pb[jb]) - p_ref, -lim32), lim32)
+        uu = (_mul32(dp, g_u) + u_off + h_u) >> sh_u
+        f = np.uint8((uu > one) | (uu < -one))
+        uu = min(max(uu, -one), one)
+        vv = (a_s[jb] * g_v + h_v) >> sh_v
+        f |= np.uint8((vv > one) | (vv < -one)) << 1
+        vv = min(max(vv, -one), one)
+        zz = zb[jb]
+        f |= np.uint8((zz > one) | (zz < -one)) << 5
+        zz = min(max(zz, -one), one)
+        b = _bias(co, uu, vv, zz)
+        ow = (a_y[jb] - b + 1024) >> 11
+        bw = (b + 1024) >> 11
+        sat = (ow > lim32) | (ow < -lim32) | (bw > lim32) | (bw < -lim32)
+        f |= np.uint8(sat & (a_ok[jb] != 0)) << 7
+        out[jb] = np.int32(min(max(ow, -lim32), lim32))
+        bias[jb] = np.int32(min(max(bw, -lim32), lim32))
+        flags[jb] = f | a_f[jb]
+
+
+@numba.njit(cache=True)
+def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
+            out, bias, valid, flags, u_o, v_o, b_o, y_o, st_o, s_o):
+    n = p.shape[0]
+    one = np.int64(_ONE)
+    # -- table fields
+    p_ref = cfg[I_PREF]
+    g_u = cfg[I_GU]
+    u_off = cfg[I_UOFF]
+    sh_u = cfg[I_SHU]
+    est = cfg[I_EST]
+    nn = cfg[I_N]
+    if est == 0 or est == 3:
+        nn = 1
+    rshift = cfg[I_SHIFT]
+    warm_n = cfg[I_WARM]
+    s_lim = (np.int64(1) << cfg[I_SB]) - 1
+    g_v = cfg[I_GV]
+    sh_v = cfg[I_SHV]
+    comb = cfg[I_COMB]
+    settle_n = cfg[I_SETTLE]
+    max_stale = cfg[I_STALE]
+    lens = np.empty(6, np.int64)
+    lens[0] = cfg[I_PON]
+    lens[1] = cfg[I_EXCH]
+    lens[2] = cfg[I_DWELL]
+    lens[3] = cfg[I_EXCH]
+    lens[4] = cfg[I_DWELL]
+    lens[5] = -1
+    co = _eval_consts(cfg)
+    # -- state (per-mode combiner state in scalars: index 1 and 2)
+    seg = 0
+    iy = np.int64(0)
+    t_state = 0
+    t_cnt = 0
+    cur = 0
+    acc = np.int64(0)
+    cnt = np.int64(0)
+    nc1 = 0
+    nc2 = 0
+    w1 = np.int64(0)
+    w2 = np.int64(0)
+    sp1 = np.int64(0)
+    sp2 = np.int64(0)
+    e1 = np.int64(0)
+    e2 = np.int64(0)
+    sl1 = np.int64(0)
+    sl2 = np.int64(0)
+    sgn = np.int64(1)
+    have_o = False
+    other0 = np.int64(0)
+    sl_o = np.int64(0)
+    e_o = np.int64(0)
+    sp_o = np.int64(0)
+    used_from = np.int64(0)
+    y_hold = np.int64(0)
+    out_hold = np.int32(0)
+    bias_hold = np.int32(0)
+    last_window = 0
+    # -- block scratch
+    a_s = np.empty(CHUNK, np.int64)    # clamped rate sum (0 in warm-up)
+    a_w = np.empty(CHUNK, np.uint8)    # flags 4 warm-up, 2 rate sum clamped
+    a_k = np.empty(CHUNK, np.int64)    # samples since the segment start
+    a_y = np.empty(CHUNK, np.int64)    # combined output y (held)
+    a_f = np.empty(CHUNK, np.uint8)    # pass-A flags
+    zero_z = np.zeros(CHUNK, np.int64)
+    for c0 in range(0, n, CHUNK):
+        m_blk = min(CHUNK, n - c0)
+        # ---------------- rate estimator sums, read straight from the word array (the firmware
+        # keeps the last n + 1 words in a ring; within a segment both read the same words)
+        for jb in range(m_blk):
+            if restart[c0 + jb] != 0:
+                seg = c0 + jb
+            a_k[jb] = c0 + jb - seg                  # samples since the segment start
+        if est <= 1:
+            for jb in range(m_blk):
+                i = c0 + jb
+                a_s[jb] = np.int64(p[i]) - p[i - nn] if a_k[jb] >= nn else np.int64(0)
+        elif est == 2:
+            for jb in range(m_blk):
+                i = c0 + jb
+                s = np.int64(0)
+                if a_k[jb] >= nn - 1:
+                    pi = np.int64(p[i])
+                    for jj in range(nn):
+                        s += (2 * jj - (nn - 1)) * (np.int64(p[i - nn + 1 + jj]) - pi)
+                a_s[jb] = s
+        else:
+            for jb in range(m_blk):
+                i = c0 + jb
+                kk = a_k[jb]
+                if kk == 0:
+                    iy = np.int64(0)
+                elif kk == 1:
+                    iy = (np.int64(p[i]) - p[i - 1]) << 24
+                else:
+                    iy += _rshr(((np.int64(p[i]) - p[i - 1]) << 24) - iy, rshift)
+                a_s[jb] = iy
+        if detail:
+            for jb in range(m_blk):
+                s_o[c0 + jb] = a_s[jb]
+        for jb in range(m_blk):
+            sv = a_s[jb]
+            w = np.uint8(a_k[jb] < warm_n)
+            c = np.uint8((sv > s_lim) | (sv < -s_lim)) & (w ^ 1)
+            a_w[jb] = (w << 2) | (c << 1)            # the warm-up (4) and rate-clamp (2) flags
+            a_s[jb] = 0 if w else min(max(sv, -s_lim), s_lim)
+        # ---------------- pass A: sequential state (timer, combiner)
+        for jb in range(m_blk):
+            i = c0 + jb
+            rs = restart[i] != 0
+            if self_timed:
+                if rs:
+                    t_state = 0
+                    t_cnt = 0
+                for _ in range(3):
+                    if t_state == 5 or t_cnt < lens[t_state]:
+                        break
+                    if t_state == 0:
+                        t_state = 5 if comb == 0 else 1
+                    elif t_state == 4:
+                        t_state = 1
+                    else:
+                        t_state += 1
+                    t_cnt = 0
+                if t_state != 5:
+                    t_cnt += 1
+                m = _STATE_MODE[t_state]
+            else:
+                m = np.int64(mode_in[i])
+            if detail:
+                if self_timed:
+                    st_o[i] = t_state
+                elif m == 0:
+                    st_o[i] = 5
+                elif m == 1:
+                    st_o[i] = 2
+                elif m == 2:
+                    st_o[i] = 4
+                elif last_window == 1:
+                    st_o[i] = 3
+                else:
+                    st_o[i] = 1
+            fl = a_w[jb]
+            warm = fl == 4
+            # combiner
+            cvalid = False
+            if comb == 0:
+                y_hold = np.int64(r[i]) << 11
+                cvalid = True
+            else:
+                # ages as differences of sample indices (int64: no wrap in a batch), saturated
+                # like the reference's counters: age_o = min(i - end_o, 2^31 - 1)
+                if rs or m != cur:
+                    if rs:
+                        cur = 0
+                        cnt = np.int64(0)
+                        nc1 = 0
+                        nc2 = 0
+                        sl1 = np.int64(0)
+                        sl2 = np.int64(0)
+                    if cur != 0 and cnt >= 1:
+                        mean = _div_round_scaled(acc, cnt, 10)
+                        sp = cnt - 1
+                        if cur == 1:
+                            if nc1 >= 1:
+                                sl1 = _div_round_scaled(mean - w1, 2 * (min(i - e1, 2147483647) - 1) - sp + sp1, 16)
+                                if sl1 > 1099511627775 or sl1 < -1099511627775:
+                                    sl1 = min(max(sl1, -1099511627775), 1099511627775)
+                                    fl |= 128
+                            w1 = mean
+                            sp1 = sp
+                            e1 = i - 1
+                            nc1 = min(nc1 + 1, 2)
+                        else:
+                            if nc2 >= 1:
+                                sl2 = _div_round_scaled(mean - w2, 2 * (min(i - e2, 2147483647) - 1) - sp + sp2, 16)
+                                if sl2 > 1099511627775 or sl2 < -1099511627775:
+                                    sl2 = min(max(sl2, -1099511627775), 1099511627775)
+                                    fl |= 128
+                            w2 = mean
+                            sp2 = sp
+                            e2 = i - 1
+                            nc2 = min(nc2 + 1, 2)
+                    if m == 1 or m == 2:
+                        cur = m
+                        last_window = m
+                        # this window's constants: sign, the other mode's state
+                        sgn = np.int64(1) if m == 1 else np.int64(-1)
+                        if m == 1:
+                            have_o, other0, sl_o, e_o, sp_o = nc2 >= 1, w2, sl2, e2, sp2
+                        else:
+                            have_o, other0, sl_o, e_o, sp_o = nc1 >= 1, w1, sl1, e1, sp1
+                        used_from = i + settle_n
+                    else:
+                        cur = 0
+                    acc = np.int64(0)
+                    cnt = np.int64(0)
+                if cur != 0 and i >= used_from:
+                    c = sgn * r[i]
+                    if cnt < 2147483647:
+                        acc += c
+                        cnt += 1
+                    else:
+                        fl |= 128
+                    ag_o = min(i - e_o, 2147483647)
+                    if have_o and ag_o <= max_stale:
+                        other = other0
+                        if comb == 2:
+                            d = 2 * ag_o + sp_o
+                            if d > 4194303:
+                                d = np.int64(4194303)
+                                fl |= 128
+                            other += _rshr(sl_o * d, 16)
+                        y_hold = (c << 10) + other
+                        cvalid = True
+            if m == 3:
+                fl |= 8
+            elif not cvalid:
+                fl |= 16
+            a_y[jb] = y_hold
+            a_f[jb] = fl
+            valid[i] = 1 if (cvalid and not warm and m != 3) else 0
+        # ---------------- pass B: stateless, vectorized: u, v, B, output words and flags
+        zb = z[c0:c0 + m_blk] if has_z else zero_z[:m_blk]
+        _pass_b(co, p[c0:c0 + m_blk], p_ref, g_u, u_off, sh_u, a_s[:m_blk], g_v, sh_v, a_y[:m_blk], zb,
+                a_f[:m_blk], valid[c0:c0 + m_blk], out[c0:c0 + m_blk], bias[c0:c0 + m_blk], flags[c0:c0 + m_blk])
+        if detail:
+            h_u = (np.int64(1) << sh_u) >> 1
+            h_v = (np.int64(1) << sh_v) >> 1
+            for jb in range(m_blk):
+                i = c0 + jb
+                dp = min(max(np.int64(p[i]) - p_ref, -2147483647), 2147483647)
+                uu = min(max((dp * g_u + u_off + h_u) >> sh_u, -one), one)
+                vv = min(max((a_s[jb] * g_v + h_v) >> sh_v, -one), one)
+                u_o[i] = uu
+                v_o[i] = vv
+                b_o[i] = _bias(co, uu, vv, min(max(zb[jb], -one), one))
+                y_o[i] = a_y[jb]
+        # ---------------- pass C: invalid samples hold the last valid output words
+        for jb in range(m_blk):
+            i = c0 + jb
+            if valid[i]:
+                out_hold = out[i]
+                bias_hold = bias[i]
+            else:
+                out[i] = out_hold
+                bias[i] = bias_hold
+
+
+def run_words(table, p, r, mode=None, restart=None, z=None, self_timed: bool = False,
+              detail: bool = False) -> dict:
+    """Run the kernel.  ``p`` proxy words, ``r`` rate words (int64[n]); ``mode`` 0..3 (int8[n]
+    preferred; ignored and optional when ``self_timed``); ``restart`` bool/int[n] (default: only sample 0 restarts,
+    which is the power-on state anyway); ``z`` Q1.30 words (default 0).  Returns a dict of arrays:
+    ``out``, ``bias`` (int32 words, LSB 2^-10 deg/h), ``valid`` (uint8), ``flags`` (uint8) and with
+    ``detail`` also ``u``, ``v`` (Q1.30), ``b``, ``y`` (LSB 2^-21 deg/h), ``state`` and ``s`` (the
+    rate estimator's sum before its clamp)."""
+    p = np.ascontiguousarray(p, np.int64)
+    n = p.shape[0]
+    r = np.ascontiguousarray(r, np.int64)
+    if r.shape != (n,):
+        raise ValueError(f"rate words: shape {r.shape}, expected ({n},)")
+    if mode is None:
+        if not self_timed:
+            raise ValueError("mode is required unless self_timed")
+        mode = np.zeros(n, np.int8)
+    mode = np.asarray(mode)
+    if mode.dtype != np.int8:
+        if mode.size and (mode.min() < 0 or mode.max() > 3):
+            raise ValueError("mode values must be 0..3")
+        mode = mode.astype(np.int8)
+    mode = np.ascontiguousarray(mode)
+    restart = np.zeros(n, np.uint8) if restart is None else np.ascontiguousarray(restart, np.uint8)
+    has_z = z is not None
+    z = np.zeros(1, np.int64) if z is None else np.ascontiguousarray(z, np.int64)
+    for name, arr in (("mode", mode), ("restart", restart)) + ((("z", z),) if has_z else ()):
+        if arr.shape != (n,):
+            raise ValueError(f"{name}: shape {arr.shape}, expected ({n},)")
+    res = {"out": np.empty(n, np.int32), "bias": np.empty(n, np.int32), "valid": np.empty(n, np.uint8),
+           "flags": np.empty(n, np.uint8)}
+    m = n if detail else 1
+    for name in ("u", "v", "b", "y", "state", "s"):
+        res[name] = np.zeros(m, np.int64)
+    _kernel(table.config_array(), p, r, mode, restart, z, has_z, bool(self_timed), bool(detail), res["out"], res["bias"],
+            res["valid"], res["flags"], res["u"], res["v"], res["b"], res["y"], res["state"], res["s"])
+    if not detail:
+        for name in ("u", "v", "b", "y", "state", "s"):
+            del res[name]
+    return res
+
+
+def evaluate_words(table, u, v, z=None) -> np.ndarray:
+    """B (int64, LSB 2^-21 deg/h) at Q1.30 words u, v (|.| <= 2^30) and z (clamped), by the
+    kernel's evaluator."""
+    u = np.ascontiguousarray(u, np.int64)
+    v = np.ascontiguousarray(v, np.int64)
+    z = np.zeros_like(u) if z is None else np.ascontiguousarray(z, np.int64)
+    if not (u.shape == v.shape == z.shape) or u.ndim != 1:
+        raise ValueError("u, v, z must be 1-D arrays of one length")
+    if np.any(np.abs(u) > F.ONE) or np.any(np.abs(v) > F.ONE):
+        raise ValueError("u and v must be in [-2^30, 2^30] (the pipeline clamps them)")
+    out = np.empty(u.shape[0], np.int64)
+    _eval_kernel(table.config_array(), u, v, z, out)
+    return out

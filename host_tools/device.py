@@ -1,0 +1,539 @@
+"""`hdrg device`: a virtual gyroscope controller on a pseudo-terminal (or any pyserial URL).
+
+The simulator (host_tools.sim) plays the sensor: its run log is converted to input words
+(firmware_ref.inputs: drive-frequency F, temperature T, raw rate R, the logged mode) and fed to
+the fixed-point firmware reference (firmware_ref.kernel.run_words, bit-identical to the
+per-sample Python reference firmware_ref.compensate.Pipeline), which gives the compensated word
+OUT, the bias word BIAS, the valid bit, the status flags and the sequencer state of every sample.
+The device streams one SAMPLE frame per sample (host_tools.serial_link, docs/PROTOCOL.md), in
+real time or ``speed`` times faster (0: as fast as the link takes them), sends an INFO frame at
+start, every ``info_period_s`` seconds, on GET_INFO and when the run ends, and accepts table
+uploads:
+
+* TABLE: checked exactly as the host checks it (serial_link.validate_table_payload: format,
+  CRC-32, field ranges, the quantizer's interval checks); ACK (detail = the table's CRC-32 word,
+  sample = counter of the first sample computed with it) or NACK with the reason code and text.
+  An accepted table applies from the next sample not yet sent, which the pipeline processes as a
+  restart (its state is reset as at power-on, the OUT/BIAS hold restarts at 0): the run from that
+  sample on equals ``run_words(new_table, words[k:])``.
+* READ_TABLE: the active table's bytes in a TABLE frame.  GET_INFO: INFO.
+
+Without ``--table`` the device starts with the *identity table*: the data flow of the run
+(host_tools.compensate.fit_config_from_logs; the pair combiner for a mode-reversal run) with all
+17 coefficients 0, quantized by host_tools.quantize, so OUT is the combined raw output.
+
+When the simulated run ends the device sends INFO with ST_RUN_ENDED and goes on answering
+requests.  Writes are paced: at ``speed`` > 0 a frame the link cannot take within one sample
+period is dropped (as a UART without flow control would; its sequence number is still used, so
+the host counts the gap); at ``speed`` 0 the device waits for the link (back-pressure).  Every
+wait is bounded, so :meth:`VirtualDevice.stop` always returns.
+"""
+from __future__ import annotations
+
+import argparse
+import errno
+import os
+import select
+import sys
+import threading
+import time
+import tty
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from firmware_ref import formats as F
+from firmware_ref import inputs
+from host_tools import serial_link as SL
+
+
+class LinkClosed(Exception):
+    """The other end went away (pty closed) or the link was closed."""
+
+
+# -- links ------------------------------------------------------------------------------------------
+
+class FdLink:
+    """A file-descriptor link (the master side of a pty): non-blocking, select-based, every wait
+    bounded.  ``keep`` fds (the pty's slave) are held open so a host may close and reopen the
+    port, and closed with the link."""
+
+    def __init__(self, fd: int, keep=(), name: str = ""):
+        self.fd = fd
+        self.keep = tuple(keep)
+        self.name = name
+        os.set_blocking(fd, False)
+        self._closed = False
+
+    def read(self, timeout: float) -> bytes:
+        if self._closed:
+            raise LinkClosed("link closed")
+        r, _, _ = select.select([self.fd], [], [], max(0.0, timeout))
+        if not r:
+            return b""
+        try:
+            data = os.read(self.fd, 65536)
+        except BlockingIOError:
+            return b""
+        except OSError as exc:
+            if exc.errno == errno.EIO:
+                raise LinkClosed("the other end closed the pty") from None
+            raise
+        if not data:
+            raise LinkClosed("end of file")
+        return data
+
+    def write(self, data: bytes, stop: threading.Event, deadline: float | None = None) -> int:
+        """Write ``data``; returns the bytes written: all of it, or fewer when ``stop`` is set, or 0
+        when nothing could be written before ``deadline`` (once started, a frame is completed)."""
+        view = memoryview(data)
+        done = 0
+        while done < len(data):
+            if stop.is_set():
+                return done
+            wait = 0.05 if deadline is None or done else min(0.05, max(0.0, deadline - time.monotonic()))
+            _, w, _ = select.select([], [self.fd], [], wait)
+            if not w:
+                if deadline is not None and done == 0 and time.monotonic() >= deadline:
+                    return 0
+                continue
+            try:
+                done += os.write(self.fd, view[done:])
+            except BlockingIOError:
+                continue
+            except OSError as exc:
+                if exc.errno == errno.EIO:
+                    raise LinkClosed("the other end closed the pty") from None
+                raise
+        return done
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        for fd in (self.fd,) + self.keep:
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+class PortLink:
+    """A pyserial port (``serial.serial_for_url``: loop://, a real port, a pty path) as a link."""
+
+    def __init__(self, port):
+        self.port = port
+        self.name = getattr(port, "port", "") or ""
+
+    def read(self, timeout: float) -> bytes:
+        try:
+            n = self.port.in_waiting
+            if n:
+                return self.port.read(n)
+            if timeout > 0:
+                time.sleep(min(timeout, 0.01))
+            return b""
+        except Exception as exc:  # serial.SerialException, OSError
+            raise LinkClosed(str(exc)) from None
+
+    def write(self, data: bytes, stop: threading.Event, deadline: float | None = None) -> int:
+        try:
+            return self.port.write(data) or len(data)
+        except Exception as exc:
+            if type(exc).__name__ == "SerialTimeoutException":
+                return 0
+            raise LinkClosed(str(exc)) from None
+
+    def close(self) -> None:
+        try:
+            self.port.close()
+        except Exception:  # pragma: no cover
+            pass
+
+
+def open_pty():
+    """A raw pseudo-terminal pair: ``(master_fd, slave_fd, slave_name)``.  Both ends are raw (no
+    echo, no line editing, 8-bit clean) before anything is written."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    tty.setraw(master)
+    return master, slave, os.ttyname(slave)
+
+
+# -- the simulated sensor ------------------------------------------------------------------------------
+
+@dataclass
+class DeviceRun:
+    """The input words of a simulated run (int64 arrays of n samples) and its sample rate [Hz]."""
+
+    freq: np.ndarray
+    temp: np.ndarray
+    rate: np.ndarray
+    mode: np.ndarray
+    sat_freq: np.ndarray
+    sat_temp: np.ndarray
+    sat_rate: np.ndarray
+    fs_hz: float
+    metadata: dict = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return len(self.freq)
+
+    @classmethod
+    def from_log(cls, log) -> "DeviceRun":
+        """Words of a run log with ``freq_hz`` and ``temp_c`` (firmware_ref.inputs, RHU + saturation)."""
+        for col in ("freq_hz", "temp_c"):
+            if col not in log:
+                raise ValueError(f"{log.source}: the virtual device needs column '{col}'")
+        f, fs_ = inputs.freq_words(log["freq_hz"])
+        t, ts_ = inputs.temp_words(log["temp_c"])
+        r, rs_ = inputs.rate_words(log.rate_dph)
+        return cls(f, t, r, np.asarray(log.mode, np.int64), fs_, ts_, rs_, float(log.sample_rate_hz),
+                   dict(log.metadata))
+
+    def compute(self, table, start: int = 0) -> dict:
+        """The firmware reference over samples ``start .. n-1`` with ``table`` (sample ``start`` is a
+        power-on/restart): ``out``, ``bias``, ``valid``, ``flags`` (with FLAG_INPUT_SAT where the
+        proxy or rate word saturated), ``state`` (int64/uint8 arrays of n - start)."""
+        from firmware_ref.kernel import run_words
+
+        p, psat = (self.freq, self.sat_freq) if table.proxy_kind == 0 else (self.temp, self.sat_temp)
+        res = run_words(table, p[start:], self.rate[start:], self.mode[start:], detail=True)
+        sat = (psat | self.sat_rate)[start:]
+        res["flags"] = res["flags"] | np.where(sat, F.FLAG_INPUT_SAT, 0).astype(np.uint8)
+        return res
+
+
+def identity_table(log):
+    """The identity table of a run: its data flow (fit_config_from_logs; pair combiner for mode
+    reversal; the exchange/dwell times of its metadata) with all coefficients 0."""
+    from firmware_ref.terms import N_TERMS
+    from host_tools.compensate import fit_config_from_logs
+    from host_tools.model import BiasModel
+    from host_tools.quantize import quantize
+
+    cfg = fit_config_from_logs([log], reversal={"combiner": "pair"} if log.reversal else None)
+    model = BiasModel(cfg, (), np.zeros(N_TERMS), source="identity table (all coefficients 0)")
+    ex = float(log.metadata.get("exchange_s", 30.0))
+    dw = float(log.metadata.get("dwell_s", 120.0))
+    return quantize(model, exchange_s=ex, dwell_s=dw, n_random=16).table
+
+
+# -- the device -----------------------------------------------------------------------------------------
+
+@dataclass
+class DeviceStats:
+    samples_sent: int = 0
+    frames_sent: int = 0
+    frames_dropped: int = 0
+    requests: int = 0
+    uploads_accepted: int = 0
+    uploads_refused: int = 0
+
+
+class VirtualDevice:
+    """The virtual controller (see the module doc) on ``link`` (FdLink or PortLink), in a thread.
+
+    ``run``: DeviceRun; ``table``: the initial firmware_ref.table.Table; ``speed``: times real time
+    (0: as fast as the link takes); ``batch``: samples per write at speed 0.  :meth:`start`,
+    :meth:`stop` (bounded join), :meth:`unplug` (stop and close the link: the host sees the port
+    vanish).  ``switches``: (first sample, table) of every table in force; ``error``: an exception
+    that ended the thread (None if it ended normally)."""
+
+    CAPS = SL.CAP_SAMPLES | SL.CAP_TABLE_UPLOAD | SL.CAP_TABLE_READ | SL.CAP_VIRTUAL
+
+    def __init__(self, link, run: DeviceRun, table, speed: float = 1.0, name: str = "hdrg-virtual",
+                 info_period_s: float = 1.0, batch: int = 64, boot_id: int | None = None):
+        if speed < 0:
+            raise ValueError(f"speed must be >= 0 (0: as fast as possible), not {speed}")
+        self.link = link
+        self.run = run
+        self.speed = float(speed)
+        self.name = name
+        self.info_period_s = info_period_s
+        self.batch = max(1, int(batch))
+        self.boot_id = int.from_bytes(os.urandom(4), "little") if boot_id is None else boot_id & 0xFFFFFFFF
+        self.fs_q16 = int(round(run.fs_hz * 65536))
+        self.stats = DeviceStats()
+        self.decoder = SL.Decoder()
+        self.switches = []
+        self.error = None
+        self.closed_reason = ""
+        self.i = 0                      # next sample to send
+        self.ended = False
+        self._tx_seq = 0
+        self._stop = threading.Event()
+        self._thread = None
+        self._lock = threading.Lock()
+        self._set_table(table, 0)
+        self._in = (run.freq, run.rate, run.temp, run.mode)
+
+    # -- table ------------------------------------------------------------------------------------
+    @property
+    def table(self):
+        return self._table
+
+    def _set_table(self, table, start: int) -> None:
+        res = self.run.compute(table, start) if start < self.run.n else None
+        self._table = table
+        self._table_bytes = table.to_bytes()
+        self._res_start = start
+        self._res = None if res is None else tuple(res[k] for k in ("out", "bias", "state", "flags", "valid"))
+        self.switches.append((start, table))
+
+    # -- frames -----------------------------------------------------------------------------------
+    def _frame(self, ftype: int, payload: bytes) -> bytes:
+        fr = SL.encode_frame(ftype, self._tx_seq, payload)
+        self._tx_seq = (self._tx_seq + 1) & 0xFFFF
+        return fr
+
+    def _send(self, data: bytes, deadline=None) -> bool:
+        n = self.link.write(data, self._stop, deadline)
+        return n == len(data)
+
+    def info(self) -> SL.DeviceInfo:
+        status = SL.ST_RUN_ENDED if self.i >= self.run.n else SL.ST_STREAMING
+        return SL.DeviceInfo(capabilities=self.CAPS, fs_q16=self.fs_q16, table_crc=self._table.crc,
+                             status=status, boot_id=self.boot_id, counter=self.i, name=self.name)
+
+    def _send_control(self, ftype: int, payload: bytes) -> None:
+        self._send(self._frame(ftype, payload))
+        self.stats.frames_sent += 1
+
+    def _send_samples(self, j: int, deadline=None) -> None:
+        """Send samples self.i .. j-1 (one write), or drop them when the link is not ready by
+        ``deadline``."""
+        i, off = self.i, self._res_start
+        freq, rate, temp, mode = (a[i:j].tolist() for a in self._in)
+        out, bias, state, flags, valid = (a[i - off:j - off].tolist() for a in self._res)
+        pack, enc = SL.SAMPLE.pack, SL.encode_frame
+        parts = []
+        seq = self._tx_seq
+        for k in range(j - i):
+            parts.append(enc(SL.T_SAMPLE, seq, pack((i + k) & 0xFFFFFFFF, freq[k], rate[k], temp[k], out[k], bias[k],
+                                                    state[k], mode[k], flags[k], valid[k])))
+            seq = (seq + 1) & 0xFFFF
+        self._tx_seq = seq
+        ok = self._send(b"".join(parts), deadline)
+        if ok:
+            self.stats.samples_sent += j - self.i
+            self.stats.frames_sent += j - self.i
+        else:
+            self.stats.frames_dropped += j - self.i
+        self.i = j
+
+    # -- requests ---------------------------------------------------------------------------------------
+    def _handle(self, data: bytes) -> None:
+        for fr in self.decoder.feed(data):
+            if fr.type in (SL.T_SAMPLE, SL.T_INFO, SL.T_ACK, SL.T_NACK):
+                continue                        # our own frames echoed (loop://): not requests
+            self.stats.requests += 1
+            if fr.major != SL.PROTO_MAJOR:
+                self._reply(SL.T_NACK, fr, SL.R_VERSION, text=SL.version_message(fr.major, fr.minor))
+            elif fr.type == SL.T_GET_INFO:
+                self._send_control(SL.T_INFO, self.info().pack())
+            elif fr.type == SL.T_READ_TABLE:
+                self._send_control(SL.T_TABLE, self._table_bytes)
+            elif fr.type == SL.T_TABLE:
+                table, code, text = SL.validate_table_payload(fr.payload)
+                if table is None:
+                    self.stats.uploads_refused += 1
+                    self._reply(SL.T_NACK, fr, code, text=text)
+                else:
+                    with self._lock:
+                        self._set_table(table, self.i)
+                    self.stats.uploads_accepted += 1
+                    self._reply(SL.T_ACK, fr, SL.R_OK, detail=table.crc, sample=self.i)
+            else:
+                self._reply(SL.T_NACK, fr, SL.R_UNKNOWN_TYPE, text=f"frame type 0x{fr.type:02x} not handled")
+
+    def _reply(self, ftype, fr, code, detail=0, sample=0, text=""):
+        self._send_control(ftype, SL.Reply(fr.type, code, fr.seq, detail, sample, text).pack())
+
+    # -- the loop ----------------------------------------------------------------------------------------
+    def _loop(self) -> None:
+        n = self.run.n
+        period = 1.0 / (self.run.fs_hz * self.speed) if self.speed > 0 else 0.0
+        self._send_control(SL.T_INFO, self.info().pack())
+        last_info = time.monotonic()
+        next_due = time.monotonic()
+        while not self._stop.is_set():
+            now = time.monotonic()
+            streaming = self.i < n
+            if not streaming:
+                timeout = 0.05
+            elif self.speed == 0:
+                timeout = 0.0
+            else:
+                timeout = min(0.05, max(0.0, next_due - now))
+            data = self.link.read(timeout)
+            if data:
+                self._handle(data)
+            now = time.monotonic()
+            if now - last_info >= self.info_period_s:
+                self._send_control(SL.T_INFO, self.info().pack())
+                last_info = now
+            if self.i < n:
+                if self.speed == 0:
+                    self._send_samples(min(n, self.i + self.batch))
+                elif now >= next_due:
+                    k = min(self.batch, 1 + int((now - next_due) / period), n - self.i)
+                    self._send_samples(self.i + k, deadline=now + max(period, 0.001))
+                    next_due += k * period
+                if self.i >= n:
+                    self._send_control(SL.T_INFO, self.info().pack())
+            if self.i >= n:
+                self.ended = True
+
+    def _main(self) -> None:
+        try:
+            self._loop()
+        except LinkClosed as exc:
+            self.closed_reason = str(exc)
+        except Exception as exc:  # reported by stop() / the CLI
+            self.error = exc
+
+    def start(self) -> "VirtualDevice":
+        self._thread = threading.Thread(target=self._main, name=f"hdrg-device {self.name}", daemon=True)
+        self._thread.start()
+        return self
+
+    @property
+    def alive(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def stop(self, timeout_s: float = 5.0) -> bool:
+        """Stop the thread (bounded join); True if it ended."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+            return not self._thread.is_alive()
+        return True
+
+    def unplug(self, timeout_s: float = 5.0) -> bool:
+        """Stop and close the link (the host's port reports an error / end of data)."""
+        ok = self.stop(timeout_s)
+        self.link.close()
+        return ok
+
+    def close(self) -> None:
+        self.unplug()
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc):
+        self.unplug()
+        return False
+
+
+def make_device(scenario: str = "paper-mr-cycle-4dpm", seed: int = 0, duration_s: float | None = None,
+                sample_rate_hz: float = 1.0, table=None, link=None, **kw):
+    """A VirtualDevice on a new pty (``link`` None) or on ``link``: ``(device, port_name, log)``.
+    ``table`` None: the identity table of the run."""
+    from host_tools import sim
+
+    log = sim.simulate(scenario, seed=seed, duration_s=duration_s, sample_rate_hz=sample_rate_hz)
+    if table is None:
+        table = identity_table(log)
+    if link is None:
+        master, slave, name = open_pty()
+        link = FdLink(master, keep=(slave,), name=name)
+    kw.setdefault("name", f"hdrg-virtual ({scenario}, seed {seed})")
+    return VirtualDevice(link, DeviceRun.from_log(log), table, **kw), link.name, log
+
+
+# -- benchmark --------------------------------------------------------------------------------------
+
+def link_benchmark(n_frames: int = 20000, batch: int = 64) -> dict:
+    """Sustained SAMPLE frames/s from the virtual device (speed 0) to a HostLink over a pty
+    (decoding and sequence checks included; setup excluded).  Returns frames, seconds,
+    frames_per_s, bytes_per_s, crc_errors, seq_gaps."""
+    dev, name, _ = make_device("static", duration_s=float(n_frames), speed=0.0, batch=batch)
+    port = SL.open_port(name)
+    try:
+        link = SL.HostLink(port)
+        got = 0
+        dev.start()
+        t0 = time.perf_counter()
+        deadline = time.monotonic() + 120.0
+        while got < n_frames and time.monotonic() < deadline:
+            got += sum(1 for fr in link.poll() if fr.type == SL.T_SAMPLE)
+        dt = time.perf_counter() - t0
+    finally:
+        dev.unplug()
+        port.close()
+    frame = SL.OVERHEAD + SL.SAMPLE.size
+    return {"frames": got, "seconds": dt, "frames_per_s": got / dt, "bytes_per_s": got * frame / dt,
+            "crc_errors": link.decoder.stats.crc_errors, "seq_gaps": link.stats.seq_gaps}
+
+
+def decode_benchmark(n_frames: int = 50000) -> dict:
+    """Decoder throughput on an in-memory stream of SAMPLE frames: frames/s."""
+    stream = b"".join(SL.encode_frame(SL.T_SAMPLE, i, SL.pack_sample(i, 1 << 30, -5, 20 << 16, 7, 3, 2, 1, 0, 1))
+                      for i in range(n_frames))
+    dec = SL.Decoder()
+    t0 = time.perf_counter()
+    got = 0
+    for k in range(0, len(stream), 4096):
+        got += len(dec.feed(stream[k:k + 4096]))
+    dt = time.perf_counter() - t0
+    return {"frames": got, "seconds": dt, "frames_per_s": got / dt}
+
+
+# -- CLI ----------------------------------------------------------------------------------------------------
+
+def configure_cli(parser: argparse.ArgumentParser) -> None:
+    where = parser.add_mutually_exclusive_group(required=True)
+    where.add_argument("--pty", action="store_true", help="serve on a new pseudo-terminal (prints its name)")
+    where.add_argument("--port", help="serve on a serial port or pyserial URL (loop://, /dev/ttyUSB1, ...)")
+    parser.add_argument("--baud", type=int, default=115200, help="baud rate with --port (default 115200)")
+    parser.add_argument("--scenario", default="paper-mr-cycle-4dpm",
+                        help="simulator scenario (hdrg simulate --list; default paper-mr-cycle-4dpm)")
+    parser.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
+    parser.add_argument("--duration", type=float, default=None, metavar="S", help="run length [s] (default: the scenario's)")
+    parser.add_argument("--rate", type=float, default=1.0, metavar="HZ", help="sample rate [Hz] (default 1)")
+    parser.add_argument("--speed", type=float, default=1.0, metavar="X",
+                        help="X times real time (default 1; 0: as fast as the link takes frames)")
+    parser.add_argument("--table", metavar="FILE", help="initial coefficient table (table.json, .bin, .memh); "
+                                                        "default: the run's identity table (coefficients 0)")
+    parser.add_argument("--name", default=None, help="device name reported in INFO")
+    parser.add_argument("--exit-at-end", action="store_true", help="exit when the simulated run has been sent")
+
+
+def run_cli(args) -> int:
+    from host_tools.quantize import read_table
+
+    table = read_table(args.table) if args.table else None
+    link = None
+    if args.port:
+        import serial
+        try:
+            link = PortLink(serial.serial_for_url(args.port, baudrate=args.baud, timeout=0, write_timeout=1.0))
+        except serial.SerialException as exc:
+            print(f"hdrg device: error: cannot open {args.port}: {exc}", file=sys.stderr)
+            return 2
+    kw = {} if args.name is None else {"name": args.name}
+    dev, name, log = make_device(args.scenario, args.seed, args.duration, args.rate, table, link,
+                                 speed=args.speed, **kw)
+    speed = "as fast as the link takes" if args.speed == 0 else f"{args.speed:g}x real time"
+    print(f"hdrg device: virtual gyroscope on {name or args.port}", flush=True)
+    print(f"  {dev.name}: {len(log)} samples at {dev.run.fs_hz:g} Hz, {speed}; table CRC-32 0x{dev.table.crc:08x}; "
+          f"protocol {SL.PROTO_MAJOR}.{SL.PROTO_MINOR}; Ctrl-C stops", flush=True)
+    dev.start()
+    try:
+        while dev.alive and not (args.exit_at_end and dev.ended):
+            time.sleep(0.1)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        dev.unplug()
+    s = dev.stats
+    print(f"hdrg device: sent {s.samples_sent} samples ({s.frames_dropped} frames dropped, link not ready); "
+          f"uploads accepted {s.uploads_accepted}, refused {s.uploads_refused}"
+          + (f"; link closed: {dev.closed_reason}" if dev.closed_reason else ""))
+    if dev.error is not None:
+        print(f"hdrg device: error: {dev.error!r}", file=sys.stderr)
+        return 1
+    return 0

@@ -1,0 +1,437 @@
+"""Quantize a float bias model into the fixed-point coefficient table: `hdrg quantize`.
+
+``quantize(model, exchange_s=30, dwell_s=120, power_on_s=0) -> Quantized`` maps a
+:class:`host_tools.model.BiasModel` to a :class:`firmware_ref.table.Table` (formats in
+firmware_ref/FORMATS.md):
+
+* **proxy**: ``P_REF = RHU(ref / LSB_P)``; ``G_U = RHU(2^(30 + SH_U) LSB_P / span)`` with the
+  largest SH_U that keeps ``G_U < 2^31``; ``U_OFF = RHU((P_REF - ref / LSB_P) G_U)``.  Refused: a span below one word LSB or above 2^30 LSB,
+  a centre outside the word.
+* **rate**: ``S_span = D span / (fs LSB_P)`` (x 2^24 for iir) is the estimator sum at |v| = 1;
+  the sum clamp ``SB = floor(log2 S_span) + 2`` (so ``2^SB - 1 > S_span``); ``G_V =
+  RHU(2^(30 + SH_V) / S_span) < 2^min(31, 62 - SB)`` with the largest SH_V.  Refused: S_span < 1/2
+  (the gain does not fit: a rate span below one LSB per sample), ``SB > 55`` or fewer than 16
+  significant gain bits, n > 4096.
+* **timing**: ``settle_n = round(settle_s fs)``, ``max_stale_n = round(max_stale_s fs)`` (the
+  golden's expressions), sequencer power-on/exchange/dwell in samples.
+* **coefficients** (interval analysis; u, v, z in [-1, 1]): each group g (Horner rows u^0..u^3
+  and k7) gets the largest exponent ``e_g`` in 0..52 with ``sum_j |RHU(c_gj 2^e_g)| <= 2^31 - 1``
+  (a rounded product ``RHU(x w, 30)`` with |w| <= 2^30 never exceeds |x|, so every inner partial
+  sum is bounded by the sum of the row's |mantissas|); the accumulator exponent E is the largest
+  in 0..min(e_g) such that, with ``e_g <- min(e_g, E + 31)``, the aligned row bounds
+  ``RHU(A_g, e_g - E)`` plus the k7 bound ``RHU(|m_7| 2^30, 30 + e_7 - E)`` sum to at most
+  ``2^31 - 1`` (the outer partial sums are bounded by that sum).  Hence no in-range input can
+  overflow any intermediate.  Refused: a group whose |coefficient| sum exceeds 2^31 - 1 deg/h at
+  exponent 0, a model whose |B| bound exceeds the output word (2^21 deg/h), or a bound on
+  |fixed - golden| above ``max_error_dph`` when given.
+
+The **bound** on |fixed - golden| (deg/h, golden fed with the dequantized input words) adds:
+coefficient quantization (exact), the evaluator's roundings (1.5 LSB_e per row, 0.5 LSB_E per
+alignment, 1.5 LSB_E outer, 0.5 LSB_E for k7, 0.5 LSB_21), the u and v errors (gain and centre
+quantization, rounding, iir state rounding) times the Lipschitz constants ``sum i |c_ij|`` and
+``sum j |c_ij|``, the combiner (window-mean and slope roundings, for trend at the table's timing)
+and the final output rounding 2^-11 deg/h.  ``measured`` gives max |B_fixed - B_golden| on the
+3^3 corners of (u, v, z) and on a random grid.
+
+table.json (:meth:`Quantized.to_dict`): format, version, the table fields, the layout words and
+CRC-32, the float model, the quantized coefficients, formats, timing, bound, measured, warnings.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from fractions import Fraction
+
+import numpy as np
+
+from firmware_ref import formats as F
+from firmware_ref.table import Table, TableError
+from firmware_ref.terms import K_AUX, N_TERMS, POLY_INDEX, TERM_POWERS
+
+FORMAT = "hdrg-fixed-table"
+VERSION = 1
+GROUPS = tuple(tuple(POLY_INDEX[i][j] for j in range(4)) for i in range(4)) + ((K_AUX,),)
+GROUP_NAMES = ("row u^0", "row u^1", "row u^2", "row u^3", "k7 (aux)")
+
+
+class QuantizeError(ValueError):
+    """A model the fixed-point formats cannot represent (the message gives the reason)."""
+
+
+def rhu(x: Fraction) -> int:
+    """Round half up of an exact rational."""
+    return math.floor(x + Fraction(1, 2))
+
+
+def rhu_shift(a: int, s: int) -> int:
+    return a if s == 0 else (a + (1 << (s - 1))) >> s
+
+
+@dataclass
+class Quantized:
+    """A quantized model: the table, the source model, and the report (bound, measured, ...)."""
+
+    table: Table
+    model: object
+    report: dict = field(default_factory=dict)
+
+    def coef_quantized(self) -> np.ndarray:
+        """The coefficients the table represents, deg/h: m_k 2^-e_g."""
+        return quantized_coef(self.table)
+
+    def to_dict(self) -> dict:
+        t = self.table
+        words = t.to_words()
+        return {
+            "format": FORMAT,
+            "version": VERSION,
+            "layout_version": words[1],
+            "fields": {k: int(v) for k, v in t.field_values().items()},
+            "words": [f"0x{w:08x}" for w in words],
+            "crc32": f"0x{words[-1]:08x}",
+            "model": self.model.to_dict(),
+            "model_source": self.model.source,
+            "coef_dph": [float(c) for c in self.model.coef],
+            "coef_quantized_dph": [float(c) for c in self.coef_quantized()],
+            "formats": formats_summary(t),
+            **self.report,
+        }
+
+    def to_json(self, path) -> None:
+        with open(os.fspath(path), "w", encoding="utf-8") as fh:
+            json.dump(self.to_dict(), fh, indent=2)
+            fh.write("\n")
+
+
+def formats_summary(t: Table) -> dict:
+    frac_p = F.FREQ_FRAC if t.proxy_kind == 0 else F.TEMP_FRAC
+    return {
+        "proxy_word": {"kind": "freq" if t.proxy_kind == 0 else "temp",
+                       "type": "uint32" if t.proxy_kind == 0 else "int32", "frac": frac_p},
+        "rate_word": {"type": "int32", "frac": F.RATE_FRAC, "unit": "deg/h"},
+        "u_v_z": {"type": "int32", "frac": F.Q},
+        "coef_lsb_dph": [2.0 ** -group_exponent(t, k) for k in range(N_TERMS)],
+        "accumulator_lsb_dph": 2.0 ** -t.e_acc,
+        "window_mean_frac": F.W_FRAC, "y_frac": F.Y_FRAC, "slope_frac": F.SLOPE_FRAC,
+        "output_word": {"type": "int32", "frac": F.OUT_FRAC, "unit": "deg/h"},
+        "rounding": "round half up (add 2^(s-1), arithmetic shift)",
+    }
+
+
+def group_exponent(t: Table, k: int) -> int:
+    return t.e_7 if k == K_AUX else t.e_row[TERM_POWERS[k][0]]
+
+
+def quantized_coef(t: Table) -> np.ndarray:
+    return np.array([t.mant[k] * 2.0 ** -group_exponent(t, k) for k in range(N_TERMS)])
+
+
+# -- the parts ----------------------------------------------------------------------------------------
+
+def _proxy_part(pc) -> dict:
+    frac = F.FREQ_FRAC if pc.kind == "freq" else F.TEMP_FRAC
+    lsb = Fraction(1, 1 << frac)
+    unit = pc.unit
+    p_ref = rhu(Fraction(pc.ref) / lsb)
+    if pc.kind == "freq" and not 0 <= p_ref <= F.UINT32_MAX:
+        raise QuantizeError(f"proxy ref {pc.ref} {unit} is outside the drive-frequency word (0 .. 16384 Hz)")
+    if pc.kind == "temp" and abs(p_ref) > F.INT32_SYM:
+        raise QuantizeError(f"proxy ref {pc.ref} {unit} is outside the temperature word (+-32768 degC)")
+    span_lsb = Fraction(pc.span) / lsb
+    if span_lsb > F.SPAN_LSB_MAX:
+        raise QuantizeError(f"proxy span {pc.span} {unit} exceeds 2^30 word LSB ({float(lsb * F.SPAN_LSB_MAX):g} {unit})")
+    sh, g = _gain(Fraction(1), span_lsb, (1 << F.GAIN_BITS) - 1)
+    if sh is None:
+        raise QuantizeError(f"proxy span {pc.span} {unit} is below one word LSB ({float(lsb):g} {unit}): "
+                            f"the proxy gain 2^30 LSB/span does not fit int32")
+    u_off = rhu((p_ref - Fraction(pc.ref) / lsb) * g)
+    return {"proxy_kind": 0 if pc.kind == "freq" else 1, "p_ref": p_ref, "g_u": g, "u_off": u_off, "sh_u": sh,
+            "_span_lsb": span_lsb, "_lsb": lsb}
+
+
+def _gain(num: Fraction, den: Fraction, gmax: int):
+    """Largest shift s in 0..62 with G = RHU(num 2^(30+s) / den) <= gmax; (s, G) or (None, None)."""
+    best = (None, None)
+    for s in range(0, 63):
+        g = rhu(num * (1 << (F.Q + s)) / den)
+        if g > gmax:
+            break
+        best = (s, g)
+    return best
+
+
+def _rate_part(rc, lsb: Fraction) -> dict:
+    est = F.ESTIMATORS.index(rc.estimator)
+    n = rc.n if rc.estimator in ("diffn", "lsq") else 1
+    if n > F.N_HIST_MAX:
+        raise QuantizeError(f"rate n = {n} exceeds the firmware's history buffer ({F.N_HIST_MAX} samples)")
+    s_span = Fraction(rc.divisor) * Fraction(rc.span) / (Fraction(rc.fs) * lsb)
+    if rc.estimator == "iir":
+        s_span *= 1 << F.IIR_FRAC
+    if s_span < Fraction(1, 2):
+        raise QuantizeError(f"rate span {rc.span} proxy units/s is below one word LSB per sample at "
+                            f"fs = {rc.fs} Hz: the rate gain does not fit int32")
+    sb = 1                               # smallest SB with 2^(SB-1) > S_span: 2^SB - 1 > S_span
+    while (1 << (sb - 1)) <= s_span:
+        sb += 1
+    if sb > F.S_BITS_MAX:
+        raise QuantizeError(f"rate span {rc.span} proxy units/s with the {rc.estimator} estimator "
+                            f"(divisor {rc.divisor}) needs a rate-sum range of 2^{sb}, beyond 2^{F.S_BITS_MAX}")
+    gmax = min((1 << F.GAIN_BITS) - 1, (1 << (62 - sb)) - 1)
+    sh, g = _gain(Fraction(1), s_span, gmax)
+    if sh is None or g < (1 << F.MIN_GAIN_BITS):
+        raise QuantizeError(f"rate span {rc.span} proxy units/s: the rate gain has fewer than "
+                            f"{F.MIN_GAIN_BITS} significant bits within the rate-sum range 2^{sb}")
+    if rhu_shift(((1 << sb) - 1) * g, sh) <= F.ONE:  # a clamped S must still clamp v
+        raise QuantizeError("internal: rate-sum clamp does not saturate v")  # pragma: no cover
+    return {"rate_est": est, "rate_n": n, "rate_shift": rc.shift, "rate_warmup": rc.warmup, "s_bits": sb,
+            "g_v": g, "sh_v": sh, "_s_span": s_span}
+
+
+def _timing(value_s: float, fs: float, name: str, minimum: int = 0) -> int:
+    n = int(round(value_s * fs))
+    if not minimum <= n <= F.TIMER_MAX - 1:
+        raise QuantizeError(f"{name} = {value_s} s at {fs} Hz gives {n} samples; needs {minimum}..{F.TIMER_MAX - 1}")
+    return n
+
+
+def _coef_part(coef) -> dict:
+    c = [Fraction(float(x)) for x in coef]
+    e_max = []
+    for g, ks in enumerate(GROUPS):
+        found = None
+        for e in range(F.EXP_MAX, F.EXP_MIN - 1, -1):
+            if sum(abs(rhu(c[k] * (1 << e))) for k in ks) <= F.ACC_LIMIT:
+                found = e
+                break
+        if found is None:
+            tot = float(sum(abs(c[k]) for k in ks))
+            raise QuantizeError(f"{GROUP_NAMES[g]}: the sum of |coefficients| {tot:.6g} deg/h exceeds "
+                                f"2^31 - 1 deg/h at the coarsest legal exponent {F.EXP_MIN}")
+        e_max.append(found)
+    for E in range(min(e_max), F.EXP_MIN - 1, -1):
+        e_g = [min(e, E + F.ALIGN_MAX) for e in e_max]
+        mant = [0] * N_TERMS
+        for g, ks in enumerate(GROUPS):
+            for k in ks:
+                mant[k] = rhu(c[k] * (1 << e_g[g]))
+        bounds = [rhu_shift(sum(abs(mant[k]) for k in GROUPS[g]), e_g[g] - E) for g in range(4)]
+        bounds.append(rhu_shift(abs(mant[K_AUX]) << F.Q, F.Q + e_g[4] - E))
+        if sum(bounds) <= F.ACC_LIMIT:
+            return {"e_row": tuple(e_g[:4]), "e_7": e_g[4], "e_acc": E, "mant": tuple(mant),
+                    "_bounds": bounds}
+    raise QuantizeError("the coefficients cannot be aligned to one accumulator below 2^31 "
+                        "at any legal exponent (sum of |coefficients| too large)")
+
+
+# -- the bound -------------------------------------------------------------------------------------------
+
+def error_bound(table: Table, model, parts: dict | None = None) -> dict:
+    """Bound on |fixed - golden| in deg/h (see the module doc): ``bias_B`` (B at 2^-21),
+    ``bias_word`` (the BIAS output word), ``combiner`` (y), ``out`` (the OUT word)."""
+    cfg = model.config
+    coef = [Fraction(float(x)) for x in model.coef]
+    t = table
+    E = t.e_acc
+    # coefficient quantization
+    eps_coef = sum(abs(coef[k] - Fraction(t.mant[k], 1 << group_exponent(t, k))) for k in range(N_TERMS))
+    # evaluator roundings
+    rnd = Fraction(0)
+    for i in range(4):
+        rnd += Fraction(3, 2) / (1 << t.e_row[i])
+        if t.e_row[i] > E:
+            rnd += Fraction(1, 2) / (1 << E)
+    rnd += Fraction(3, 2) / (1 << E)
+    if F.Q + t.e_7 - E > 0:
+        rnd += Fraction(1, 2) / (1 << E)
+    if E > F.Y_FRAC:
+        rnd += Fraction(1, 2) / (1 << F.Y_FRAC)
+    # input-map errors
+    if parts is None:
+        parts = {**_proxy_part(cfg.proxy), **_rate_part(cfg.rate, _proxy_part(cfg.proxy)["_lsb"])}
+    lsb = parts["_lsb"]
+    span_lsb = parts["_span_lsb"]
+    half_q = Fraction(1, 1 << (F.Q + 1))
+    gu = Fraction(t.g_u, 1 << (F.Q + t.sh_u))
+    du = (half_q + (span_lsb + 1) * abs(gu - 1 / span_lsb)
+          + abs((t.p_ref - Fraction(cfg.proxy.ref) / lsb) * gu - Fraction(t.u_off, 1 << (F.Q + t.sh_u)))
+          + abs(Fraction(cfg.proxy.ref) / lsb - t.p_ref) * abs(gu - 1 / span_lsb))
+    s_span = parts["_s_span"]
+    dv = half_q + (s_span + 1) * abs(Fraction(t.g_v, 1 << (F.Q + t.sh_v)) - 1 / s_span)
+    if cfg.rate.estimator == "iir":
+        dv += Fraction(1 << t.rate_shift, 2) / s_span
+    lip_u = sum(TERM_POWERS[k][0] * abs(coef[k]) for k in range(N_TERMS) if k != K_AUX)
+    lip_v = sum(TERM_POWERS[k][1] * abs(coef[k]) for k in range(N_TERMS) if k != K_AUX)
+    float_eps = sum(abs(c) for c in coef) * Fraction(1, 1 << 48)   # golden float64 roundings
+    bias_b = eps_coef + rnd + lip_u * du + lip_v * dv + float_eps
+    half_out = Fraction(1, 1 << (F.OUT_FRAC + 1))
+    # combiner
+    if t.combiner == 0:
+        comb = Fraction(0)
+    else:
+        w_err = Fraction(1, 1 << (F.W_FRAC + 1))
+        comb = w_err / 2
+        if t.combiner == 2:
+            d_max = min(2 * t.max_stale_n + t.dwell_n, F.D_MAX)
+            dc2_min = max(2, 4 * (t.exchange_n + t.dwell_n) - 2 * t.dwell_n)
+            ratio = Fraction(d_max, dc2_min)
+            comb = (w_err + 2 * w_err * ratio + Fraction(d_max, 1 << (F.SLOPE_FRAC + 1)) + w_err) / 2
+    return {"bias_B": float(bias_b), "bias_word": float(bias_b + half_out), "combiner": float(comb),
+            "out": float(bias_b + comb + half_out),
+            "parts": {"coef_quantization": float(eps_coef), "evaluator_rounding": float(rnd),
+                      "u_error": float(du), "v_error": float(dv), "lipschitz_u_dph": float(lip_u),
+                      "lipschitz_v_dph": float(lip_v), "output_rounding": float(half_out)},
+            "note": "deg/h; golden fed with the dequantized input words; trend combiner at the table's timing"}
+
+
+def measure(table: Table, model, n_random: int = 20000, seed: int = 0) -> dict:
+    """max |B_fixed - B_golden| (deg/h) on the 27 corners of (u, v, z) in {-1, 0, 1}^3 and on a
+    random grid (u, v, z uniform in [-1, 1], plus the k7 axis only if k7 != 0)."""
+    from firmware_ref.kernel import evaluate_words
+
+    g = np.array([-F.ONE, 0, F.ONE], np.int64)
+    uu, vv, zz = (a.ravel() for a in np.meshgrid(g, g, g, indexing="ij"))
+    rng = np.random.default_rng(seed)
+    ur, vr, zr = (rng.integers(-F.ONE, F.ONE + 1, n_random) for _ in range(3))
+    out = {}
+    for name, (u, v, z) in (("corners", (uu, vv, zz)), ("random", (ur, vr, zr))):
+        b = evaluate_words(table, u, v, z) * 2.0 ** -F.Y_FRAC
+        gold = model.evaluate(u * 2.0 ** -F.Q, v * 2.0 ** -F.Q, z * 2.0 ** -F.Q)
+        out[name] = float(np.max(np.abs(b - gold)))
+    out["n_random"] = int(n_random)
+    return out
+
+
+def quantize(model, exchange_s: float = 30.0, dwell_s: float = 120.0, power_on_s: float = 0.0,
+             max_error_dph: float | None = None, n_random: int = 20000) -> Quantized:
+    """The fixed-point table of ``model`` (see the module doc); QuantizeError if it cannot be
+    represented."""
+    cfg = model.config
+    fs = cfg.rate.fs
+    where = f"{model.source}: cannot quantize"
+    try:
+        pp = _proxy_part(cfg.proxy)
+        rp = _rate_part(cfg.rate, pp["_lsb"])
+        cp = _coef_part(model.coef)
+        fs_q16 = rhu(Fraction(fs) * (1 << 16))
+        if not 0 < fs_q16 <= F.UINT32_MAX:
+            raise QuantizeError(f"sample rate {fs} Hz outside the fs_q16 word (2^-16 .. 65536 Hz)")
+        rev = cfg.reversal
+        comb = 0 if rev is None else (1 if rev.combiner == "pair" else 2)
+        settle_n = 0 if rev is None else _timing(rev.settle_s, fs, "settle_s")
+        stale_n = 0 if rev is None else _timing(rev.max_stale_s, fs, "max_stale_s")
+        timing = {"power_on_n": _timing(power_on_s, fs, "power_on_s"),
+                  "exchange_n": _timing(exchange_s, fs, "exchange_s"),
+                  "dwell_n": _timing(dwell_s, fs, "dwell_s", 1)}
+        total = float(sum(abs(Fraction(float(c))) for c in model.coef))
+        out_range = F.INT32_SYM * 2.0 ** -F.OUT_FRAC
+        if total > out_range:
+            raise QuantizeError(f"the bias bound sum |k| = {total:.6g} deg/h exceeds the output word "
+                                f"range +-{out_range:.6g} deg/h")
+        if cfg.aux.generator != "none":
+            raise QuantizeError(f"aux generator {cfg.aux.generator!r} has no fixed-point form yet (only 'none')")
+        table = Table(proxy_kind=pp["proxy_kind"], p_ref=pp["p_ref"], g_u=pp["g_u"], u_off=pp["u_off"],
+                      sh_u=pp["sh_u"],
+                      rate_est=rp["rate_est"], rate_n=rp["rate_n"], rate_shift=rp["rate_shift"],
+                      rate_warmup=rp["rate_warmup"], s_bits=rp["s_bits"], g_v=rp["g_v"], sh_v=rp["sh_v"],
+                      fs_q16=fs_q16, combiner=comb, settle_n=settle_n, max_stale_n=stale_n, **timing,
+                      e_row=cp["e_row"], e_7=cp["e_7"], e_acc=cp["e_acc"], mant=cp["mant"])
+    except (QuantizeError, TableError) as exc:
+        raise QuantizeError(f"{where}: {exc}") from None
+    warnings = []
+    if comb == 2 and 2 * stale_n + timing["dwell_n"] > F.D_MAX:
+        warnings.append(f"trend distance 2 max_stale_n + dwell_n = {2 * stale_n + timing['dwell_n']} half-samples "
+                        f"exceeds D_MAX = {F.D_MAX}: it saturates (FLAG_SAT) on stale-limit samples")
+    bound = error_bound(table, model, {**pp, **rp})
+    if max_error_dph is not None and bound["out"] > max_error_dph:
+        raise QuantizeError(f"{where}: the bound on |fixed - golden| {bound['out']:.3g} deg/h exceeds "
+                            f"--max-error {max_error_dph:g} deg/h")
+    report = {
+        "timing": {"fs_hz": fs, "settle_n": settle_n, "max_stale_n": stale_n, **timing,
+                   "exchange_s": exchange_s, "dwell_s": dwell_s, "power_on_s": power_on_s},
+        "interval_bounds": {"group_bounds_at_E": cp["_bounds"], "sum": int(sum(cp["_bounds"])),
+                            "limit": F.ACC_LIMIT},
+        "bound_dph": bound,
+        "measured_dph": measure(table, model, n_random),
+        "warnings": warnings,
+    }
+    return Quantized(table, model, report)
+
+
+def read_table(path) -> Table:
+    """A table from table.json (checks CRC and that its fields agree with its words), a binary
+    ``.bin`` or a ``.memh``/``.hex`` memory file."""
+    path = os.fspath(path)
+    ext = os.path.splitext(path)[1].lower()
+    if ext == ".bin":
+        with open(path, "rb") as fh:
+            return Table.from_bytes(fh.read(), path)
+    with open(path, "r", encoding="utf-8") as fh:
+        text = fh.read()
+    if ext in (".memh", ".hex", ".mem"):
+        return Table.from_memh(text, path)
+    try:
+        d = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise TableError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    if not isinstance(d, dict) or d.get("format") != FORMAT:
+        raise TableError(f"{path}: not an hdrg table (format {d.get('format') if isinstance(d, dict) else None!r}, "
+                         f"expected {FORMAT!r})")
+    if d.get("version") != VERSION:
+        raise TableError(f"{path}: unsupported table.json version {d.get('version')!r}")
+    try:
+        words = [int(w, 16) for w in d["words"]]
+    except (KeyError, TypeError, ValueError):
+        raise TableError(f"{path}: field 'words' missing or not a list of hex words") from None
+    table = Table.from_words(words, path)
+    fields_ = d.get("fields", {})
+    vals = table.field_values()
+    bad = [k for k, v in fields_.items() if vals.get(k) != v]
+    if bad:
+        raise TableError(f"{path}: fields {', '.join(bad)} disagree with the words (edited by hand?)")
+    return table
+
+
+# -- CLI ----------------------------------------------------------------------------------------------------
+
+def configure_cli(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("model", metavar="MODEL", help="bias model JSON (hdrg fit)")
+    parser.add_argument("-o", "--output", required=True, help="table.json to write")
+    parser.add_argument("--exchange-s", type=float, default=30.0, help="sequencer exchange time [s] (default 30)")
+    parser.add_argument("--dwell-s", type=float, default=120.0, help="sequencer mode-1/2 window [s] (default 120)")
+    parser.add_argument("--power-on-s", type=float, default=0.0, help="sequencer power-on time [s] (default 0)")
+    parser.add_argument("--max-error", type=float, default=None, metavar="DPH",
+                        help="refuse if the bound on |fixed - golden| exceeds DPH deg/h")
+    parser.add_argument("--memh", metavar="FILE", help="also write a $readmemh memory file")
+    parser.add_argument("--header", metavar="FILE", help="also write a C99 header")
+    parser.add_argument("--bin", metavar="FILE", help="also write the binary table (little-endian words)")
+
+
+def run_cli(args) -> int:
+    from host_tools.model import BiasModel
+
+    model = BiasModel.from_json(args.model)
+    q = quantize(model, exchange_s=args.exchange_s, dwell_s=args.dwell_s, power_on_s=args.power_on_s,
+                 max_error_dph=args.max_error)
+    q.to_json(args.output)
+    t = q.table
+    if args.memh:
+        with open(args.memh, "w", encoding="utf-8") as fh:
+            fh.write(t.to_memh())
+    if args.header:
+        with open(args.header, "w", encoding="utf-8") as fh:
+            fh.write(t.to_c_header())
+    if args.bin:
+        with open(args.bin, "wb") as fh:
+            fh.write(t.to_bytes())
+    b, m = q.report["bound_dph"], q.report["measured_dph"]
+    print(f"{args.output}: {len(t.to_words())} words, CRC-32 0x{t.crc:08x}; exponents rows "
+          f"{list(t.e_row)}, k7 {t.e_7}, E {t.e_acc}")
+    print(f"|fixed - golden| bound: B {b['bias_B']:.3g}, OUT {b['out']:.3g} deg/h; measured B max "
+          f"{m['corners']:.3g} (corners), {m['random']:.3g} (random, n={m['n_random']}) deg/h")
+    for w in q.report["warnings"]:
+        print(f"warning: {w}")
+    return 0

@@ -1,0 +1,73 @@
+"""firmware_ref/FORMATS.md agrees with firmware_ref/formats.py; the derivation meets its rules;
+the op counts are consistent with the algorithm."""
+import pytest
+
+from firmware_ref import formats as F
+from firmware_ref.table import LAYOUT
+from host_tools import compensate as hc
+
+
+def test_formats_md_generated_blocks_are_current():
+    path = F.formats_md_path()
+    text = path.read_text(encoding="utf-8")
+    blocks = F.render_blocks()
+    assert F.splice(text, blocks) == text, ("FORMATS.md is out of date: run "
+                                           "`python -m firmware_ref.formats --update`")
+    for name in blocks:
+        assert f"<!-- BEGIN {name} -->" in text
+    for s in F.SIGNALS:
+        assert s.name in text
+    for name, _, _ in LAYOUT:
+        assert f"| {name} |" in text
+
+
+def test_formats_md_states_the_algorithm_constants():
+    text = F.formats_md_path().read_text(encoding="utf-8")
+    for needle in ("div_round_scaled(acc, cnt, 10)", "RHU(slope[o] * d, 16)", "RHU(y_hold - B, 11)",
+                   "RHU(dP * T.g_u + T.u_off, T.sh_u)", "iy += RHU(((P - P[i-1]) << 24) - iy, T.rate_shift)",
+                   "min(2*age[o] + span[o], 2^22 - 1)", "clamp(div_round_scaled(mean - W[cur], dc2, 16), +-(2^40 - 1))"):
+        assert needle in text, needle
+    assert F.W_FRAC - F.RATE_FRAC == F.MEAN_EXTRA == 10 and F.SLOPE_EXTRA == 16 and F.OUT_SHIFT == 11
+    assert F.D_MAX == 2 ** 22 - 1 and F.SLOPE_MAX == 2 ** 40 - 1
+    assert F.SLOPE_MAX * F.D_MAX < 2 ** 62 and (2 ** 31) * (2 ** 31) <= 2 ** 62  # the int64 products
+
+
+def test_derivation_meets_its_rules():
+    d = F.derivation()
+    assert d["f_frac_min"] <= F.FREQ_FRAC
+    for key in ("f_noise_increase", "f_noise_increase_diff", "r_noise_increase", "t_noise_increase"):
+        assert d[key] < 0.01 * F.NoiseFigures().max_noise_increase  # 100x margin on the 1 % rule
+    assert 2.0 ** -F.RATE_FRAC <= d["q_r_max_dph"] and 2.0 ** -F.TEMP_FRAC <= d["q_t_max_c"]
+    assert d["df_per_sample_lsb"] > 100            # 1 degC/min resolved to better than 1 %
+    assert d["f_range_hz"] >= 16384 and d["r_range_dps"] >= 500
+    assert 2 * d["out_rounding_dph"] < 0.002       # the final rounding leaves room in the goal
+    # the rule itself: a noise of sigma plus an LSB of max_lsb_for_noise grows by exactly 1 %
+    assert F.noise_increase(1.0, F.max_lsb_for_noise(1.0, 0.01)) == pytest.approx(0.01)
+
+
+def test_flags_and_state_tables_match_the_golden():
+    assert (F.FLAG_PROXY_CLAMPED, F.FLAG_RATE_CLAMPED, F.FLAG_WARMUP, F.FLAG_EXCHANGE, F.FLAG_STALE) == (
+        hc.FLAG_PROXY_CLAMPED, hc.FLAG_RATE_CLAMPED, hc.FLAG_WARMUP, hc.FLAG_EXCHANGE, hc.FLAG_STALE)
+    assert len(set(F.FLAGS)) == len(F.FLAGS) and max(F.FLAGS) < 256
+    assert F.STATE_MODE[F.ST_MODE_1] == 1 and F.STATE_MODE[F.ST_MODE_2] == 2 and F.STATE_MODE[F.ST_FTR] == 0
+    for st, vs in enumerate(F.STATE_VS):
+        drive = vs & (F.VS_DRV_X | F.VS_DRV_Y)
+        assert drive in (F.VS_DRV_X, F.VS_DRV_Y)             # exactly one drive axis, always
+        assert not (vs & F.VS_SNS_X and vs & F.VS_SNS_Y)
+        if vs & F.VS_SNS_X:
+            assert drive == F.VS_DRV_Y                       # sense on the axis that is not driven
+        if vs & F.VS_SNS_Y:
+            assert drive == F.VS_DRV_X
+        assert bool(vs & F.VS_NEG) == (F.STATE_SIGN[st] == -1)
+
+
+def test_op_counts():
+    base = F.op_counts("diff", 1, "pair")
+    assert base["mul"] >= 16                                 # 15 Horner multiply-adds + k7 z
+    assert F.op_counts("diff", 1, "ftr")["div_per_window"] == 0 and base["div_per_window"] == 1
+    assert F.op_counts("diff", 1, "trend")["div_per_window"] == 2
+    assert F.op_counts("diff", 1, "trend")["mul"] == base["mul"] + 1
+    l8, l32 = F.op_counts("lsq", 8, "pair"), F.op_counts("lsq", 32, "pair")
+    assert l32["mul"] - l8["mul"] == 24 and l32["mem"] - l8["mem"] == 24
+    with pytest.raises(ValueError):
+        F.op_counts("kalman", 1, "pair")

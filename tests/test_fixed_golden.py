@@ -1,0 +1,109 @@
+"""|fixed - golden| on the simulator's paper scenarios (the golden fed with exactly the dequantized
+input words), and `hdrg compensate --impl fixed`."""
+import numpy as np
+import pytest
+
+from firmware_ref import formats as F
+from firmware_ref import inputs
+from firmware_ref.compensate import compensate_log, log_words
+from host_tools import compensate as comp
+from host_tools import runlog as rl
+from host_tools.cli import main as cli_main
+from host_tools.fit import fit
+from host_tools.model import BiasModel
+from host_tools.quantize import quantize
+from host_tools.reversal import ReversalConfig
+from host_tools.sim import simulate
+
+GOAL_DPH = 0.002
+
+
+def dequantized(log, model):
+    """The log with its proxy and rate columns replaced by the values of their words."""
+    w = log_words(log, model.config)
+    kind = model.config.proxy.kind
+    return log.with_columns(**{model.config.proxy.column: inputs.from_words(w["p"], inputs.proxy_frac(kind))},
+                            rate_dph=inputs.from_words(w["r"], F.RATE_FRAC))
+
+
+def fitted(log, **kw):
+    cfg = comp.fit_config_from_logs([log], **kw)
+    prep = comp.prepare(log, cfg)
+    res = fit(prep.u, prep.v, None, prep.y, prep.valid, terms="all")
+    return BiasModel(cfg, res.terms, res.coef, source="<fit>")
+
+
+@pytest.mark.parametrize("scenario,combiner", [("paper-mr-cycle-4dpm", "pair"), ("paper-mr-cycle-4dpm", "trend"),
+                                               ("paper-ftr-cycle-4dpm", None)])
+def test_fixed_vs_golden_paper_scenarios(scenario, combiner):
+    log = simulate(scenario, seed=0)
+    model = fitted(log, reversal=None if combiner is None else ReversalConfig(combiner))
+    q = quantize(model)
+    gold = comp.compensate(dequantized(log, model), model)
+    fixed, flags = compensate_log(log, model, table=q.table, return_flags=True)
+    np.testing.assert_array_equal(fixed["valid"], gold["valid"])
+    prep = comp.prepare(dequantized(log, model), model)
+    np.testing.assert_array_equal(flags & 31, prep.flags)
+    v = gold["valid"] > 0
+    err = fixed.rate_dph - gold.rate_dph
+    berr = fixed["bias_dph"] - gold["bias_dph"]
+    emax, esig, bmax = float(np.max(np.abs(err))), float(np.std(err[v])), float(np.max(np.abs(berr)))
+    print(f"\n{scenario} {combiner}: |fixed - golden| max {emax:.3g} deg/h, 1 sigma {esig:.3g} deg/h, "
+          f"bias max {bmax:.3g} deg/h; bound {q.report['bound_dph']['out']:.3g} deg/h")
+    assert emax < GOAL_DPH
+    assert emax <= q.report["bound_dph"]["out"] and bmax <= q.report["bound_dph"]["bias_word"]
+    # the error is the output rounding, not a bias: mean well below the half LSB
+    assert abs(float(np.mean(err[v]))) < 2.0 ** -F.OUT_FRAC / 8
+    assert not (flags & (F.FLAG_SAT | F.FLAG_INPUT_SAT)).any()
+    # and the compensation itself works: the fixed output is as flat as the golden one
+    assert np.std(fixed.rate_dph[v]) == pytest.approx(np.std(gold.rate_dph[v]), rel=1e-3)
+
+
+def test_cli_compensate_fixed(tmp_path, capsys):
+    log = simulate("paper-mr-cycle-4dpm", seed=1, duration_s=4000.0)
+    rl.write(log, tmp_path / "run.csv")
+    model = fitted(log)
+    model.to_json(tmp_path / "model.json")
+    args = [str(tmp_path / "run.csv"), "--model", str(tmp_path / "model.json")]
+    assert cli_main(["compensate", *args, "-o", str(tmp_path / "fx.csv"), "--impl", "fixed"]) == 0
+    assert cli_main(["compensate", *args, "-o", str(tmp_path / "fl.csv")]) == 0
+    fx, fl = rl.read(tmp_path / "fx.csv"), rl.read(tmp_path / "fl.csv")
+    assert fx.columns.keys() == fl.columns.keys()
+    assert fx.metadata["compensation_impl"] == "fixed" and fx.metadata["compensated"] == "yes"
+    np.testing.assert_array_equal(fx["valid"], fl["valid"])
+    run = rl.read(tmp_path / "run.csv")
+    np.testing.assert_array_equal(fx.rate_dph, compensate_log(run, model).rate_dph)  # the words, exactly
+    gold = comp.compensate(dequantized(run, model), model)
+    assert np.max(np.abs(fx.rate_dph - gold.rate_dph)) < GOAL_DPH
+    # with a table file: the same words
+    from host_tools.quantize import configure_cli, run_cli
+    import argparse
+    p = argparse.ArgumentParser()
+    configure_cli(p)
+    assert run_cli(p.parse_args([str(tmp_path / "model.json"), "-o", str(tmp_path / "table.json"),
+                                 "--memh", str(tmp_path / "t.memh")])) == 0
+    for table in ("table.json", "t.memh"):
+        assert cli_main(["compensate", *args, "-o", str(tmp_path / "fx2.csv"), "--impl", "fixed",
+                         "--table", str(tmp_path / table)]) == 0
+        np.testing.assert_array_equal(rl.read(tmp_path / "fx2.csv").rate_dph, fx.rate_dph)
+    capsys.readouterr()
+    # a table of another model is refused, and --table needs --impl fixed
+    other = fitted(simulate("paper-mr-cycle-4dpm", seed=2, duration_s=4000.0))
+    other.to_json(tmp_path / "other.json")
+    assert cli_main(["compensate", str(tmp_path / "run.csv"), "--model", str(tmp_path / "other.json"), "-o",
+                     str(tmp_path / "x.csv"), "--impl", "fixed", "--table", str(tmp_path / "table.json")]) == 2
+    assert "does not match the model" in capsys.readouterr().err
+    assert cli_main(["compensate", *args, "-o", str(tmp_path / "x.csv"), "--table", str(tmp_path / "table.json")]) == 2
+    assert "--impl fixed" in capsys.readouterr().err
+
+
+def test_fixed_refuses_like_golden():
+    log = simulate("paper-ftr-cycle-4dpm", seed=0, duration_s=600.0)
+    model = fitted(simulate("paper-mr-cycle-4dpm", seed=0, duration_s=2000.0))
+    with pytest.raises(ValueError, match="FTR"):
+        compensate_log(log, model)
+    done = comp.compensate(log, fitted(log))
+    with pytest.raises(ValueError, match="already compensated"):
+        compensate_log(done, fitted(log))
+    with pytest.raises(ValueError, match="sample rate"):
+        compensate_log(simulate("paper-ftr-cycle-4dpm", seed=0, duration_s=600.0, sample_rate_hz=2.0), fitted(log))
