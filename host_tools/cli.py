@@ -18,6 +18,7 @@ COMMANDS = {
     "metrics": ("host_tools.metrics", "the paper's figures of merit of run logs or compensated outputs"),
     "fit": ("host_tools.fit", "fit the 17-coefficient bias model to run logs"),
     "quantize": ("host_tools.quantize", "quantize a bias model into the fixed-point coefficient table (table.json)"),
+    "export": ("host_tools.export", "export a coefficient table as a C header, table.json and a $readmemh memory file"),
     "compensate": ("host_tools.compensate", "apply a bias model to a run log (float golden or fixed point)"),
     "report": ("host_tools.report", "before/after tables and figures of a model on run logs"),
     "paper": ("host_tools.paper", "reproduce every experiment of Chen et al. 2022 on the simulator"),

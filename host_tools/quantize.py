@@ -48,12 +48,12 @@ from fractions import Fraction
 import numpy as np
 
 from firmware_ref import formats as F
-from firmware_ref.table import Table, TableError
+from firmware_ref.table import COEF_GROUPS, Table, TableError, horner_bounds
 from firmware_ref.terms import K_AUX, N_TERMS, POLY_INDEX, TERM_POWERS
 
 FORMAT = "hdrg-fixed-table"
 VERSION = 1
-GROUPS = tuple(tuple(POLY_INDEX[i][j] for j in range(4)) for i in range(4)) + ((K_AUX,),)
+GROUPS = COEF_GROUPS
 GROUP_NAMES = ("row u^0", "row u^1", "row u^2", "row u^3", "k7 (aux)")
 
 
@@ -218,8 +218,7 @@ def _coef_part(coef) -> dict:
         for g, ks in enumerate(GROUPS):
             for k in ks:
                 mant[k] = rhu(c[k] * (1 << e_g[g]))
-        bounds = [rhu_shift(sum(abs(mant[k]) for k in GROUPS[g]), e_g[g] - E) for g in range(4)]
-        bounds.append(rhu_shift(abs(mant[K_AUX]) << F.Q, F.Q + e_g[4] - E))
+        _, bounds = horner_bounds(e_g[:4], e_g[4], E, mant)
         if sum(bounds) <= F.ACC_LIMIT:
             return {"e_row": tuple(e_g[:4]), "e_7": e_g[4], "e_acc": E, "mant": tuple(mant),
                     "_bounds": bounds}
@@ -422,8 +421,9 @@ def run_cli(args) -> int:
         with open(args.memh, "w", encoding="utf-8") as fh:
             fh.write(t.to_memh())
     if args.header:
+        from host_tools.export import c_header
         with open(args.header, "w", encoding="utf-8") as fh:
-            fh.write(t.to_c_header())
+            fh.write(c_header(t, info=q.to_dict()))
     if args.bin:
         with open(args.bin, "wb") as fh:
             fh.write(t.to_bytes())

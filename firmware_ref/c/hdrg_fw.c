@@ -1,0 +1,645 @@
+/*
+ * hdrg_fw.c - C99 twin of the fixed-point compensation pipeline.  See hdrg_fw.h and
+ * firmware_ref/FORMATS.md ("The exact integer algorithm (per sample)"); the comments name the
+ * Python reference function each part copies.
+ *
+ * Portability notes (C99 6.5.7, 6.3.1.3, 6.5p5):
+ *
+ *  - Right shift of a negative value is implementation-defined, so it is never written.
+ *    hdrg_asr(x, s) = floor(x / 2^s) is computed as
+ *        (int64_t)(((uint64_t)x + 2^63) >> s) - 2^(63 - s)          (1 <= s <= 63)
+ *    Proof: (uint64_t)x is x mod 2^64 (6.3.1.3p2), so X = (uint64_t)x + 2^63 (mod 2^64) equals
+ *    x + 2^63 exactly, because x + 2^63 lies in [0, 2^64).  The unsigned shift gives
+ *    floor(X / 2^s) = floor(x / 2^s + 2^(63 - s)) = floor(x / 2^s) + 2^(63 - s), an integer in
+ *    [0, 2^(64 - s) - 1], which fits int64 for s >= 1, so the conversion back is exact; the
+ *    subtraction then yields floor(x / 2^s), which lies in int64.  Hence hdrg_asr equals the
+ *    arithmetic (flooring) shift of the spec for every int64 x.  Cost: one add, one shift, one
+ *    subtract; with a constant shift gcc -O2 folds the offset into RHU's rounding constant
+ *    (add, shr, add per rounded product).
+ *  - Left shift of a negative value is undefined, so x << k is written x * ((int64_t)1 << k).
+ *  - Signed overflow is undefined: every product and sum below is bounded by FORMATS.md
+ *    ("Every signal"); the bounds rest on table checks that hdrg_table_parse() enforces (gains,
+ *    shifts, s_bits vs g_v, exponents, and the Horner interval bound |acc| <= 2^31 - 1).
+ *  - C's / truncates toward zero: hdrg_floor_div() corrects it to floor for negative a.
+ *
+ * -DHDRG_BREAK_ROUNDING builds a deliberately wrong twin (RHU truncates instead of rounding
+ * half up) so that the tests can show that the comparison catches it.
+ */
+#include "hdrg_fw.h"
+
+#define I64(x) ((int64_t)(x))
+#define P2(k) ((int64_t)1 << (k))
+
+/* ---------------------------------------------------------------- primitives (arith.py) -- */
+
+int64_t hdrg_asr(int64_t x, unsigned s)
+{
+    if (s == 0u) {
+        return x;
+    }
+    return (int64_t)(((uint64_t)x + UINT64_C(0x8000000000000000)) >> s) - P2(63u - s);
+}
+
+int64_t hdrg_rhu(int64_t x, unsigned s)
+{
+    if (s == 0u) {
+        return x;
+    }
+#ifdef HDRG_BREAK_ROUNDING
+    return hdrg_asr(x, s);                          /* truncation: deliberately wrong */
+#else
+    return hdrg_asr(x + P2(s - 1u), s);
+#endif
+}
+
+int64_t hdrg_mul_rhu(int64_t a, int64_t b, unsigned s)
+{
+    return hdrg_rhu(a * b, s);
+}
+
+int64_t hdrg_floor_div(int64_t a, int64_t b)
+{
+    int64_t q = a / b;
+    if (a % b != 0 && a < 0) {
+        q -= 1;
+    }
+    return q;
+}
+
+int64_t hdrg_div_round(int64_t a, int64_t b)
+{
+    /* a + (a + b) = 2a + b without an intermediate 2a (which can leave int64 when 2a + b does
+     * not, for a < 0) */
+    return hdrg_floor_div(a + (a + b), 2 * b);
+}
+
+int64_t hdrg_div_round_scaled(int64_t a, int64_t b, unsigned k)
+{
+    int64_t q = a / b, r = a % b;                   /* truncated (b > 0: neither overflows) */
+    if (r < 0) {                                    /* floor: 0 <= r < b, no q * b product */
+        q -= 1;
+        r += b;
+    }
+    return q * P2(k) + hdrg_div_round(r * P2(k), b);
+}
+
+int64_t hdrg_clamp(int64_t x, int64_t lo, int64_t hi, int *clamped)
+{
+    int c = 0;
+    if (x > hi) {
+        x = hi;
+        c = 1;
+    } else if (x < lo) {
+        x = lo;
+        c = 1;
+    }
+    if (clamped != NULL) {
+        *clamped = c;
+    }
+    return x;
+}
+
+int64_t hdrg_sat_signed(int64_t x, unsigned width, int *clamped)
+{
+    int64_t m = P2(width - 1u) - 1;
+    return hdrg_clamp(x, -m, m, clamped);
+}
+
+uint32_t hdrg_crc32_words(const uint32_t *words, size_t n)
+{
+    uint32_t crc = 0xFFFFFFFFu;
+    size_t i;
+    unsigned byte, bit;
+    for (i = 0; i < n; i++) {
+        for (byte = 0; byte < 4u; byte++) {
+            crc ^= (words[i] >> (8u * byte)) & 0xFFu;
+            for (bit = 0; bit < 8u; bit++) {
+                crc = (crc & 1u) ? (crc >> 1) ^ 0xEDB88320u : crc >> 1;
+            }
+        }
+    }
+    return crc ^ 0xFFFFFFFFu;
+}
+
+/* ---------------------------------------------------------------- table (table.py) ------- */
+
+static const char *const WORD_NAMES[HDRG_TABLE_WORDS_MAX] = {
+    "magic", "version", "length", "proxy_kind", "p_ref", "g_u", "u_off", "sh_u", "rate_est",
+    "rate_n", "rate_shift", "rate_warmup", "s_bits", "g_v", "sh_v", "fs_q16", "combiner",
+    "settle_n", "max_stale_n", "power_on_n", "exchange_n", "dwell_n", "e_0", "e_1", "e_2", "e_3",
+    "e_7", "e_acc", "m_0", "m_1", "m_2", "m_3", "m_4", "m_5", "m_6", "m_7", "m_8", "m_9", "m_10",
+    "m_11", "m_12", "m_13", "m_14", "m_15", "m_16", "aux_gen", "aux_nparams", "crc32"
+};
+
+const char *hdrg_word_name(unsigned index)
+{
+    return index < HDRG_TABLE_WORDS_MAX ? WORD_NAMES[index] : "?";
+}
+
+const char *hdrg_error_name(int err)
+{
+    switch (err) {
+    case HDRG_OK: return "OK";
+    case HDRG_ERR_LENGTH: return "LENGTH";
+    case HDRG_ERR_MAGIC: return "MAGIC";
+    case HDRG_ERR_VERSION: return "VERSION";
+    case HDRG_ERR_CRC: return "CRC";
+    case HDRG_ERR_FIELD: return "FIELD";
+    case HDRG_ERR_HORNER: return "HORNER";
+    case HDRG_ERR_INPUT: return "INPUT";
+    default: return "UNKNOWN";
+    }
+}
+
+/* two's complement uint32 -> int32 value, without the implementation-defined cast */
+static int64_t s32(uint32_t w)
+{
+    return w >= 0x80000000u ? I64(w) - P2(32) : I64(w);
+}
+
+/* POLY_INDEX (firmware_ref/terms.py): c[i][j] = m[POLY[i][j]], the term u^i v^j */
+static const uint8_t POLY[4][4] = {{0, 4, 5, 6}, {1, 8, 9, 10}, {2, 11, 12, 13}, {3, 14, 15, 16}};
+#define K_AUX 7
+
+static int64_t abs64(int64_t x)
+{
+    return x < 0 ? -x : x;
+}
+
+#define NEED(cond, word) do { if (!(cond)) { *bad = (word); return HDRG_ERR_FIELD; } } while (0)
+
+static int check_fields(const hdrg_table_t *t, unsigned *bad)
+{
+    unsigned g;
+    /* Table.validate, in its order */
+    NEED(t->proxy_kind <= 1u, HDRG_W_PROXY_KIND);
+    if (t->proxy_kind == 1u) {
+        NEED(abs64(t->p_ref) <= HDRG_INT32_SYM, HDRG_W_P_REF);
+    }
+    NEED(t->g_u > 0, HDRG_W_G_U);
+    NEED(t->g_v > 0, HDRG_W_G_V);
+    NEED(abs64(t->u_off) <= t->g_u / 2 + 1, HDRG_W_U_OFF);
+    NEED(t->sh_u <= 62u, HDRG_W_SH_U);
+    NEED(t->sh_v <= 62u, HDRG_W_SH_V);
+    NEED(t->rate_est <= 3u, HDRG_W_RATE_EST);
+    NEED(t->rate_n >= 1u && t->rate_n <= HDRG_N_HIST_MAX, HDRG_W_RATE_N);
+    NEED(t->rate_est != 2u || t->rate_n >= 2u, HDRG_W_RATE_N);
+    NEED(t->rate_shift <= 24u, HDRG_W_RATE_SHIFT);
+    NEED(t->rate_warmup >= 1u && t->rate_warmup <= HDRG_TIMER_MAX, HDRG_W_RATE_WARMUP);
+    NEED(t->s_bits >= 1u && t->s_bits <= (unsigned)HDRG_S_BITS_MAX, HDRG_W_S_BITS);
+    NEED(t->g_v < P2(62u - t->s_bits), HDRG_W_G_V);
+    NEED(t->fs_q16 > 0u, HDRG_W_FS_Q16);
+    NEED(t->combiner <= 2u, HDRG_W_COMBINER);
+    NEED(t->settle_n <= HDRG_TIMER_MAX, HDRG_W_SETTLE_N);
+    NEED(t->max_stale_n <= HDRG_TIMER_MAX, HDRG_W_MAX_STALE_N);
+    NEED(t->power_on_n <= HDRG_TIMER_MAX, HDRG_W_POWER_ON_N);
+    NEED(t->exchange_n <= HDRG_TIMER_MAX, HDRG_W_EXCHANGE_N);
+    NEED(t->max_stale_n < HDRG_COUNT_MAX, HDRG_W_MAX_STALE_N);
+    NEED(t->dwell_n >= 1u && t->dwell_n <= HDRG_TIMER_MAX, HDRG_W_DWELL_N);
+    for (g = 0; g < 5u; g++) {
+        uint32_t e = g < 4u ? t->e_row[g] : t->e_7;
+        unsigned w = g < 4u ? HDRG_W_E_0 + g : HDRG_W_E_7;
+        NEED(e <= (unsigned)HDRG_EXP_MAX, w);
+        NEED(e >= t->e_acc && e - t->e_acc <= (unsigned)HDRG_ALIGN_MAX, w);
+    }
+    NEED(t->e_acc <= (unsigned)HDRG_EXP_MAX, HDRG_W_E_ACC);
+    for (g = 0; g < HDRG_N_TERMS; g++) {
+        NEED(t->mant[g] != INT32_MIN, HDRG_W_M_0 + g);
+    }
+    NEED(t->aux_gen == 0u, HDRG_W_AUX_GEN);
+    NEED(t->aux_nparams == 0u, HDRG_W_AUX_NPARAMS);
+    return HDRG_OK;
+}
+
+/* The quantizer's interval bound (host_tools/quantize._coef_part): every row's |mantissa| sum
+ * <= 2^31 - 1 and the aligned row bounds plus the k7 bound sum to <= 2^31 - 1.  With |u|, |v|,
+ * |z| <= 2^30 (|RHU(x w, 30)| <= |x|) every Horner accumulator then stays within 2^31 - 1 and
+ * every product below 2^61: this is what makes the evaluator free of overflow. */
+static int check_horner(const hdrg_table_t *t, unsigned *bad)
+{
+    int64_t total = 0;
+    unsigned i, j;
+    for (i = 0; i < 4u; i++) {
+        int64_t a = 0;
+        for (j = 0; j < 4u; j++) {
+            a += abs64(t->mant[POLY[i][j]]);
+        }
+        if (a > HDRG_ACC_LIMIT) {
+            *bad = HDRG_W_E_0 + i;
+            return HDRG_ERR_HORNER;
+        }
+        total += hdrg_rhu(a, t->e_row[i] - t->e_acc);
+    }
+    total += hdrg_rhu(abs64(t->mant[K_AUX]) * HDRG_ONE, HDRG_Q + t->e_7 - t->e_acc);
+    if (total > HDRG_ACC_LIMIT) {
+        *bad = HDRG_W_E_ACC;
+        return HDRG_ERR_HORNER;
+    }
+    return HDRG_OK;
+}
+
+int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, unsigned *bad_word)
+{
+    unsigned dummy = 0, i;
+    unsigned *bad = bad_word != NULL ? bad_word : &dummy;
+    int err;
+    *bad = 0;
+    if (n_words < HDRG_N_FIXED + 1u) {
+        *bad = HDRG_W_LENGTH;
+        return HDRG_ERR_LENGTH;
+    }
+    if (words[HDRG_W_MAGIC] != HDRG_MAGIC) {
+        *bad = HDRG_W_MAGIC;
+        return HDRG_ERR_MAGIC;
+    }
+    if (words[HDRG_W_VERSION] != HDRG_LAYOUT_VERSION) {
+        *bad = HDRG_W_VERSION;
+        return HDRG_ERR_VERSION;
+    }
+    if (words[HDRG_W_LENGTH] != n_words) {
+        *bad = HDRG_W_LENGTH;
+        return HDRG_ERR_LENGTH;
+    }
+    if (hdrg_crc32_words(words, n_words - 1u) != words[n_words - 1u]) {
+        *bad = (unsigned)(n_words - 1u);
+        return HDRG_ERR_CRC;
+    }
+    t->proxy_kind = words[HDRG_W_PROXY_KIND];
+    t->p_ref = t->proxy_kind == 0u ? I64(words[HDRG_W_P_REF]) : s32(words[HDRG_W_P_REF]);
+    t->g_u = s32(words[HDRG_W_G_U]);
+    t->u_off = s32(words[HDRG_W_U_OFF]);
+    t->sh_u = words[HDRG_W_SH_U];
+    t->rate_est = words[HDRG_W_RATE_EST];
+    t->rate_n = words[HDRG_W_RATE_N];
+    t->rate_shift = words[HDRG_W_RATE_SHIFT];
+    t->rate_warmup = words[HDRG_W_RATE_WARMUP];
+    t->s_bits = words[HDRG_W_S_BITS];
+    t->g_v = s32(words[HDRG_W_G_V]);
+    t->sh_v = words[HDRG_W_SH_V];
+    t->fs_q16 = words[HDRG_W_FS_Q16];
+    t->combiner = words[HDRG_W_COMBINER];
+    t->settle_n = words[HDRG_W_SETTLE_N];
+    t->max_stale_n = words[HDRG_W_MAX_STALE_N];
+    t->power_on_n = words[HDRG_W_POWER_ON_N];
+    t->exchange_n = words[HDRG_W_EXCHANGE_N];
+    t->dwell_n = words[HDRG_W_DWELL_N];
+    for (i = 0; i < 4u; i++) {
+        t->e_row[i] = words[HDRG_W_E_0 + i];
+    }
+    t->e_7 = words[HDRG_W_E_7];
+    t->e_acc = words[HDRG_W_E_ACC];
+    for (i = 0; i < HDRG_N_TERMS; i++) {
+        uint32_t w = words[HDRG_W_M_0 + i];
+        t->mant[i] = (int32_t)s32(w);              /* INT32_MIN is refused by check_fields */
+    }
+    t->aux_gen = words[HDRG_W_AUX_GEN];
+    t->aux_nparams = words[HDRG_W_AUX_NPARAMS];
+    if (I64(HDRG_N_FIXED) + I64(t->aux_nparams) + 1 != I64(n_words)) {
+        *bad = HDRG_W_AUX_NPARAMS;
+        return HDRG_ERR_LENGTH;
+    }
+    t->n_words = (uint32_t)n_words;
+    t->crc = words[n_words - 1u];
+    err = check_fields(t, bad);
+    if (err != HDRG_OK) {
+        return err;
+    }
+    return check_horner(t, bad);
+}
+
+/* ---------------------------------------------------------------- pipeline --------------- */
+
+static const uint8_t STATE_MODE[6] = {3, 3, 1, 3, 2, 0};
+static const uint8_t STATE_VS[6] = {
+    HDRG_VS_DRV_X, HDRG_VS_DRV_X, HDRG_VS_DRV_X | HDRG_VS_SNS_Y, HDRG_VS_DRV_Y,
+    HDRG_VS_DRV_Y | HDRG_VS_SNS_X | HDRG_VS_NEG, HDRG_VS_DRV_X | HDRG_VS_SNS_Y
+};
+static const int8_t STATE_SIGN[6] = {0, 0, 1, 0, -1, 1};
+
+int hdrg_init(hdrg_state_t *st, const uint32_t *words, size_t n_words, unsigned *bad_word)
+{
+    int err = hdrg_table_parse(&st->t, words, n_words, bad_word);
+    if (err == HDRG_OK) {
+        hdrg_reset(st);
+    }
+    return err;
+}
+
+static void rate_reset(hdrg_state_t *st)
+{
+    st->head = 0;
+    st->k = 0;
+    st->iy = 0;
+}
+
+static void comb_restart(hdrg_state_t *st)
+{
+    st->cur = 0;
+    st->acc = 0;
+    st->cnt = 0;
+    st->pos = 0;
+    st->ncommit[1] = 0;
+    st->ncommit[2] = 0;
+    st->slope[1] = 0;
+    st->slope[2] = 0;
+}
+
+void hdrg_reset(hdrg_state_t *st)
+{
+    unsigned o;
+    st->n = (st->t.rate_est == 1u || st->t.rate_est == 2u) ? st->t.rate_n : 1u;
+    st->t_state = HDRG_ST_POWER_ON;
+    st->t_cnt = 0;
+    for (o = 0; o <= HDRG_N_HIST_MAX; o++) {
+        st->hist[o] = 0;
+    }
+    rate_reset(st);
+    comb_restart(st);
+    st->last_window = 0;
+    for (o = 0; o < 3u; o++) {
+        st->ncommit[o] = 0;
+        st->w[o] = 0;
+        st->slope[o] = 0;
+        st->span[o] = 0;
+        st->age[o] = 0;
+    }
+    st->y_hold = 0;
+    st->out_hold = 0;
+    st->bias_hold = 0;
+}
+
+/* the value of a stored proxy word */
+static int64_t pword(const hdrg_state_t *st, uint32_t w)
+{
+    return st->t.proxy_kind == 0u ? I64(w) : s32(w);
+}
+
+/* the proxy word m samples back (0 <= m <= n) */
+static int64_t hist_back(const hdrg_state_t *st, uint32_t m)
+{
+    uint32_t i = st->head >= m ? st->head - m : st->head + st->n + 1u - m;
+    return pword(st, st->hist[i]);
+}
+
+/* sequencer.state_length, next_state */
+static int64_t state_length(const hdrg_table_t *t, unsigned s)
+{
+    switch (s) {
+    case HDRG_ST_POWER_ON: return I64(t->power_on_n);
+    case HDRG_ST_EXCH_TO_1: case HDRG_ST_EXCH_TO_2: return I64(t->exchange_n);
+    case HDRG_ST_MODE_1: case HDRG_ST_MODE_2: return I64(t->dwell_n);
+    default: return -1;
+    }
+}
+
+static uint8_t next_state(const hdrg_table_t *t, unsigned s)
+{
+    if (s == HDRG_ST_POWER_ON) {
+        return t->combiner == 0u ? HDRG_ST_FTR : HDRG_ST_EXCH_TO_1;
+    }
+    if (s == HDRG_ST_MODE_2) {
+        return HDRG_ST_EXCH_TO_1;
+    }
+    return (uint8_t)(s + 1u);
+}
+
+/* sequencer.Timer.step */
+static uint8_t timer_step(hdrg_state_t *st)
+{
+    unsigned pass;
+    for (pass = 0; pass < 3u; pass++) {
+        if (st->t_state == HDRG_ST_FTR || I64(st->t_cnt) < state_length(&st->t, st->t_state)) {
+            break;
+        }
+        st->t_state = next_state(&st->t, st->t_state);
+        st->t_cnt = 0;
+    }
+    if (st->t_state != HDRG_ST_FTR) {
+        st->t_cnt += 1u;                /* <= length <= 2^31 - 1 */
+    }
+    return st->t_state;
+}
+
+/* proxy.proxy_u */
+static int32_t proxy_u(const hdrg_table_t *t, int64_t p, int *clamped)
+{
+    /* |dp| <= 2^31 - 1, 0 < g_u < 2^31, |u_off| <= 2^30, sh_u <= 62: the sum is below 2^63 */
+    int64_t dp = hdrg_clamp(p - t->p_ref, -I64(HDRG_INT32_SYM), HDRG_INT32_SYM, NULL);
+    int64_t u = hdrg_rhu(dp * t->g_u + t->u_off, t->sh_u);
+    return (int32_t)hdrg_clamp(u, -HDRG_ONE, HDRG_ONE, clamped);
+}
+
+/* rate.RateState.step: pushes p; returns v, sets *s (the sum before its clamp), *clamped, *warm */
+static int32_t rate_step(hdrg_state_t *st, uint32_t pw, int restart, int64_t *s_out, int *clamped,
+                         int *warm)
+{
+    const hdrg_table_t *t = &st->t;
+    uint32_t k = st->k, n = st->n, j;
+    int64_t p, s = 0, sc, v;
+    int sclamp = 0, vclamp = 0;
+    if (restart) {
+        rate_reset(st);
+        k = 0;
+    } else {
+        st->head = st->head == n ? 0u : st->head + 1u;
+    }
+    st->hist[st->head] = pw;
+    p = pword(st, pw);
+    if (t->rate_est <= 1u) {                        /* diff, diffn: |S| < 2^32 */
+        if (k >= n) {
+            s = p - hist_back(st, n);
+        }
+    } else if (t->rate_est == 2u) {                 /* lsq: |S| < n^2 2^32 <= 2^56 */
+        if (k >= n - 1u) {
+            uint32_t idx = st->head >= n - 1u ? st->head - (n - 1u) : st->head + 2u;  /* mod n + 1 */
+            for (j = 0; j < n; j++) {
+                s += (2 * I64(j) - I64(n - 1u)) * (pword(st, st->hist[idx]) - p);
+                idx = idx == n ? 0u : idx + 1u;
+            }
+        }
+    } else {                                        /* iir: |y| < 2^56 */
+        if (k == 1u) {
+            st->iy = (p - hist_back(st, 1u)) * P2(HDRG_IIR_FRAC);
+        } else if (k >= 2u) {
+            st->iy += hdrg_rhu((p - hist_back(st, 1u)) * P2(HDRG_IIR_FRAC) - st->iy, t->rate_shift);
+        }
+        s = st->iy;
+    }
+    *s_out = s;
+    *warm = k < t->rate_warmup;
+    if (*warm) {
+        st->k = k + 1u;                             /* saturates at rate_warmup */
+        *clamped = 0;
+        return 0;
+    }
+    st->k = k;
+    sc = hdrg_clamp(s, -(P2(t->s_bits) - 1), P2(t->s_bits) - 1, &sclamp);
+    v = hdrg_rhu(sc * t->g_v, t->sh_v);             /* |sc g_v| < 2^SB 2^(62 - SB) */
+    v = hdrg_clamp(v, -HDRG_ONE, HDRG_ONE, &vclamp);
+    *clamped = sclamp || vclamp;
+    return (int32_t)v;
+}
+
+/* sequencer.Combiner.step: returns cvalid, sets st->y_hold, *sat */
+static int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, int *sat)
+{
+    const hdrg_table_t *t = &st->t;
+    unsigned cur, o;
+    int cvalid = 0;
+    if (t->combiner == 0u) {
+        st->y_hold = I64(r) * P2(HDRG_Y_FRAC - 10);  /* R << 11 */
+        return 1;
+    }
+    if (restart) {
+        comb_restart(st);
+    }
+    for (o = 1; o <= 2u; o++) {
+        if (st->age[o] < HDRG_COUNT_MAX) {
+            st->age[o] += 1u;
+        }
+    }
+    cur = st->cur;
+    if (mode != cur) {
+        if (cur != 0u && st->cnt >= 1u) {           /* commit the closing window */
+            int64_t mean = hdrg_div_round_scaled(st->acc, I64(st->cnt), HDRG_MEAN_EXTRA);
+            int64_t sp = I64(st->cnt) - 1;
+            if (st->ncommit[cur] >= 1u) {
+                int64_t dc2 = 2 * (I64(st->age[cur]) - 1) - sp + I64(st->span[cur]);
+                int c = 0;
+                st->slope[cur] = hdrg_clamp(
+                    hdrg_div_round_scaled(mean - st->w[cur], dc2, HDRG_SLOPE_EXTRA),
+                    -HDRG_SLOPE_MAX, HDRG_SLOPE_MAX, &c);
+                *sat |= c;
+            }
+            st->w[cur] = mean;
+            st->span[cur] = (uint32_t)sp;
+            st->age[cur] = 1u;
+            st->ncommit[cur] = st->ncommit[cur] >= 1u ? 2u : 1u;
+        }
+        cur = (mode == 1u || mode == 2u) ? mode : 0u;
+        st->cur = (uint8_t)cur;
+        if (cur != 0u) {
+            st->last_window = (uint8_t)cur;
+        }
+        st->acc = 0;
+        st->cnt = 0;
+        st->pos = 0;
+    }
+    if (cur != 0u) {
+        int64_t c = cur == 1u ? I64(r) : -I64(r);
+        if (st->pos >= t->settle_n) {
+            if (st->cnt < HDRG_COUNT_MAX) {
+                st->acc += c;                       /* |acc| <= 2^31 cnt < 2^62 */
+                st->cnt += 1u;
+            } else {
+                *sat = 1;
+            }
+            o = 3u - cur;
+            if (st->ncommit[o] >= 1u && st->age[o] <= t->max_stale_n) {
+                int64_t other = st->w[o];
+                if (t->combiner == 2u) {
+                    int dc = 0;
+                    int64_t d = hdrg_clamp(2 * I64(st->age[o]) + I64(st->span[o]), 0, HDRG_D_MAX, &dc);
+                    *sat |= dc;
+                    other += hdrg_rhu(st->slope[o] * d, HDRG_SLOPE_EXTRA);  /* < 2^40 2^22 */
+                }
+                st->y_hold = c * P2(HDRG_MEAN_EXTRA) + other;
+                cvalid = 1;
+            }
+        } else {
+            st->pos += 1u;
+        }
+    }
+    return cvalid;
+}
+
+/* evaluator.evaluate */
+int64_t hdrg_evaluate(const hdrg_table_t *t, int32_t u, int32_t v, int32_t z, int *z_clamped)
+{
+    int64_t a[4], acc, zz;
+    unsigned i;
+    int E = (int)t->e_acc;
+    zz = hdrg_clamp(z, -HDRG_ONE, HDRG_ONE, z_clamped);
+    for (i = 0; i < 4u; i++) {
+        const uint8_t *c = POLY[3u - i];
+        int64_t p = t->mant[c[3]];
+        p = hdrg_mul_rhu(p, v, HDRG_Q) + t->mant[c[2]];
+        p = hdrg_mul_rhu(p, v, HDRG_Q) + t->mant[c[1]];
+        p = hdrg_mul_rhu(p, v, HDRG_Q) + t->mant[c[0]];
+        a[3u - i] = hdrg_rhu(p, t->e_row[3u - i] - t->e_acc);
+    }
+    acc = a[3];
+    acc = hdrg_mul_rhu(acc, u, HDRG_Q) + a[2];
+    acc = hdrg_mul_rhu(acc, u, HDRG_Q) + a[1];
+    acc = hdrg_mul_rhu(acc, u, HDRG_Q) + a[0];
+    acc += hdrg_mul_rhu(t->mant[K_AUX], zz, HDRG_Q + t->e_7 - t->e_acc);
+    if (E >= HDRG_Y_FRAC) {
+        return hdrg_rhu(acc, (unsigned)(E - HDRG_Y_FRAC));
+    }
+    return acc * P2(HDRG_Y_FRAC - E);               /* |acc| < 2^31: below 2^52 */
+}
+
+/* compensate.Pipeline.step */
+int hdrg_step(hdrg_state_t *st, const hdrg_input_t *in, hdrg_sample_t *o)
+{
+    const hdrg_table_t *t = &st->t;
+    int restart = in->restart != 0;
+    int uc = 0, vc = 0, warm = 0, zc = 0, sat = 0, cvalid, valid;
+    unsigned state, mode, flags;
+    uint32_t pw;
+    int64_t s = 0, b;
+    int32_t u, v;
+    if (in->mode < -1 || in->mode > 3) {
+        return HDRG_ERR_INPUT;
+    }
+    /* 1. sequencer state: self-timed or logged */
+    if (in->mode < 0) {
+        if (restart) {
+            st->t_state = HDRG_ST_POWER_ON;
+            st->t_cnt = 0;
+        }
+        state = timer_step(st);
+        mode = STATE_MODE[state];
+    } else {
+        mode = (unsigned)in->mode;
+        state = mode == 0u ? HDRG_ST_FTR : mode == 1u ? HDRG_ST_MODE_1 : mode == 2u ? HDRG_ST_MODE_2
+              : st->last_window == 1u ? HDRG_ST_EXCH_TO_2 : HDRG_ST_EXCH_TO_1;
+    }
+    cvalid = comb_step(st, mode, in->r, restart, &sat);
+    /* 2. proxy, 3. rate */
+    pw = t->proxy_kind == 0u ? in->f : (uint32_t)in->t;   /* bit pattern, decoded by pword */
+    u = proxy_u(t, pword(st, pw), &uc);
+    v = rate_step(st, pw, restart, &s, &vc, &warm);
+    /* 5. evaluator */
+    b = hdrg_evaluate(t, u, v, in->z, &zc);
+    /* 6. compensate */
+    valid = cvalid && !warm && mode != 3u;
+    if (valid) {
+        int s1 = 0, s2 = 0;
+        /* |y| < 2^47, |B| < 2^52 */
+        st->out_hold = (int32_t)hdrg_sat_signed(hdrg_rhu(st->y_hold - b, HDRG_OUT_SHIFT), 32u, &s1);
+        st->bias_hold = (int32_t)hdrg_sat_signed(hdrg_rhu(b, HDRG_OUT_SHIFT), 32u, &s2);
+        sat = sat || s1 || s2;
+    }
+    flags = (uc ? HDRG_FLAG_PROXY_CLAMPED : 0u) | (vc ? HDRG_FLAG_RATE_CLAMPED : 0u)
+          | (warm ? HDRG_FLAG_WARMUP : 0u) | (mode == 3u ? HDRG_FLAG_EXCHANGE : 0u)
+          | ((!cvalid && mode != 3u) ? HDRG_FLAG_STALE : 0u) | (zc ? HDRG_FLAG_AUX_CLAMPED : 0u)
+          | (sat ? HDRG_FLAG_SAT : 0u);
+    o->state = (uint8_t)state;
+    o->vs = STATE_VS[state];
+    o->mode = (uint8_t)mode;
+    o->sign = STATE_SIGN[state];
+    o->u = u;
+    o->v = v;
+    o->z = (int32_t)hdrg_clamp(in->z, -HDRG_ONE, HDRG_ONE, NULL);
+    o->s = s;
+    o->acc = st->acc;
+    o->cnt = st->cnt;
+    o->y = st->y_hold;
+    o->b = b;
+    o->out = st->out_hold;
+    o->bias = st->bias_hold;
+    o->valid = (uint8_t)valid;
+    o->flags = (uint8_t)flags;
+    return HDRG_OK;
+}

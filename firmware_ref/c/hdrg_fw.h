@@ -1,0 +1,214 @@
+/*
+ * hdrg_fw.h - C99 twin of the fixed-point compensation pipeline (firmware_ref/FORMATS.md).
+ *
+ * Bit for bit the same as the Python-integer reference (firmware_ref/proxy.py, rate.py,
+ * sequencer.py, evaluator.py, compensate.py) and the numba kernel (firmware_ref/kernel.py).
+ * stdint.h and stddef.h only; no floating point, no malloc (all state is in hdrg_state_t),
+ * no undefined behaviour and no implementation-defined behaviour:
+ *   - arithmetic right shifts of negative values are never written: hdrg_rhu() shifts the
+ *     offset value (uint64_t)x + 2^63 (see hdrg_fw.c for the proof of equivalence);
+ *   - left shifts of negative values are written as products with (int64_t)1 << k;
+ *   - every signed intermediate stays inside int64 by the bounds of FORMATS.md, which the
+ *     table checks of hdrg_table_parse() enforce (including the Horner interval bound);
+ *   - uint32 -> int32 reinterpretation is done arithmetically, never by a cast.
+ *
+ * Usage:
+ *     static hdrg_state_t st;                     (16.7 kB with HDRG_N_HIST_MAX = 4096)
+ *     if (hdrg_init(&st, words, n_words) != HDRG_OK) ... refuse the table
+ *     per sample: hdrg_step(&st, &in, &out);      (in: input words, out: outputs + intermediates)
+ *
+ * Units (FORMATS.md): F uint32 LSB 2^-18 Hz; T int32 LSB 2^-16 degC; R int32 LSB 2^-10 deg/h;
+ * u, v, z int32 Q1.30; y, B int64 LSB 2^-21 deg/h; OUT, BIAS int32 LSB 2^-10 deg/h.
+ */
+#ifndef HDRG_FW_H
+#define HDRG_FW_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+/* Longest diffn/lsq window n the history ring can hold (compile-time; the ring holds n + 1
+ * uint32 words, 4 (HDRG_N_HIST_MAX + 1) bytes).  A table with rate_n above it is refused
+ * (HDRG_ERR_FIELD).  At most 4096 (formats.N_HIST_MAX: the lsq bound |S| < 2^57 needs it). */
+#ifndef HDRG_N_HIST_MAX
+#define HDRG_N_HIST_MAX 4096
+#endif
+#if HDRG_N_HIST_MAX < 2 || HDRG_N_HIST_MAX > 4096
+#error "HDRG_N_HIST_MAX must be in 2..4096"
+#endif
+
+/* ---- table layout (version 1) ---------------------------------------------------------- */
+#define HDRG_MAGIC 0x47524448u          /* 'HDRG' as little-endian bytes */
+#define HDRG_LAYOUT_VERSION 1u
+#define HDRG_N_FIXED 47u                /* words 0..46: header, config, mantissas, aux header */
+#define HDRG_TABLE_WORDS_MAX 48u        /* version 1: no aux parameters, CRC last */
+#define HDRG_N_TERMS 17u
+
+enum hdrg_word {
+    HDRG_W_MAGIC = 0, HDRG_W_VERSION, HDRG_W_LENGTH, HDRG_W_PROXY_KIND, HDRG_W_P_REF, HDRG_W_G_U,
+    HDRG_W_U_OFF, HDRG_W_SH_U, HDRG_W_RATE_EST, HDRG_W_RATE_N, HDRG_W_RATE_SHIFT, HDRG_W_RATE_WARMUP,
+    HDRG_W_S_BITS, HDRG_W_G_V, HDRG_W_SH_V, HDRG_W_FS_Q16, HDRG_W_COMBINER, HDRG_W_SETTLE_N,
+    HDRG_W_MAX_STALE_N, HDRG_W_POWER_ON_N, HDRG_W_EXCHANGE_N, HDRG_W_DWELL_N, HDRG_W_E_0,
+    HDRG_W_E_7 = HDRG_W_E_0 + 4, HDRG_W_E_ACC, HDRG_W_M_0,
+    HDRG_W_AUX_GEN = HDRG_W_M_0 + 17, HDRG_W_AUX_NPARAMS
+};
+
+/* ---- formats (firmware_ref/formats.py) ------------------------------------------------- */
+#define HDRG_Q 30
+#define HDRG_ONE ((int64_t)1 << HDRG_Q)
+#define HDRG_INT32_SYM 2147483647
+#define HDRG_IIR_FRAC 24
+#define HDRG_S_BITS_MAX 55
+#define HDRG_MEAN_EXTRA 10
+#define HDRG_SLOPE_EXTRA 16
+#define HDRG_SLOPE_MAX (((int64_t)1 << 40) - 1)
+#define HDRG_D_MAX 4194303
+#define HDRG_COUNT_MAX 2147483647u
+#define HDRG_TIMER_MAX 2147483647u
+#define HDRG_ACC_LIMIT 2147483647
+#define HDRG_EXP_MAX 52
+#define HDRG_ALIGN_MAX 31
+#define HDRG_Y_FRAC 21
+#define HDRG_OUT_SHIFT 11
+
+/* ---- status flags ---------------------------------------------------------------------- */
+#define HDRG_FLAG_PROXY_CLAMPED 1u
+#define HDRG_FLAG_RATE_CLAMPED 2u
+#define HDRG_FLAG_WARMUP 4u
+#define HDRG_FLAG_EXCHANGE 8u
+#define HDRG_FLAG_STALE 16u
+#define HDRG_FLAG_AUX_CLAMPED 32u
+#define HDRG_FLAG_INPUT_SAT 64u         /* host side only: never set here */
+#define HDRG_FLAG_SAT 128u
+
+/* ---- sequencer states and virtual-switch bits ------------------------------------------ */
+enum hdrg_seq_state {
+    HDRG_ST_POWER_ON = 0, HDRG_ST_EXCH_TO_1, HDRG_ST_MODE_1, HDRG_ST_EXCH_TO_2, HDRG_ST_MODE_2,
+    HDRG_ST_FTR
+};
+#define HDRG_VS_DRV_X 0x01u
+#define HDRG_VS_DRV_Y 0x02u
+#define HDRG_VS_SNS_Y 0x04u
+#define HDRG_VS_SNS_X 0x08u
+#define HDRG_VS_NEG 0x10u
+
+/* ---- errors ---------------------------------------------------------------------------- */
+enum hdrg_error {
+    HDRG_OK = 0,
+    HDRG_ERR_LENGTH,    /* fewer than 48 words, or the length word disagrees with the count */
+    HDRG_ERR_MAGIC,     /* word 0 is not 0x47524448 */
+    HDRG_ERR_VERSION,   /* word 1 is not 1 */
+    HDRG_ERR_CRC,       /* the last word is not the CRC-32 of the others */
+    HDRG_ERR_FIELD,     /* a field outside its legal range (which: *bad_word) */
+    HDRG_ERR_HORNER,    /* the mantissas break the Horner interval bound (|acc| <= 2^31 - 1) */
+    HDRG_ERR_INPUT      /* hdrg_step: mode not in -1..3 */
+};
+
+/* The decoded table fields (FORMATS.md "Coefficient table layout"); signed fields decoded from
+ * two's complement, p_ref of a freq table kept as the uint32 value. */
+typedef struct hdrg_table {
+    uint32_t proxy_kind;        /* 0 freq (P = F word), 1 temp (P = T word) */
+    int64_t p_ref, g_u, u_off;
+    uint32_t sh_u;
+    uint32_t rate_est;          /* 0 diff, 1 diffn, 2 lsq, 3 iir */
+    uint32_t rate_n, rate_shift, rate_warmup, s_bits;
+    int64_t g_v;
+    uint32_t sh_v, fs_q16;
+    uint32_t combiner;          /* 0 ftr, 1 pair, 2 trend */
+    uint32_t settle_n, max_stale_n, power_on_n, exchange_n, dwell_n;
+    uint32_t e_row[4], e_7, e_acc;
+    int32_t mant[HDRG_N_TERMS];
+    uint32_t aux_gen, aux_nparams;
+    uint32_t n_words, crc;
+} hdrg_table_t;
+
+/* The input words of one sample. */
+typedef struct hdrg_input {
+    uint32_t f;         /* drive-frequency word F (used when proxy_kind = 0) */
+    int32_t t;          /* temperature word T (used when proxy_kind = 1) */
+    int32_t r;          /* raw rate word R */
+    int32_t z;          /* aux word Z (Q1.30; clamped to [-2^30, 2^30], flag 32) */
+    int8_t mode;        /* logged mode 0..3, or -1: the internal sequencer (timer) decides */
+    uint8_t restart;    /* 1 at the start of a gap-free segment */
+} hdrg_input_t;
+
+/* The outputs and every intermediate of one sample. */
+typedef struct hdrg_sample {
+    uint8_t state;      /* sequencer state (enum hdrg_seq_state) */
+    uint8_t vs;         /* virtual-switch bits of the state */
+    uint8_t mode;       /* run-log mode 0..3 */
+    int8_t sign;        /* rate sign of the state: 1, -1, 0 (sense loop open) */
+    int32_t u, v, z;    /* Q1.30 (clamped) */
+    int64_t s;          /* rate-estimator sum before its clamp (P LSB; iir: 2^-24 P LSB) */
+    int64_t acc;        /* window sum after this sample (LSB 2^-10 deg/h) */
+    uint32_t cnt;       /* window count after this sample */
+    int64_t y;          /* combined output (held), LSB 2^-21 deg/h */
+    int64_t b;          /* bias B, LSB 2^-21 deg/h */
+    int32_t out, bias;  /* output words (held), LSB 2^-10 deg/h */
+    uint8_t valid, flags;
+} hdrg_sample_t;
+
+/* The whole firmware state: the table and every register of the pipeline. */
+typedef struct hdrg_state {
+    hdrg_table_t t;
+    uint32_t n;                             /* effective window: rate_n (diffn, lsq) or 1 */
+    /* timer */
+    uint8_t t_state;
+    uint32_t t_cnt;
+    /* rate estimator */
+    uint32_t hist[HDRG_N_HIST_MAX + 1];     /* ring of the last n + 1 proxy words (bit patterns) */
+    uint32_t head;                          /* index of the present word */
+    uint32_t k;                             /* samples since restart, saturating at rate_warmup */
+    int64_t iy;                             /* iir state, 2^-24 P LSB */
+    /* combiner (index 1, 2: the modes) */
+    uint8_t cur, last_window;
+    uint8_t ncommit[3];
+    int64_t acc;
+    uint32_t cnt, pos;
+    int64_t w[3], slope[3];
+    uint32_t span[3], age[3];
+    /* held outputs */
+    int64_t y_hold;
+    int32_t out_hold, bias_hold;
+} hdrg_state_t;
+
+/* ---- primitives (FORMATS.md "primitives"; preconditions as firmware_ref/arith.py) ------- */
+/* RHU(x, s) = floor(x / 2^s + 1/2); 0 <= s <= 62 and x + 2^(s-1) must fit int64. */
+int64_t hdrg_rhu(int64_t x, unsigned s);
+/* floor(x / 2^s) for 0 <= s <= 63 (the arithmetic right shift, written portably). */
+int64_t hdrg_asr(int64_t x, unsigned s);
+/* RHU(a * b, s); the product must fit int64. */
+int64_t hdrg_mul_rhu(int64_t a, int64_t b, unsigned s);
+/* floor(a / b), b > 0. */
+int64_t hdrg_floor_div(int64_t a, int64_t b);
+/* floor((2a + b) / 2b), b > 0. */
+int64_t hdrg_div_round(int64_t a, int64_t b);
+/* RHU(a 2^k / b), b > 0, without forming a 2^k (see arith.div_round_scaled). */
+int64_t hdrg_div_round_scaled(int64_t a, int64_t b, unsigned k);
+/* min(max(x, lo), hi); *clamped = 1 if x was outside (clamped may be NULL). */
+int64_t hdrg_clamp(int64_t x, int64_t lo, int64_t hi, int *clamped);
+/* symmetric saturation to a signed width-bit word, 1 <= width <= 63 */
+int64_t hdrg_sat_signed(int64_t x, unsigned width, int *clamped);
+/* CRC-32 (IEEE 802.3, zlib.crc32) of n words as little-endian bytes. */
+uint32_t hdrg_crc32_words(const uint32_t *words, size_t n);
+
+/* ---- table, pipeline ------------------------------------------------------------------- */
+/* Decode and check a table (magic, version, length, CRC, every field range and the Horner
+ * interval bound).  Returns HDRG_OK or an error; *bad_word (may be NULL) gets the index of the
+ * offending word (HDRG_ERR_FIELD) or 0. */
+int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, unsigned *bad_word);
+/* Name of a layout word ("s_bits", "m_7", "crc32", ...), or "?" */
+const char *hdrg_word_name(unsigned index);
+/* Name of an error code */
+const char *hdrg_error_name(int err);
+
+/* Parse the table into st and reset (power-on).  On error st is left unusable. */
+int hdrg_init(hdrg_state_t *st, const uint32_t *words, size_t n_words, unsigned *bad_word);
+/* Power-on reset (everything, including the held outputs). */
+void hdrg_reset(hdrg_state_t *st);
+/* One sample.  Returns HDRG_OK, or HDRG_ERR_INPUT (mode outside -1..3; the state is unchanged). */
+int hdrg_step(hdrg_state_t *st, const hdrg_input_t *in, hdrg_sample_t *out);
+/* The bias B (LSB 2^-21 deg/h) at u, v in [-2^30, 2^30] (precondition) and any z (clamped;
+ * *z_clamped may be NULL). */
+int64_t hdrg_evaluate(const hdrg_table_t *t, int32_t u, int32_t v, int32_t z, int *z_clamped);
+
+#endif /* HDRG_FW_H */
