@@ -17,6 +17,7 @@ COMMANDS = {
     "simulate": ("host_tools.sim", "generate a simulated run log (virtual gyroscope in a chamber)"),
     "metrics": ("host_tools.metrics", "the paper's figures of merit of run logs or compensated outputs"),
     "fit": ("host_tools.fit", "fit the 17-coefficient bias model to run logs"),
+    "diagnose": ("host_tools.diagnose", "trace a model's residual to a missing effect, add it through k7, report before/after"),
     "quantize": ("host_tools.quantize", "quantize a bias model into the fixed-point coefficient table (table.json)"),
     "export": ("host_tools.export", "export a coefficient table as a C header, table.json and a $readmemh memory file"),
     "compensate": ("host_tools.compensate", "apply a bias model to a run log (float golden or fixed point)"),

@@ -1,5 +1,12 @@
 """Shared test fixtures: paths to the measured data copied into the project (with its MIT license)."""
-from pathlib import Path
+import os
+
+# one BLAS thread per process (set before numpy loads OpenBLAS): the small solves of the fitter
+# and the diagnosis thrash with multithreaded OpenBLAS on a loaded 2-core machine
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+from pathlib import Path  # noqa: E402
 
 import pytest
 

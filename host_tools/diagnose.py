@@ -1,0 +1,1149 @@
+"""Close the loop on measured data: find the residual of a bias model, trace it to an effect the
+model lacks, add that effect through the auxiliary term k7, and report the error before and after:
+``hdrg diagnose RUN... [--holdout RUN...] --out DIR [--json report.json]``.
+
+Procedure (:func:`diagnose`)
+----------------------------
+1. **Fit** the current model on the training runs (host_tools.fit.fit_logs; default the paper's 16
+   terms, the trend combiner for mode-reversal logs; ``--proxy``, ``--rate-estimator``,
+   ``--terms``, ``--combiner`` as in ``hdrg fit``).
+2. **Residual** = the model's target (FTR output or mode-reversal combined output) minus the
+   model, on the valid samples; characterized per run (:func:`characterize`): Allan deviation
+   against the white-noise line extrapolated from the shortest tau (taus where it is > 2x that line
+   hold structure above white noise), spectrum lines (:func:`spectral_lines`: Hann-windowed
+   periodogram of the mean-free residual, invalid samples interpolated, over a local median
+   continuum; gap-free logs only), and the binned means / correlation of the residual against
+   time, proxy rate, mode and every logged channel.
+3. **Trace**: every candidate of host_tools.effects (physically motivated regressor families,
+   computed causally from the log, parameters scanned on coarse grids) is scored by
+   cross-validation: groups are the training runs (leave one run out) or, with a single training
+   run, ``cv_blocks`` contiguous time blocks dealt round-robin into ``cv_folds`` folds (each fold
+   holds out contiguous blocks spread over the run, so no fold extrapolates the polynomial in u);
+   never random samples.  In each fold the base terms (the polynomial terms plus the generators
+   already added, each its own column) AND the candidate are refitted on the training part and
+   scored on the held-out part (:class:`_Scanner`).  The score is on SCORE_TAU_S = 1-s means of
+   the valid samples (the samples themselves at <= 1 Hz; at 50 Hz the white noise of single
+   samples would swamp any slow effect): ``gain = 1 - SSE_heldout(with candidate) /
+   SSE_heldout(base)``, summed over folds.  With >= 2 training runs a candidate may also be
+   another rate estimator (lsq over 16 s or 64 s, family ``rate_estimator``): it replaces the v
+   terms instead of adding a column (within one run, blocks of the same record favour it even
+   when held-out runs get worse, so it is not offered there).
+4. **Selection rule** (:data:`RULE`): the best candidate is accepted only when
+
+   a. its CV gain >= ``g_min`` (default 0.02: it explains at least 2 % of the held-out residual
+      variance of 1-s means), and
+   b. its CV gain >= the 95 % level of the *largest* gain of the whole coarse scan on
+      ``n_surrogates`` (29) surrogates: each training run's residual is replaced by Gaussian
+      noise with the run's own noise spectrum (:func:`surrogates`, :func:`noise_continuum`: the
+      residual's periodogram smoothed by a local median that drops lines and the mode-sign
+      sidebands, its own power kept at the 4 lowest bins; random phases; no wrap-around, so it
+      drifts like a real record; corrected for what the base fit absorbs) and every candidate
+      is rescored, the periodic ones at the lines of each surrogate's own spectrum.  So the
+      threshold counts every candidate and scan point, the choice of the periods, and the run's
+      own white, flicker and slow noise (a slow random residual is what makes slow candidates
+      look good by chance), and
+   c. it is consistent: it lowers the held-out error in a strict majority of the folds (all folds
+      with 2 runs).
+
+   Ties: among the candidates within 5 % (relative) of the best gain, one computed from the proxy,
+   the mode and the sample counter alone is preferred to one that needs another logged channel
+   (board_temp, aux_*) (:func:`_preferred`).  The winner's continuous parameter (tau or period)
+   is then refined on finer grids (ratios 2^(+-1/4, +-1/2), then 2^(+-1/8); periods +-2, 4 %,
+   then +-1 %) by the same CV gain.  Periodic candidates exist only at the periods of significant
+   lines of the training residual (power / continuum > ln(bins / 0.01): Bonferroni over the
+   frequency bins).
+5. **Add the effect**: the polynomial terms plus every accepted generator as its own column are
+   refitted by a small explicit least-squares solve on the training runs; the generator weights
+   are normalized by the sum of their magnitudes (so |z| <= 1 everywhere, host_tools.regressors)
+   and baked into ``AuxConfig('sum', ...)``; the fitter then fits the 17 coefficients with k7.
+   (A rate_estimator winner changes the model's rate estimator instead.)  Iterate while a
+   candidate passes the rule, at most ``max_iter`` (3) times.
+6. **Report**: per iteration the effect, its parameters, the evidence (CV gain, threshold, folds,
+   ranking; PNG: residual vs the candidate, Allan deviation and spectrum before/after) and the
+   error before and after (:func:`error_stats`: stability 1 sigma and variation p-p of 1-s and
+   100-s averages, host_tools.metrics) on the held-out runs (the training runs when none are
+   given; several runs: the mean over runs), next to the noise floor (white noise: the Allan
+   deviation at 1 s, and that / 10 for 100 s).  DIR/diagnose.json (also ``--json``),
+   DIR/diagnose.md, DIR/model.json (the final model, usable by ``hdrg compensate``) and
+   DIR/*.png.
+
+Limits: with a single training run, slow candidates (aging, long lags) cannot be told from the
+run's own slow noise as well as across runs; a turn-on transient or anything else that only a
+part of a run holds needs two runs to be identified.  Tau-scans of filters/decays assume the
+nominal sample rate.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from firmware_ref.terms import K_AUX, TERM_NAMES
+from host_tools import effects, metrics
+from host_tools import runlog as rl
+from host_tools.compensate import compensate, fit_config_from_logs, prepare
+from host_tools.fit import fit_logs
+from host_tools.model import BiasModel
+from host_tools.regressors import AuxConfig, generator_values, regressor_matrix
+
+G_MIN = 0.02                 # minimum CV gain (fraction of held-out residual variance)
+N_SURROGATES = 39            # surrogate residuals for the null of the scan's best gain
+NULL_QUANTILE = 0.95
+MAX_ITER = 3
+CV_BLOCKS = 16               # single training run: contiguous blocks ...
+CV_FOLDS = 4                 # ... dealt round-robin into folds
+BAND_RATIO = 2 ** 0.25       # spectrum continuum: median over 1/4-octave bands
+LINE_ALPHA = 0.01            # spectrum lines: false-alarm level over all bins (Bonferroni)
+MAX_LINES = 3                # periodic candidates: at most this many lines
+RATE_ALTERNATIVES_S = (16.0, 64.0)   # rate_estimator candidates: lsq windows [s]
+REPORT_TAUS = (1.0, 100.0)
+TOP_RANKING = 12
+SCORE_TAU_S = 1.0            # the CV scores bin means of this many seconds (the report's shortest tau)
+TIE_TOLERANCE = 0.05         # gains within 5 % (relative) of the best are a tie: prefer the proxy
+
+RULE = ("accept the best candidate iff (a) its cross-validated gain (1 - held-out SSE of 1-s means "
+        "with it / without it, the base terms refitted with it in every fold; folds: runs, or "
+        "contiguous blocks of one run) >= g_min, (b) that gain >= the "
+        f"{NULL_QUANTILE:.0%} level of the best gain of the whole coarse scan on surrogate residuals "
+        "(Gaussian noise with each run's own noise spectrum, lines removed, no wrap-around: the "
+        "threshold counts every candidate, scan point and chosen period and the run's own "
+        "white/flicker/slow noise), and (c) it lowers the held-out error in a strict majority of "
+        "the folds; ties within 5 % prefer a regressor of the proxy alone; then refine its "
+        "parameter; stop when no candidate passes or after max_iter iterations")
+
+
+# ---------------------------------------------------------------------------------------------
+# cross-validation engine
+# ---------------------------------------------------------------------------------------------
+
+class _Scanner:
+    """Leave-one-group-out cross-validation of a base design plus candidate columns, for many
+    targets at once (the real target and the surrogates), in Gram form.
+
+    The valid rows of every group are stacked (group after group).  The base design X is replaced
+    by an orthonormal basis Q of its span (left singular vectors of the column-scaled stacked
+    design, numerical rank kept) and the targets by their residual Yr = Y - Q Q^T Y on all groups, so per-group sums of
+    small quantities suffice: A_g = Q_g^T Q_g, B_g = Q_g^T Yr_g, S_g = sum Yr_g^2.  Fold f trains
+    on all groups but f (A_tr = I - A_f, B_tr = -B_f since Q^T Yr = 0) and is scored on group f:
+    held-out SSE = S_f - 2 b.B_f + b.A_f b for the fold's coefficient change b.  A candidate C adds
+    D_g = Q_g^T C_g, E_g = C_g^T C_g, F_g = C_g^T Yr_g and its coefficients a to the solve.  This
+    is algebraically the refit of the base terms plus the candidate in every fold."""
+
+    def __init__(self, X_logs, Y_logs, groups):
+        self.groups = groups
+        X = np.concatenate([X_logs[j][idx] for j, idx in groups])
+        Y = np.concatenate([Y_logs[j][idx] for j, idx in groups])
+        sizes = [len(idx) for _, idx in groups]
+        self.bounds = np.concatenate([[0], np.cumsum(sizes)])
+        norms = np.sqrt(np.einsum("ij,ij->j", X, X))
+        norms[norms == 0] = 1.0
+        U, sv, _ = np.linalg.svd(X / norms, full_matrices=False)
+        keep = sv > (sv.max() if len(sv) else 0.0) * 1e-10
+        self.Q = np.ascontiguousarray(U[:, keep])
+        self.Yr = np.ascontiguousarray(Y - self.Q @ (self.Q.T @ Y))
+        p = self.Q.shape[1]
+        self.p = p
+        self.A, self.B, self.S = [], [], []
+        for a, b in self._slices():
+            Qg, Yg = self.Q[a:b], self.Yr[a:b]
+            self.A.append(np.einsum("ij,ik->jk", Qg, Qg))
+            self.B.append(np.einsum("ij,ik->jk", Qg, Yg))
+            self.S.append(np.einsum("ij,ij->j", Yg, Yg))
+        self.e0 = np.empty((len(groups), Y.shape[1]))
+        eye = np.eye(p)
+        self._base = []
+        for f in range(len(groups)):
+            b = _solve_sym(eye - self.A[f], -self.B[f])
+            self._base.append(b)
+            self.e0[f] = self.S[f] - 2.0 * np.einsum("ij,ij->j", b, self.B[f]) + \
+                np.einsum("ij,ij->j", b, self.A[f] @ b)
+
+    def _slices(self):
+        return [(int(self.bounds[g]), int(self.bounds[g + 1])) for g in range(len(self.groups))]
+
+    def stack(self, C_logs) -> np.ndarray:
+        """The valid rows of per-log columns (n_log, m) in the stacked group order."""
+        return np.concatenate([C_logs[j][idx] for j, idx in self.groups])
+
+    def score(self, C_logs):
+        """(folds, targets) held-out SSE with the candidate columns C_logs (one (n, m) array per
+        log) added; the base SSE where the candidate is not identifiable in a fold."""
+        C = self.stack(C_logs)
+        D, E, F = [], [], []
+        for a, b in self._slices():
+            Cg = C[a:b]
+            D.append(np.einsum("ij,ik->jk", self.Q[a:b], Cg))
+            E.append(np.einsum("ij,ik->jk", Cg, Cg))
+            F.append(np.einsum("ij,ik->jk", Cg, self.Yr[a:b]))
+        Dt, Et, Ft = sum(D), sum(E), sum(F)
+        p = self.p
+        out = self.e0.copy()
+        eye = np.eye(p)
+        for f in range(len(self.groups)):
+            Atr = eye - self.A[f]
+            Dtr, Etr = Dt - D[f], Et - E[f]
+            # identifiability: the candidate's part outside the base span on the training rows
+            schur = Etr - Dtr.T @ _solve_sym(Atr, Dtr)
+            if np.any(np.diag(schur) <= 1e-9 * np.maximum(np.diag(Etr), 1e-300)):
+                continue
+            M = np.block([[Atr, Dtr], [Dtr.T, Etr]])
+            rhs = np.vstack([-self.B[f], Ft - F[f]])
+            try:
+                sol = np.linalg.solve(M, rhs)
+            except np.linalg.LinAlgError:
+                continue
+            b, c = sol[:p], sol[p:]
+            Ab = self.A[f] @ b + D[f] @ c
+            Ec = D[f].T @ b + E[f] @ c
+            out[f] = (self.S[f] - 2.0 * (np.einsum("ij,ij->j", b, self.B[f]) + np.einsum("ij,ij->j", c, F[f]))
+                      + np.einsum("ij,ij->j", b, Ab) + np.einsum("ij,ij->j", c, Ec))
+        return out
+
+
+def _solve_sym(A, B):
+    try:
+        return np.linalg.solve(A, B)
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(A, B, rcond=None)[0]
+
+
+class _Binner:
+    """Averages of the valid samples of one log over consecutive bins of SCORE_TAU_S seconds
+    (``round(SCORE_TAU_S * fs)`` samples, counted within each gap-free segment; a bin with fewer
+    than half its samples valid is dropped).  At fs <= 1 Hz a bin is one valid sample."""
+
+    def __init__(self, log, valid, fs):
+        valid = np.asarray(valid, bool)
+        size = max(1, int(round(SCORE_TAU_S * fs)))
+        idx = np.flatnonzero(valid)
+        if size == 1:
+            self.idx, self.inverse, self.count, self.n = idx, None, None, len(idx)
+            return
+        start = np.zeros(len(valid), np.int64)
+        start[np.asarray(log.segments, np.int64)] = np.asarray(log.segments, np.int64)
+        start = np.maximum.accumulate(start)
+        seg = np.searchsorted(np.asarray(log.segments), np.arange(len(valid)), side="right") - 1
+        key = seg[idx] * (len(valid) + 1) + (idx - start[idx]) // size
+        keys, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
+        keep = count >= (size + 1) // 2
+        remap = np.full(len(keys), -1, np.int64)
+        remap[keep] = np.arange(int(keep.sum()))
+        inv = remap[inverse]
+        sel = inv >= 0
+        self.idx, self.inverse, self.count, self.n = idx[sel], inv[sel], count[keep], int(keep.sum())
+
+    def mean(self, A) -> np.ndarray:
+        """(bins, ...) bin means of the rows of A (n rows, 1-D or 2-D)."""
+        A = np.asarray(A, np.float64)
+        rows = A[self.idx]
+        if self.inverse is None:
+            return rows
+        if rows.ndim == 1:
+            return np.bincount(self.inverse, rows, self.n) / self.count
+        return np.column_stack([np.bincount(self.inverse, rows[:, j], self.n) for j in range(rows.shape[1])]) \
+            / self.count[:, None]
+
+
+def cv_groups(valid_masks, cv_blocks=CV_BLOCKS, cv_folds=CV_FOLDS) -> list:
+    """The CV groups as (log index, row indices of valid samples): one group per log when there
+    are >= 2 logs; else ``cv_blocks`` contiguous time blocks of the single log dealt round-robin
+    into ``cv_folds`` groups (block b -> group b % cv_folds)."""
+    if len(valid_masks) >= 2:
+        return [(j, np.flatnonzero(v)) for j, v in enumerate(valid_masks)]
+    v = valid_masks[0]
+    n = len(v)
+    if cv_folds < 2 or cv_blocks < cv_folds:
+        raise ValueError(f"a single training run needs cv_folds >= 2 and cv_blocks >= cv_folds "
+                         f"(got {cv_blocks} blocks, {cv_folds} folds)")
+    block = (np.arange(n) * cv_blocks) // max(n, 1)
+    groups = [(0, np.flatnonzero(v & (block % cv_folds == k))) for k in range(cv_folds)]
+    if any(len(idx) == 0 for _, idx in groups):
+        raise ValueError("a CV fold holds no valid sample: the run is too short for the blocks")
+    return groups
+
+
+# ---------------------------------------------------------------------------------------------
+# spectrum: continuum, lines, surrogates
+# ---------------------------------------------------------------------------------------------
+
+def _filled(resid, valid):
+    """The mean-free residual on the valid rows, linearly interpolated (in row index) across the
+    invalid ones (mode exchanges, warm-up; held at the ends): a gap-free series for spectra.
+    Zero-filling instead would modulate the residual by the exchange pattern (spurious lines)."""
+    valid = np.asarray(valid, bool)
+    r = np.asarray(resid, np.float64)
+    if not valid.any():
+        return np.zeros(len(r))
+    rv = r[valid] - r[valid].mean()
+    idx = np.flatnonzero(valid)
+    return np.interp(np.arange(len(r)), idx, rv)
+
+
+SLOW_BINS = 4                # surrogates keep the residual's own power at bins 1..4
+MIN_BAND_BINS = 5            # continuum bands with fewer bins: mean instead of median
+
+
+def continuum(power) -> np.ndarray:
+    """Smooth noise continuum of a periodogram ``power`` (bins 0..K, bin 0 ignored): per
+    1/4-octave band of bins, the median / ln 2 (the mean of an exponential ordinate; the median
+    ignores the few bins a line occupies) in bands of >= MIN_BAND_BINS bins, the plain mean in the
+    narrower bands at the lowest frequencies; interpolated in log-log between band centres.  The
+    lowest bins thus keep their own power: a slow residual counts as noise there, since one run
+    cannot tell a slow effect from slow noise (conservative)."""
+    K = len(power) - 1
+    if K < 1:
+        return np.zeros_like(power)
+    edges = [1]
+    while edges[-1] <= K:
+        edges.append(max(edges[-1] + 1, int(math.ceil(edges[-1] * BAND_RATIO))))
+    centres, levels = [], []
+    for a, b in zip(edges[:-1], edges[1:]):
+        seg = power[a:min(b, K + 1)]
+        if len(seg) == 0:
+            continue
+        lev = float(np.mean(seg)) if len(seg) < MIN_BAND_BINS else float(np.median(seg)) / math.log(2.0)
+        centres.append(math.sqrt(a * (a + len(seg) - 1)))
+        levels.append(max(lev, 1e-300))
+    k = np.arange(K + 1, dtype=np.float64)
+    k[0] = 1.0
+    out = np.exp(np.interp(np.log(k), np.log(centres), np.log(levels)))
+    out[0] = 0.0
+    return out
+
+
+def local_continuum(power, exact_upto=256) -> np.ndarray:
+    """Continuum of a periodogram for the line test: at bin k the median / ln 2 of the bins k'
+    with 2 <= |k' - k| <= max(6, ceil(k / 4)), 1 <= k' <= K (the bin and its direct neighbours,
+    where a line leaks, excluded); above ``exact_upto`` the band :func:`continuum` (a line is a
+    negligible part of a band there)."""
+    K = len(power) - 1
+    out = continuum(power)
+    kmax = min(K, exact_upto)
+    if kmax < 1:
+        return out
+    ks = np.arange(1, kmax + 1)
+    hs = np.maximum(6, np.ceil(ks / 4.0).astype(np.int64))
+    H = int(hs.max())
+    pad = H + 2
+    padded = np.concatenate([np.full(pad, np.nan), np.asarray(power, np.float64), np.full(pad, np.nan)])
+    padded[pad] = np.nan                     # bin 0 never enters
+    offs = np.concatenate([np.arange(-H, -1), np.arange(2, H + 1)])
+    win = padded[pad + ks[:, None] + offs[None, :]]
+    win[np.abs(offs)[None, :] > hs[:, None]] = np.nan
+    count = np.sum(~np.isnan(win), axis=1)
+    srt = np.sort(win, axis=1)                    # NaN sort last
+    med = 0.5 * (np.take_along_axis(srt, (count // 2)[:, None], 1)[:, 0]
+                 + np.take_along_axis(srt, np.maximum((count - 1) // 2, 0)[:, None], 1)[:, 0])
+    ok = count >= 3
+    out[ks[ok]] = np.maximum(med[ok] / math.log(2.0), 1e-300)
+    return out
+
+
+def noise_continuum(power) -> np.ndarray:
+    """The noise spectrum the surrogates get: the periodogram itself at the lowest bins 1 ..
+    SLOW_BINS (fewer than that many cycles per record: one run cannot tell a slow deterministic
+    effect from slow noise there, so its power counts as noise: conservative), above them the
+    robust :func:`local_continuum` (narrow features such as lines and the sidebands of the
+    mode-sign modulation are not noise)."""
+    out = local_continuum(power)
+    k = min(SLOW_BINS, len(power) - 1)
+    out[1:k + 1] = np.maximum(power[1:k + 1], 1e-300)
+    return out
+
+
+def spectral_lines(resid, valid, fs, max_lines=MAX_LINES, alpha=LINE_ALPHA) -> list:
+    """Significant lines of a residual: periodogram (Hann window) of the mean-free residual
+    (invalid samples interpolated, :func:`_filled`)
+    over its :func:`local_continuum`; a bin is a line when power / continuum > ln(K / alpha) (K
+    bins: about alpha false alarms per spectrum) and a local maximum, with a period between 4
+    samples and a third of the record.  Returns up to ``max_lines`` dicts {period_s, ratio,
+    amp_dph} (strongest first; amp: the sinusoid amplitude estimate)."""
+    valid = np.asarray(valid, bool)
+    r = _filled(np.asarray(resid, np.float64), valid)
+    n = len(r)
+    if n < 16 or not valid.any():
+        return []
+    X = np.fft.rfft(r * np.hanning(n))
+    power = np.abs(X) ** 2
+    cont = local_continuum(power)
+    K = len(power) - 1
+    thr = math.log(K / alpha)
+    ratio = np.where(cont > 0, power / np.where(cont > 0, cont, 1.0), 0.0)
+    k = np.arange(len(power))
+    ok = (k >= 3) & (k <= n / 4.0)
+    cand = [i for i in np.flatnonzero(ok & (ratio > thr))
+            if ratio[i] >= ratio[i - 1] and ratio[i] >= ratio[min(i + 1, K)]]
+    cand.sort(key=lambda i: -ratio[i])
+    frac = float(valid.mean())
+    return [{"period_s": float(n / (i * fs)), "ratio": float(ratio[i]),
+             "amp_dph": float(4.0 * np.abs(X[i]) / (n * max(frac, 1e-12)))} for i in cand[:max_lines]]
+
+
+SURROGATE_OVERSAMPLE = 4     # surrogates are cut from a series this many times longer (no wrap-around)
+SURROGATE_ROUNDS = 2         # spectrum corrections for what the base fit absorbs
+MAX_SPECTRUM_BOOST = 100.0   # largest correction of the noise spectrum per round
+
+
+def _low_slope(level) -> float:
+    """Log-log slope of a spectrum over its lowest bins 1..2*SLOW_BINS, clamped to [-2, 0]
+    (random walk .. white): how it continues below the lowest bin of the record."""
+    k = np.arange(1, min(2 * SLOW_BINS, len(level) - 1) + 1)
+    if len(k) < 2:
+        return 0.0
+    slope = np.polyfit(np.log(k), np.log(np.maximum(level[k], 1e-300)), 1)[0]
+    return float(np.clip(slope, -2.0, 0.0))
+
+
+def _surrogate_series(level, n, count, rng) -> np.ndarray:
+    """``count`` Gaussian series (n, count), random phases, power per bin of an n-record
+    ``level`` (bins 0..n//2), each a random window of a SURROGATE_OVERSAMPLE x longer series:
+    the level interpolated in frequency, continued below the lowest bin with the slope of the
+    lowest bins (:func:`_low_slope`), so a window holds the random offset and drift of a real
+    record (a run's mean wanders from run to run like the record's slow part)."""
+    L = SURROGATE_OVERSAMPLE * n
+    kf = np.arange(L // 2 + 1) * (n / L)
+    lev = np.interp(kf, np.arange(1, len(level)), level[1:])
+    below = (kf > 0) & (kf < 1)
+    lev[below] = level[1] * kf[below] ** _low_slope(level)
+    amp = np.sqrt(lev * (L / n))
+    amp[0] = 0.0
+    out = np.zeros((n, count))
+    for c in range(count):
+        x = np.fft.irfft(amp * np.exp(1j * rng.uniform(0.0, 2.0 * math.pi, len(amp))), L)
+        start = int(rng.integers(0, L - n + 1))
+        out[:, c] = x[start:start + n]
+    return out
+
+
+def surrogates(resid, valid, count, rng, project=None, rounds=SURROGATE_ROUNDS):
+    """``(noise, residual)``: ``count`` surrogate *noise* series (n, count) for a residual, and
+    their residuals after the base fit (``noise - project(noise)``): Gaussian, random phases, such
+    that their residual after the base fit has the noise spectrum (:func:`noise_continuum`) of
+    the actual residual.
+
+    * No wrap-around: each is a random window of a series SURROGATE_OVERSAMPLE times longer, so a
+      surrogate can drift and wander like a real record (a plain FFT surrogate is periodic in n:
+      it cannot drift, and slow candidates would look better on real slow noise than on it).
+    * ``project`` (a function (n, k) -> (n, k) returning the part the base fit would remove) lets
+      the noise spectrum be corrected in ``rounds`` steps, band ratio by band ratio, for what the
+      base fit absorbs: the actual residual is noise minus its projection on the base terms, so
+      the noise itself has more slow power than the residual shows (FTR runs with a slow
+      non-repeatable wander are the case).
+    * Scaled so that the std of the surrogate's residual equals the actual residual's.
+    Lines and phase structure are not kept."""
+    valid = np.asarray(valid, bool)
+    r = _filled(np.asarray(resid, np.float64), valid)
+    n = len(r)
+    if count == 0 or n < 4 or not valid.any():
+        return np.zeros((n, count)), np.zeros((n, count))
+    target = noise_continuum(np.abs(np.fft.rfft(r)) ** 2)
+    level = target.copy()
+    probe = max(4, min(count, 8))
+    for _ in range(rounds if project is not None else 0):
+        w = _surrogate_series(level, n, probe, rng)
+        rs = w - project(w)
+        got = np.mean([noise_continuum(np.abs(np.fft.rfft(_filled(rs[:, c], valid))) ** 2)
+                       for c in range(probe)], axis=0)
+        ratio = np.where(got > 0, target / np.where(got > 0, got, 1.0), 1.0)
+        level = level * np.clip(ratio, 1.0, MAX_SPECTRUM_BOOST)
+    w = _surrogate_series(level, n, count, rng)
+    rs = w - project(w) if project is not None else w
+    sd = np.std(rs[valid], axis=0)
+    scale = float(np.std(r[valid])) / np.where(sd > 0, sd, 1.0)
+    return w * scale, rs * scale
+
+
+# ---------------------------------------------------------------------------------------------
+# residual characterization
+# ---------------------------------------------------------------------------------------------
+
+def _binned(x, r, bins=10):
+    """Binned means of r by quantile bins of x (unique values when x has few): list of
+    {"x": centre, "mean_dph", "n"}."""
+    vals = np.unique(x)
+    if len(vals) <= bins:
+        return [{"x": float(v), "mean_dph": float(r[x == v].mean()), "n": int(np.sum(x == v))} for v in vals]
+    edges = np.unique(np.quantile(x, np.linspace(0, 1, bins + 1)))
+    idx = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(edges) - 2)
+    out = []
+    for b in range(len(edges) - 1):
+        sel = idx == b
+        if sel.any():
+            out.append({"x": float(x[sel].mean()), "mean_dph": float(r[sel].mean()), "n": int(sel.sum())})
+    return out
+
+
+def _allan_bridged(resid, t_s, valid, fs=None) -> dict:
+    """metrics.allan of the residual with its invalid samples (mode exchanges, warm-up) bridged by
+    linear interpolation (:func:`_filled`), so a mode-reversal log reaches long taus (its valid
+    stretches are at most one dwell long); time gaps still break the stretches."""
+    return metrics.allan(_filled(resid, valid), t_s, np.ones(len(resid), bool), fs)
+
+
+def characterize(log, resid, valid, fs, v=None) -> dict:
+    """The residual of one run against its own noise floor (see the module doc): ``allan``
+    (:func:`_allan_bridged`: tau_s, adev_dph, white_dph = the white-noise line through the
+    shortest tau, structure_taus_s = the taus where adev > 2 x white_dph), ``lines`` (:func:`spectral_lines`),
+    ``dependence`` {channel: {corr, range_dph, bins}} over time_s, proxy_rate (v), mode and every
+    logged channel but t_s/rate_dph, ``rms_dph``."""
+    valid = np.asarray(valid, bool)
+    out = {"source": log.source, "n_valid": int(valid.sum()),
+           "rms_dph": float(np.std(resid[valid])) if valid.any() else None}
+    a = _allan_bridged(resid, log.t_s, valid, fs)
+    taus = np.asarray(a["tau_s"], np.float64)
+    adev = np.asarray(a["adev_dph"], np.float64)
+    white = adev[0] * np.sqrt(taus[0] / taus) if len(taus) else np.zeros(0)
+    out["allan"] = {"tau_s": taus.tolist(), "adev_dph": adev.tolist(), "white_dph": white.tolist(),
+                    "structure_taus_s": taus[adev > 2.0 * white].tolist(),
+                    "adev_1s_dph": a["adev_1s_dph"], "bias_instability_dph": a["bias_instability_dph"]}
+    out["lines"] = spectral_lines(resid, valid, fs) if len(log.segments) == 1 else []
+    dep = {}
+    if valid.sum() >= 20:
+        r = resid[valid]
+        chans = {"time_s": log.t_s}
+        if v is not None:
+            chans["proxy_rate"] = v
+        chans["mode"] = log.mode
+        for name in log.columns:
+            if name not in ("t_s", "rate_dph", "mode"):
+                chans[name] = log[name]
+        for name, x in chans.items():
+            x = np.asarray(x, np.float64)[valid]
+            sd = float(np.std(x))
+            corr = float(np.corrcoef(x, r)[0, 1]) if sd > 0 and np.std(r) > 0 else 0.0
+            bins = _binned(x, r)
+            means = [b["mean_dph"] for b in bins]
+            dep[name] = {"corr": corr, "range_dph": float(max(means) - min(means)) if means else 0.0, "bins": bins}
+    out["dependence"] = dep
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# error statistics
+# ---------------------------------------------------------------------------------------------
+
+STAT_KEYS = ("std_dph", "pp_dph", "std100_dph", "pp100_dph")
+
+
+def _stats_one(y, t, valid) -> dict:
+    m = metrics.bias_metrics(y, t, valid, taus=REPORT_TAUS)
+    r1, r100 = metrics.at_tau(m, 1.0), metrics.at_tau(m, 100.0)
+    return {"std_dph": r1["stability_dph"], "pp_dph": r1["variation_dph"],
+            "std100_dph": r100["stability_dph"], "pp100_dph": r100["variation_dph"]}
+
+
+def _mean_stats(rows) -> dict:
+    out = {}
+    for key in STAT_KEYS:
+        vals = [r[key] for r in rows if r[key] is not None]
+        out[key] = float(np.mean(vals)) if vals else None
+    return out
+
+
+def error_stats(logs, model: BiasModel) -> dict:
+    """The error of ``model`` on ``logs``: the compensated output (host_tools.compensate) judged
+    by host_tools.metrics: ``std_dph``/``pp_dph`` (1 sigma / peak-to-peak of 1-s averages) and
+    ``std100_dph``/``pp100_dph`` (100-s averages), deg/h, mean over the logs (None where no log
+    supports that tau); ``runs`` holds the per-run values."""
+    rows = []
+    for log in logs:
+        out = compensate(log, model)
+        rows.append({"run": log.source, **_stats_one(out.rate_dph, log.t_s, np.asarray(out["valid"]) == 1)})
+    return {**_mean_stats(rows), "runs": rows}
+
+
+def _residuals(logs, model):
+    res = []
+    for log in logs:
+        pr = prepare(log, model)
+        res.append((pr, pr.y - model.evaluate(pr.u, pr.v, pr.z)))
+    return res
+
+
+def noise_floor(logs, model) -> dict:
+    """White-noise floor of the model's residual on ``logs`` (mean over logs): the Allan deviation
+    at 1 s (the 1-s std of white noise) and that / 10 (its 100-s std); None if 1 s is not an
+    Allan tau."""
+    vals = []
+    for log, (pr, r) in zip(logs, _residuals(logs, model)):
+        a = metrics.allan(r, log.t_s, pr.valid)
+        if a["adev_1s_dph"] is not None:
+            vals.append(a["adev_1s_dph"])
+    if not vals:
+        return {"std_dph": None, "std100_dph": None, "method": "no 1-s Allan tau"}
+    w = float(np.mean(vals))
+    return {"std_dph": w, "std100_dph": w / 10.0,
+            "method": "white noise: Allan deviation of the residual at 1 s; / sqrt(100) at 100 s"}
+
+
+# ---------------------------------------------------------------------------------------------
+# the diagnosis
+# ---------------------------------------------------------------------------------------------
+
+@dataclass
+class _Accepted:
+    family: str
+    params: dict
+    terms: list = field(default_factory=list)      # generator terms (weight 1 placeholders)
+    rate: dict | None = None                       # rate_estimator winner: {"estimator", "n"}
+
+
+def _poly_terms(model) -> tuple:
+    return tuple(k for k in model.terms if k != K_AUX)
+
+
+def _design(pr, poly, gen_cols):
+    X = regressor_matrix(pr.u, pr.v)[:, list(poly)]
+    return np.column_stack([X] + list(gen_cols)) if gen_cols else X
+
+
+def _explicit_weights(train, cfg, poly, gen_terms) -> list:
+    """Refit poly terms + every generator as its own column (training valid samples, lstsq);
+    return the generator terms with weights c_j / sum |c_j| (|z| <= 1)."""
+    fs = cfg.rate.fs
+    Xs, ys = [], []
+    for log in train:
+        pr = prepare(log, replace(cfg, aux=AuxConfig()))
+        cols = [generator_values(log, t, fs) for t in gen_terms]
+        X = _design(pr, poly, cols)
+        Xs.append(X[pr.valid])
+        ys.append(pr.y[pr.valid])
+    X = np.concatenate(Xs)
+    y = np.concatenate(ys)
+    norms = np.sqrt(np.einsum("ij,ij->j", X, X))
+    norms[norms == 0] = 1.0
+    c = np.linalg.lstsq(X / norms, y, rcond=None)[0] / norms
+    cg = c[len(poly):]
+    total = float(np.sum(np.abs(cg)))
+    if not total > 0:
+        raise ValueError("the accepted generators have zero weight in the explicit refit")
+    return [{**t, "weight": float(cj / total)} for t, cj in zip(gen_terms, cg)]
+
+
+def _rate_alternatives(train, cfg) -> list:
+    """(label, params) of the rate_estimator candidates: lsq windows RATE_ALTERNATIVES_S (at the
+    nominal fs), shorter than half the shortest segment, different from the current one."""
+    fs = cfg.rate.fs
+    shortest = min(int(np.min(np.diff(np.append(log.segments, len(log))))) for log in train)
+    out = []
+    for sec in RATE_ALTERNATIVES_S:
+        n = max(2, int(round(sec * fs)))
+        if n > shortest // 2:
+            continue
+        if cfg.rate.estimator == "lsq" and cfg.rate.n == n:
+            continue
+        out.append({"estimator": "lsq", "n": n})
+    return out
+
+
+def _config(train, opts, rate=None, aux=None):
+    o = dict(opts)
+    if rate is not None:
+        o["rate_estimator"], o["n"] = rate["estimator"], rate["n"]
+    return fit_config_from_logs(train, aux=aux, **o)
+
+
+def _gain(e1, e0):
+    """Per column of Y: 1 - sum_f e1 / sum_f e0."""
+    return 1.0 - e1.sum(axis=0) / np.maximum(e0.sum(axis=0), 1e-300)
+
+
+def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator="diff", rate_n=8, rate_shift=4,
+             terms="all", combiner="trend", settle_s=0.0, proxy_range=None, rate_range=None,
+             max_iter=MAX_ITER, n_surrogates=N_SURROGATES, g_min=G_MIN, cv_blocks=CV_BLOCKS,
+             cv_folds=CV_FOLDS, seed=0, families=None, rate_alternatives=True, out_dir=None,
+             plots=True) -> tuple:
+    """Run the closed loop (module doc) on RunLogs.  Returns ``(report, model)``: the report dict
+    (the JSON of the module doc) and the final BiasModel.  With ``out_dir`` the files are written
+    there (:func:`write_report`)."""
+    train = list(train_logs)
+    hold = list(holdout_logs)
+    if not train:
+        raise ValueError("no training runs")
+    rev = any(log.reversal for log in train)
+    opts = dict(proxy_kind=proxy, rate_estimator=rate_estimator, n=rate_n, shift=rate_shift,
+                proxy_range=proxy_range, rate_range=rate_range,
+                reversal={"combiner": combiner, "settle_s": settle_s} if rev else None)
+    cfg = _config(train, opts)
+    model, _ = fit_logs(train, cfg, terms, drop_unidentifiable=True)
+    poly = _poly_terms(model)
+    evals = hold if hold else train
+    rng = np.random.default_rng(seed)
+    accepted: list[_Accepted] = []
+    gen_terms: list = []
+    rate_choice = None
+    iterations = []
+    stopped = None
+    first_stats = error_stats(evals, model)
+    report = {"train": [log.source for log in train], "holdout": [log.source for log in hold],
+              "evaluated_on": "holdout" if hold else "train", "rule": RULE,
+              "settings": {"g_min": g_min, "n_surrogates": n_surrogates, "null_quantile": NULL_QUANTILE,
+                           "cv": "runs" if len(train) >= 2 else f"{cv_blocks} blocks round-robin in {cv_folds} folds",
+                           "max_iter": max_iter, "seed": seed, "terms": [int(k) for k in poly]},
+              "baseline": {"holdout" if hold else "train": first_stats,
+                           "train": error_stats(train, model) if hold else first_stats},
+              "noise_floor": noise_floor(evals, model)}
+    characterization = None
+    for it in range(1, max_iter + 1):
+        scan = _scan(train, cfg, model, poly, gen_terms, rng, n_surrogates, g_min, cv_blocks, cv_folds,
+                     families, rate_alternatives and rate_choice is None)
+        if characterization is None:
+            characterization = {"train": scan["characterization"],
+                                "holdout": [characterize(log, r, pr.valid, cfg.rate.fs, pr.v)
+                                            for log, (pr, r) in zip(hold, _residuals(hold, model))]}
+        if not scan["accept"]:
+            stopped = {k: scan[k] for k in ("best", "threshold", "ranking", "reason", "null_max")}
+            break
+        best = scan["winner"]
+        before_model = model
+        before = error_stats(evals, model)
+        if best["family"] == "rate_estimator":
+            rate_choice = {"estimator": best["params"]["estimator"], "n": best["params"]["n"]}
+            acc = _Accepted("rate_estimator", dict(best["params"]), [], rate_choice)
+        else:
+            acc = _Accepted(best["family"], dict(best["params"]), [dict(t) for t in best["terms"]])
+            gen_terms = gen_terms + acc.terms
+        cfg = _config(train, opts, rate=rate_choice)
+        if gen_terms:
+            weighted = _explicit_weights(train, cfg, poly, gen_terms)
+            cfg = replace(cfg, aux=AuxConfig.from_terms(weighted, cfg.rate.fs))
+            model, _ = fit_logs(train, cfg, tuple(poly) + (K_AUX,), drop_unidentifiable=True)
+        else:
+            model, _ = fit_logs(train, cfg, tuple(poly), drop_unidentifiable=True)
+        accepted.append(acc)
+        after = error_stats(evals, model)
+        entry = {"effect": acc.family, "params": acc.params, "before": _clean(before), "after": _clean(after),
+                 "train_before": _clean(error_stats(train, before_model)) if hold else _clean(before),
+                 "train_after": _clean(error_stats(train, model)) if hold else _clean(after),
+                 "cv_gain": best["gain"], "threshold": scan["threshold"], "refined_from": best["coarse"],
+                 "folds_improved": best["folds_improved"], "folds": best["folds"],
+                 "ranking": scan["ranking"], "null_max": scan["null_max"],
+                 "aux": model.config.aux.to_dict(), "rate": model.config.rate.to_dict(),
+                 "before_runs": before["runs"], "after_runs": after["runs"]}
+        entry["_plot"] = (before_model, model, best)
+        iterations.append(entry)
+    else:
+        if max_iter > 0:
+            stopped = {"reason": f"max_iter ({max_iter}) reached", "best": None, "threshold": None,
+                       "ranking": [], "null_max": []}
+    final = error_stats(evals, model)
+    report.update({"iterations": iterations, "final": _clean(final), "final_runs": final["runs"],
+                   "final_train": _clean(error_stats(train, model)) if hold else _clean(final),
+                   "verdict": "effect found" if iterations else "no significant missing effect",
+                   "stopped": stopped, "characterization": characterization})
+    model.fit["diagnose"] = {"effects": [{"effect": a.family, "params": a.params} for a in accepted],
+                             "verdict": report["verdict"]}
+    if out_dir is not None:
+        write_report(report, model, out_dir, train, hold, plots=plots)
+    for entry in iterations:
+        entry.pop("_plot", None)
+    return report, model
+
+
+def _clean(stats) -> dict:
+    return {k: stats[k] for k in STAT_KEYS}
+
+
+def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_folds, families, rate_alt):
+    """Score every candidate (module doc, steps 3-4) against the current base; returns a dict with
+    the ranking, the null, the decision and the (refined) winner."""
+    fs = cfg.rate.fs
+    preps = [prepare(log, replace(cfg, aux=AuxConfig())) for log in train]
+    gen_cols = [[generator_values(log, t, fs) for t in gen_terms] for log in train]
+    X_logs = [_design(pr, poly, gc) for pr, gc in zip(preps, gen_cols)]
+    valid = [pr.valid for pr in preps]
+    # base fit on all training data: residual per log
+    Xv = np.concatenate([X[v] for X, v in zip(X_logs, valid)])
+    yv = np.concatenate([pr.y[v] for pr, v in zip(preps, valid)])
+    norms = np.sqrt(np.einsum("ij,ij->j", Xv, Xv))
+    norms[norms == 0] = 1.0
+    coef = np.linalg.lstsq(Xv / norms, yv, rcond=None)[0] / norms
+    fitted = [X @ coef for X in X_logs]
+    resid = [np.where(v, pr.y - f, 0.0) for pr, f, v in zip(preps, fitted, valid)]
+    charac = [characterize(log, r, v, fs, pr.v) for log, r, v, pr in zip(train, resid, valid, preps)]
+    gapfree = all(len(log.segments) == 1 for log in train)
+    periods = _pooled_periods([c["lines"] for c in charac]) if gapfree else []
+    Y_logs = []
+    sur_resids = []
+    for X, pr, f, r, v in zip(X_logs, preps, fitted, resid, valid):
+        Xs = X[v] / norms
+        Qv = np.linalg.qr(Xs)[0]
+
+        def project(W, Qv=Qv, v=v):
+            out = np.zeros_like(W)
+            out[v] = Qv @ (Qv.T @ W[v])
+            return out
+
+        sur, sur_resid = surrogates(r, v, n_sur, rng, project)
+        Y_logs.append(np.column_stack([pr.y, f[:, None] + sur]))
+        sur_resids.append(sur_resid)
+    binners = [_Binner(log, v, fs) for log, v in zip(train, valid)]
+    groups = cv_groups([np.ones(b.n, bool) for b in binners], cv_blocks, cv_folds)
+    scanner = _Scanner([b.mean(X) for b, X in zip(binners, X_logs)], [b.mean(Y) for b, Y in zip(binners, Y_logs)],
+                       groups)
+    e0 = scanner.e0
+    nfold = len(groups)
+    majority = nfold // 2 + 1
+    cands = effects.library(train, cfg, periods=periods, families=families)
+    # drop candidates equal to an accepted generator
+    have = [json.dumps(t, sort_keys=True) for t in gen_terms]
+    cands = [c for c in cands if not any(json.dumps(t, sort_keys=True) in have for t in c.terms)]
+    rows = []
+    nsur = Y_logs[0].shape[1] - 1
+
+    def evaluate(c):
+        e1 = scanner.score([b.mean(c.columns(log, fs)) for b, log in zip(binners, train)])
+        g = _gain(e1, e0)
+        return {"family": c.family, "label": c.label, "params": dict(c.params), "terms": list(c.terms),
+                "gain": float(g[0]), "folds_improved": int(np.sum(e1[:, 0] < e0[:, 0])), "folds": nfold,
+                "_cand": c, "_null": g[1:]}
+
+    rows = [evaluate(c) for c in cands]
+    if gapfree and (families is None or "periodic" in families) and nsur:
+        # the periodic candidates are chosen from the residual's own spectrum: repeat that choice
+        # on every surrogate (its lines, scored on it; 0 when it has none), so the null of the
+        # periodic family counts the selection
+        pnull = np.zeros(nsur)
+        for j in range(nsur):
+            for period in _pooled_periods([spectral_lines(sr[:, j], v, fs) for sr, v in zip(sur_resids, valid)]):
+                pnull[j] = max(pnull[j], evaluate(effects.periodic(period))["_null"][j])
+        for r in rows:
+            if r["family"] == "periodic":
+                r["_null"] = pnull
+    if rate_alt and len(train) >= 2:      # a base change is only judged across runs (see the doc)
+        for alt in _rate_alternatives(train, cfg):
+            try:
+                acfg = _config_like(train, cfg, alt)
+            except ValueError:
+                continue
+            apreps = [prepare(log, replace(acfg, aux=AuxConfig())) for log in train]
+            AX = [_design(pr, poly, gc) for pr, gc in zip(apreps, gen_cols)]
+            # a longer warm-up changes the valid set: both bases are scored on the common samples
+            cb = [_Binner(log, v & a.valid, fs) for log, v, a in zip(train, valid, apreps)]
+            cgroups = cv_groups([np.ones(b.n, bool) for b in cb], cv_blocks, cv_folds)
+            Yc = [b.mean(Y) for b, Y in zip(cb, Y_logs)]
+            g_base = _Scanner([b.mean(X) for b, X in zip(cb, X_logs)], Yc, cgroups).e0
+            g_alt = _Scanner([b.mean(X) for b, X in zip(cb, AX)], Yc, cgroups).e0
+            g = _gain(g_alt, g_base)
+            params = {"estimator": alt["estimator"], "n": alt["n"], "window_s": alt["n"] / acfg.rate.fs}
+            rows.append({"family": "rate_estimator", "label": f"rate_estimator(lsq, n={alt['n']})",
+                         "params": params, "terms": [], "gain": float(g[0]),
+                         "folds_improved": int(np.sum(g_alt[:, 0] < g_base[:, 0])), "folds": nfold,
+                         "_cand": None, "_null": g[1:]})
+    out = {"characterization": charac, "accept": False, "reason": None, "winner": None, "ranking": [],
+           "best": None, "threshold": None, "null_max": []}
+    if not rows:
+        out["reason"] = "no candidates"
+        return out
+    # rule (b): the largest gain of the whole scan on each surrogate; its 95 % level
+    nulls = np.array([r["_null"] for r in rows]).reshape(len(rows), nsur)
+    null_max = nulls.max(axis=0)
+    level = float(np.quantile(null_max, NULL_QUANTILE)) if nsur else -np.inf
+    threshold = max(g_min, level)
+    for r in rows:
+        r["significant"] = bool(r["gain"] >= threshold and r["folds_improved"] >= majority)
+    rows.sort(key=lambda r: -r["gain"])
+    keys = ("label", "family", "gain", "significant", "folds_improved", "folds")
+    out.update(ranking=[{k: r[k] for k in keys} for r in rows[:TOP_RANKING]], threshold=threshold,
+               null_max=[float(x) for x in null_max])
+    passing = [r for r in rows if r["significant"]]
+    best = _preferred(passing if passing else rows)
+    out["best"] = {k: best[k] for k in keys}
+    if not passing:
+        if best["gain"] < g_min:
+            out["reason"] = f"best CV gain {best['gain']:.4f} < g_min {g_min}"
+        elif best["gain"] < level:
+            out["reason"] = (f"best CV gain {best['gain']:.4f} ({best['label']}) < {level:.4f}, the "
+                             f"{NULL_QUANTILE:.0%} level of the scan's best gain on {nsur} surrogate residuals")
+        else:
+            out["reason"] = (f"inconsistent: {best['label']} improves {best['folds_improved']} of {nfold} folds "
+                             f"(need {majority})")
+        return out
+    # refine the winner's continuous parameter
+    coarse = best
+    cand = best["_cand"]
+    if cand is not None and cand.scan:
+        dur = max(float(log.t_s[-1] - log.t_s[0]) for log in train)
+        for ratios in (_ratios(cand.scan, 1), _ratios(cand.scan, 2)):
+            trial = [best] + [evaluate(c) for c in effects.refine(cand, ratios, max_value=dur)]
+            best = max(trial, key=lambda r: r["gain"])
+            cand = best["_cand"]
+    best = {k: v for k, v in best.items() if not k.startswith("_")}
+    best.update(significant=True, coarse=coarse["label"], coarse_gain=coarse["gain"])
+    out.update(accept=True, winner=best)
+    return out
+
+
+def _tier(family) -> int:
+    """0: a regressor from the proxy, the mode and the sample counter only; 1: it needs another
+    logged channel (board_temp, aux_*)."""
+    return 1 if family == "board_temp" or family.startswith("aux_") else 0
+
+
+def _preferred(rows) -> dict:
+    """The winner of a ranking (sorted by gain): among the rows within TIE_TOLERANCE (relative) of
+    the best gain, the best one of the lowest :func:`_tier` (Occam: when another channel explains
+    no more than the proxy itself, within the noise of the gains, the proxy's lag is the
+    simpler model and needs no extra input in the firmware)."""
+    top = rows[0]["gain"]
+    close = [r for r in rows if r["gain"] >= top - TIE_TOLERANCE * abs(top)]
+    tier = min(_tier(r["family"]) for r in close)
+    return max((r for r in close if _tier(r["family"]) == tier), key=lambda r: r["gain"])
+
+
+def _pooled_periods(lines_per_log) -> list:
+    """Periods [s] of the strongest lines over all logs (strongest first), lines within 2 % merged,
+    at most MAX_LINES."""
+    periods = []
+    for ln in sorted((ln for lines in lines_per_log for ln in lines), key=lambda ln: -ln["ratio"]):
+        if all(abs(ln["period_s"] / p - 1.0) > 0.02 for p in periods):
+            periods.append(ln["period_s"])
+    return periods[:MAX_LINES]
+
+
+def _ratios(scan, level):
+    if scan == "period_s":
+        return (0.96, 0.98, 1.02, 1.04) if level == 1 else (0.99, 1.01)
+    return (2 ** -0.5, 2 ** -0.25, 2 ** 0.25, 2 ** 0.5) if level == 1 else (2 ** -0.125, 2 ** 0.125)
+
+
+def _config_like(train, cfg, alt):
+    """cfg with another rate estimator (span from the training data)."""
+    from host_tools.rate import RateConfig
+    keep = [np.asarray(log.mode) != rl.MODE_EXCHANGE for log in train]
+    ps = [log[cfg.proxy.column] for log in train]
+    rate = RateConfig.from_data(ps, cfg.rate.fs, alt["estimator"], alt["n"], cfg.rate.shift,
+                                restarts=[log.segments for log in train], masks=keep)
+    return replace(cfg, rate=rate)
+
+
+# ---------------------------------------------------------------------------------------------
+# report files
+# ---------------------------------------------------------------------------------------------
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items() if not str(k).startswith("_")}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    return obj
+
+
+def _fmt(x, prec=4):
+    return "n/a" if x is None else f"{x:.{prec}g}"
+
+
+def _stats_line(s):
+    return " | ".join(_fmt(s.get(k)) for k in STAT_KEYS)
+
+
+def write_report(report, model, out_dir, train, hold, plots=True) -> None:
+    """DIR/diagnose.json, DIR/diagnose.md, DIR/model.json and (plots) DIR/iter<k>_*.png."""
+    os.makedirs(out_dir, exist_ok=True)
+    evals = hold if hold else train
+    for k, entry in enumerate(report["iterations"], 1):
+        figs = []
+        if plots and "_plot" in entry:
+            figs = _plots(k, entry["_plot"], train, evals, out_dir)
+        entry["figures"] = figs
+    model.to_json(os.path.join(out_dir, "model.json"))
+    report["model"] = "model.json"
+    doc = _jsonable(report)
+    with open(os.path.join(out_dir, "diagnose.json"), "w", encoding="utf-8") as fh:
+        json.dump(doc, fh, indent=1, allow_nan=False)
+        fh.write("\n")
+    with open(os.path.join(out_dir, "diagnose.md"), "w", encoding="utf-8") as fh:
+        fh.write(markdown(doc, model))
+
+
+def markdown(doc, model) -> str:
+    """The human report (diagnose.md) of a report dict."""
+    on = doc["evaluated_on"]
+    lines = ["# hdrg diagnose", "",
+             f"Training runs: {', '.join(os.path.basename(s) for s in doc['train'])}  ",
+             "Held-out runs: " + (", ".join(os.path.basename(s) for s in doc["holdout"])
+                                  or "(none: figures on the training runs)"),
+             "", f"**Verdict: {doc['verdict']}**", "",
+             "Errors in deg/h on the " + ("held-out" if on == "holdout" else "training") + " runs: stability "
+             "(1 sigma) and variation (p-p) of 1-s and 100-s averages of the compensated output.", "",
+             "| step | effect | params | std 1 s | p-p 1 s | std 100 s | p-p 100 s | CV gain | threshold |",
+             "|---|---|---|---:|---:|---:|---:|---:|---:|"]
+    first = doc["baseline"][on]
+    lines.append(f"| 0 | (base model) | terms {doc['settings']['terms']} | {_stats_line(first)} | | |")
+    for k, it in enumerate(doc["iterations"], 1):
+        params = ", ".join(f"{a}={_fmt(b) if isinstance(b, float) else b}" for a, b in it["params"].items())
+        lines.append(f"| {k} | {it['effect']} | {params} | {_stats_line(it['after'])} | "
+                     f"{_fmt(it['cv_gain'])} | {_fmt(it['threshold'])} |")
+    nf = doc["noise_floor"]
+    lines += ["", f"Noise floor (white noise of the residual): {_fmt(nf['std_dph'])} deg/h at 1 s, "
+                  f"{_fmt(nf['std100_dph'])} deg/h at 100 s.", "",
+              f"Selection rule: {doc['rule']}.", ""]
+    if doc.get("stopped"):
+        st = doc["stopped"]
+        lines += [f"Stopped: {st['reason']}.", ""]
+        if st.get("ranking"):
+            lines += ["Best remaining candidates (CV gain, folds improved):", ""]
+            lines += [f"* {r['label']}: {r['gain']:.4f} ({r['folds_improved']}/{r['folds']})"
+                      for r in st["ranking"][:6]]
+            lines.append("")
+    for k, it in enumerate(doc["iterations"], 1):
+        lines += [f"## Iteration {k}: {it['effect']}", "",
+                  f"CV gain {it['cv_gain']:.4f} (threshold {it['threshold']:.4f}), improves "
+                  f"{it['folds_improved']} of {it['folds']} folds.  Training: "
+                  f"std 100 s {_fmt(it['train_before']['std100_dph'])} -> {_fmt(it['train_after']['std100_dph'])}; "
+                  f"{'held-out' if on == 'holdout' else 'training'}: {_fmt(it['before']['std100_dph'])} -> "
+                  f"{_fmt(it['after']['std100_dph'])} deg/h.", "", "Ranking:", ""]
+        lines += [f"* {r['label']}: {r['gain']:.4f} ({r['folds_improved']}/{r['folds']})" for r in it["ranking"][:8]]
+        lines.append("")
+        for f in it.get("figures", []):
+            lines.append(f"![{f}]({f})")
+        lines.append("")
+    ch = doc.get("characterization") or {}
+    for which in ("train", "holdout"):
+        for c in ch.get(which, []) or []:
+            lines += [f"### Residual of the base model: {os.path.basename(c['source'])} ({which})", "",
+                      f"rms {_fmt(c['rms_dph'])} deg/h; Allan deviation above 2x the white-noise line at "
+                      f"tau = {', '.join(_fmt(t) for t in c['allan']['structure_taus_s']) or 'none'} s; "
+                      f"spectrum lines: {', '.join(_fmt(ln['period_s']) + ' s' for ln in c['lines']) or 'none'}.", ""]
+            dep = sorted(c["dependence"].items(), key=lambda kv: -abs(kv[1]["corr"]))
+            lines.append("Dependence (correlation, range of binned means in deg/h): " + "; ".join(
+                f"{name} {d['corr']:+.2f} / {d['range_dph']:.3g}" for name, d in dep))
+            lines.append("")
+    lines += ["Final model: model.json (terms " + ", ".join(f"k{k} ({TERM_NAMES[k]})" for k in model.terms) + ").", ""]
+    return "\n".join(lines)
+
+
+def _plots(k, plot_info, train, evals, out_dir) -> list:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from scipy.signal import welch
+
+    before_model, after_model, best = plot_info
+    files = []
+    # residual vs the candidate's fitted contribution (training runs)
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    after_aux = after_model.config.aux
+    for log, (pr, r) in zip(train, _residuals(train, before_model)):
+        if best["terms"]:
+            cols = np.column_stack([generator_values(log, t, after_model.config.rate.fs) for t in best["terms"]])
+            weights = [t2["weight"] for t2 in after_aux.terms[-len(best["terms"]):]]
+            x = cols @ np.asarray(weights) * after_model.coef[K_AUX]
+            xlabel = f"fitted {best['label']} [deg/h]"
+        else:
+            pa = prepare(log, after_model)
+            x = (pr.y - after_model.evaluate(pa.u, pa.v, pa.z)) - r
+            xlabel = f"{best['label']}: change of the residual [deg/h]"
+        v = pr.valid
+        ax.plot(x[v], r[v], ",", alpha=0.4, label=os.path.basename(log.source))
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("residual before [deg/h]")
+    ax.set_title(f"iteration {k}: residual vs {best['label']}", fontsize=9)
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    files.append(f"iter{k}_candidate.png")
+    fig.savefig(os.path.join(out_dir, files[-1]), dpi=90)
+    plt.close(fig)
+    # Allan and spectrum before/after (evaluation runs)
+    fig1, ax1 = plt.subplots(figsize=(6, 4.5))
+    fig2, ax2 = plt.subplots(figsize=(6, 4.5))
+    for name, m, style in (("before", before_model, "--"), ("after", after_model, "-")):
+        for log, (pr, r) in zip(evals, _residuals(evals, m)):
+            a = _allan_bridged(r, log.t_s, pr.valid)
+            label = f"{os.path.basename(log.source)} {name}"
+            if a["tau_s"]:
+                ax1.loglog(a["tau_s"], a["adev_dph"], style, label=label)
+            g = _filled(r, pr.valid)
+            nper = min(len(g), max(256, len(g) // 4))
+            if nper >= 16:
+                f, p = welch(g, fs=after_model.config.rate.fs, nperseg=nper)
+                ax2.loglog(f[1:], p[1:], style, label=label, lw=0.8)
+    ax1.set_xlabel("averaging time [s]")
+    ax1.set_ylabel("Allan deviation of the residual [deg/h]\n(exchanges bridged)")
+    ax1.grid(True, which="both", alpha=0.3)
+    ax1.legend(fontsize=7)
+    ax2.set_xlabel("frequency [Hz]")
+    ax2.set_ylabel("PSD of the residual [(deg/h)^2/Hz]")
+    ax2.grid(True, which="both", alpha=0.3)
+    ax2.legend(fontsize=7)
+    for fig, name in ((fig1, "allan"), (fig2, "spectrum")):
+        fig.tight_layout()
+        files.append(f"iter{k}_{name}.png")
+        fig.savefig(os.path.join(out_dir, files[-1]), dpi=90)
+        plt.close(fig)
+    return files
+
+
+# ---------------------------------------------------------------------------------------------
+# CLI
+# ---------------------------------------------------------------------------------------------
+
+def configure_cli(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("runs", metavar="RUN", nargs="+", help="training run logs (CSV or .npz)")
+    parser.add_argument("--holdout", nargs="+", default=[], metavar="RUN",
+                        help="held-out run logs: the errors before/after are reported on them")
+    parser.add_argument("--out", required=True, help="output directory (diagnose.md, diagnose.json, model.json, PNG)")
+    parser.add_argument("--json", default=None, metavar="FILE", help="also write the JSON report to FILE")
+    parser.add_argument("--proxy", choices=("freq", "temp"), default=None,
+                        help="temperature proxy: freq (default when present) or temp (temp_c)")
+    parser.add_argument("--rate-estimator", default="diff", choices=("diff", "diffn", "lsq", "iir"),
+                        help="proxy-rate estimator of the starting model (default: diff)")
+    parser.add_argument("--rate-n", type=int, default=8, help="window length n of diffn/lsq [samples]")
+    parser.add_argument("--rate-shift", type=int, default=4, help="iir coefficient 2^-shift")
+    parser.add_argument("--terms", default="all",
+                        help="terms of the starting model: all (the paper's 16) | auto | k0,k1,... | groups")
+    parser.add_argument("--combiner", choices=("pair", "trend"), default="trend",
+                        help="mode-reversal combiner (mode-reversal logs only; default trend)")
+    parser.add_argument("--settle", type=float, default=0.0, help="settling time excluded after each exchange [s]")
+    parser.add_argument("--proxy-range", default=None,
+                        help="declared proxy range LO,HI (default: training range +10%%)")
+    parser.add_argument("--rate-range", default=None, help="declared largest |d proxy/dt| (default: from data)")
+    parser.add_argument("--max-iter", type=int, default=MAX_ITER, help="most effects to add (default 3)")
+    parser.add_argument("--surrogates", type=int, default=N_SURROGATES,
+                        help=f"surrogate residuals for the significance threshold (default {N_SURROGATES})")
+    parser.add_argument("--g-min", type=float, default=G_MIN, help=f"minimum CV gain (default {G_MIN})")
+    parser.add_argument("--cv-blocks", type=int, default=CV_BLOCKS, help="single run: contiguous CV blocks")
+    parser.add_argument("--cv-folds", type=int, default=CV_FOLDS, help="single run: folds the blocks are dealt into")
+    parser.add_argument("--seed", type=int, default=0, help="random seed of the surrogates")
+    parser.add_argument("--no-plots", action="store_true", help="no PNG figures")
+
+
+def run_cli(args) -> int:
+    train = [rl.read(p) for p in args.runs]
+    hold = [rl.read(p) for p in args.holdout]
+    if args.max_iter < 0 or args.surrogates < 0:
+        raise ValueError("--max-iter and --surrogates must be >= 0")
+    report, model = diagnose(train, hold, proxy=args.proxy, rate_estimator=args.rate_estimator,
+                             rate_n=args.rate_n, rate_shift=args.rate_shift, terms=args.terms,
+                             combiner=args.combiner, settle_s=args.settle, proxy_range=args.proxy_range,
+                             rate_range=args.rate_range, max_iter=args.max_iter, n_surrogates=args.surrogates,
+                             g_min=args.g_min, cv_blocks=args.cv_blocks, cv_folds=args.cv_folds,
+                             seed=args.seed, out_dir=args.out, plots=not args.no_plots)
+    if args.json:
+        with open(os.path.join(args.out, "diagnose.json"), encoding="utf-8") as src, \
+                open(args.json, "w", encoding="utf-8") as dst:
+            dst.write(src.read())
+    on = "held-out" if hold else "training"
+    base = report["baseline"][report["evaluated_on"]]
+    print(f"hdrg diagnose: {report['verdict']} ({on} runs; std 1 s / std 100 s in deg/h)")
+    print(f"  base model: {_fmt(base['std_dph'])} / {_fmt(base['std100_dph'])}")
+    for k, it in enumerate(report["iterations"], 1):
+        params = ", ".join(f"{a}={_fmt(b) if isinstance(b, float) else b}" for a, b in it["params"].items())
+        print(f"  {k}. {it['effect']} ({params}): {_fmt(it['after']['std_dph'])} / {_fmt(it['after']['std100_dph'])}"
+              f"  [CV gain {it['cv_gain']:.3f} >= {it['threshold']:.3f}]")
+    if report.get("stopped"):
+        print(f"  stopped: {report['stopped']['reason']}")
+    print(f"written: {os.path.join(args.out, 'diagnose.md')}, diagnose.json, model.json")
+    return 0
