@@ -1096,20 +1096,8 @@ def configure_cli(parser: argparse.ArgumentParser) -> None:
                         help="held-out run logs: the errors before/after are reported on them")
     parser.add_argument("--out", required=True, help="output directory (diagnose.md, diagnose.json, model.json, PNG)")
     parser.add_argument("--json", default=None, metavar="FILE", help="also write the JSON report to FILE")
-    parser.add_argument("--proxy", choices=("freq", "temp"), default=None,
-                        help="temperature proxy: freq (default when present) or temp (temp_c)")
-    parser.add_argument("--rate-estimator", default="diff", choices=("diff", "diffn", "lsq", "iir"),
-                        help="proxy-rate estimator of the starting model (default: diff)")
-    parser.add_argument("--rate-n", type=int, default=8, help="window length n of diffn/lsq [samples]")
-    parser.add_argument("--rate-shift", type=int, default=4, help="iir coefficient 2^-shift")
-    parser.add_argument("--terms", default="all",
-                        help="terms of the starting model: all (the paper's 16) | auto | k0,k1,... | groups")
-    parser.add_argument("--combiner", choices=("pair", "trend"), default="trend",
-                        help="mode-reversal combiner (mode-reversal logs only; default trend)")
-    parser.add_argument("--settle", type=float, default=0.0, help="settling time excluded after each exchange [s]")
-    parser.add_argument("--proxy-range", default=None,
-                        help="declared proxy range LO,HI (default: training range +10%%)")
-    parser.add_argument("--rate-range", default=None, help="declared largest |d proxy/dt| (default: from data)")
+    from host_tools.fit import add_model_options
+    add_model_options(parser, "the starting model")
     parser.add_argument("--max-iter", type=int, default=MAX_ITER, help="most effects to add (default 3)")
     parser.add_argument("--surrogates", type=int, default=N_SURROGATES,
                         help=f"surrogate residuals for the significance threshold (default {N_SURROGATES})")

@@ -908,22 +908,29 @@ def fit_logs(logs, config, terms="all", *, drop_unidentifiable=False, cv_blocks=
     return model, res
 
 
-def configure_cli(parser) -> None:
-    parser.add_argument("runs", metavar="RUN", nargs="+", help="training run logs (CSV or .npz)")
-    parser.add_argument("-o", "--output", required=True, help="model JSON to write")
+def add_model_options(parser, what: str = "the model") -> None:
+    """The options that configure a model (proxy, rate estimator, terms, combiner, ranges), shared by
+    `hdrg fit` and `hdrg diagnose` (its starting model)."""
     parser.add_argument("--proxy", choices=("freq", "temp"), default=None,
                         help="temperature proxy: freq (drive frequency, default when present) or temp (temp_c)")
     parser.add_argument("--rate-estimator", default="diff", choices=("diff", "diffn", "lsq", "iir"),
-                        help="proxy-rate estimator (default: diff, the paper's consecutive difference)")
+                        help=f"proxy-rate estimator of {what} (default: diff, the paper's consecutive difference)")
     parser.add_argument("--rate-n", type=int, default=8, help="window length n of diffn/lsq [samples]")
     parser.add_argument("--rate-shift", type=int, default=4, help="iir coefficient 2^-shift")
     parser.add_argument("--terms", default="all",
-                        help="all (the paper's 16 terms) | auto (cross-validated selection) | k0,k1,... | groups const,temp,rate,cross")
+                        help=f"terms of {what}: all (the paper's 16 terms) | auto (cross-validated selection) "
+                             f"| k0,k1,... | groups const,temp,rate,cross")
     parser.add_argument("--combiner", choices=("pair", "trend"), default="trend",
                         help="mode-reversal combiner (mode-reversal logs only): pair (the paper) or trend (ours, default)")
     parser.add_argument("--settle", type=float, default=0.0, help="settling time excluded after each exchange [s]")
     parser.add_argument("--proxy-range", default=None, help="declared proxy range LO,HI in proxy units (default: training range +10%%)")
     parser.add_argument("--rate-range", default=None, help="declared largest |d proxy/dt| [proxy units/s] (default: from data)")
+
+
+def configure_cli(parser) -> None:
+    parser.add_argument("runs", metavar="RUN", nargs="+", help="training run logs (CSV or .npz)")
+    parser.add_argument("-o", "--output", required=True, help="model JSON to write")
+    add_model_options(parser)
     parser.add_argument("--drop-unidentifiable", action="store_true",
                         help="drop terms the data cannot identify (and report them) instead of refusing")
     parser.add_argument("--cv-blocks", type=int, default=8, help="time blocks for 'auto' on a single run")
