@@ -79,3 +79,14 @@ def div_round_scaled(a: int, b: int, k: int) -> int:
     r = a - q * b
     return check_int64(check_int64(q << k, "quotient scaled") + div_round(check_int64(r << k, "remainder scaled"), b),
                        "div_round_scaled")
+
+
+def mul_rshift_round_wide(a: int, d: int, s: int) -> int:
+    """``RHUW(a, d, s) = rshift_round(a * d, s)`` for a product wider than int64: ``|a| < 2^31``,
+    ``|d| <= 2^62``, ``31 <= s <= 62`` (the filter / decay update of the aux generators, Q1.60 state
+    times a 31-bit coefficient).  Exact; on int64 machines (numba, C) it is computed from the split
+    ``d = dh 2^31 + dl`` (0 <= dl < 2^31) as ``(a dh + ((a dl + 2^(s-1)) >> 31)) >> (s - 31)``, which
+    equals it by ``floor(floor(x / 2^31) / 2^(s-31)) = floor(x / 2^s)``; every intermediate there is
+    below 2^63."""
+    assert -(1 << 31) < a < 1 << 31 and abs(d) <= 1 << 62 and 31 <= s <= 62, (a, d, s)
+    return check_int64((a * d + (1 << (s - 1))) >> s, "mul_rshift_round_wide result")

@@ -7,7 +7,9 @@ bit-identical)::
     u, uc       = proxy_u(P)                          (firmware_ref.proxy)
     v, vc, warm = rate.step(P, restart)               (firmware_ref.rate)
     cvalid, y   = combiner.step(mode, R, restart)     (firmware_ref.sequencer; y held)
-    B, zc       = evaluate(u, v, Z)                   (firmware_ref.evaluator, every sample)
+    z, zc       = aux_gen 0: clamp(Z, +-2^30); aux_gen 1: the generators (firmware_ref.aux) on
+                  the channel words (F, T, A_c), K, mode, restart (or power-on), S, warm
+    B           = evaluate(u, v, z)                   (firmware_ref.evaluator, every sample)
     valid       = cvalid and not warm and mode != 3
     if valid:   OUT = symsat32(RHU(y - B, 11)); BIAS = symsat32(RHU(B, 11))   (held otherwise;
                                                                              0 before the first)
@@ -15,7 +17,8 @@ bit-identical)::
                   | 32 zc | 128 (any saturation: window count, trend, OUT, BIAS)
 
 OUT and BIAS are int32 words, LSB 2^-10 deg/h; the hold is not reset at restarts (as the golden
-host_tools.compensate).  Bit 64 (an input value saturated when converted to a word) is added by
+host_tools.compensate).  K is the sample counter since power-on (the golden's ``rint(t_s fs)``);
+when not given, the pipeline counts itself: K = the previous sample's K + 1, 0 at power-on.  Bit 64 (an input value saturated when converted to a word) is added by
 the host side (:func:`compensate_log`).
 
 :func:`compensate_log` is ``hdrg compensate --impl fixed``: run log + model (+ optional table)
@@ -29,7 +32,8 @@ import numpy as np
 
 from firmware_ref import formats as F
 from firmware_ref import inputs
-from firmware_ref.arith import rshift_round, sat_signed
+from firmware_ref.arith import clamp, rshift_round, sat_signed
+from firmware_ref.aux import AuxStage, aux_columns, channel_rows
 from firmware_ref.evaluator import evaluate
 from firmware_ref.proxy import proxy_u
 from firmware_ref.rate import RateState
@@ -46,6 +50,7 @@ class Sample:
     flags: int
     u: int
     v: int
+    z: int
     b: int
     y: int
     s: int
@@ -63,16 +68,29 @@ class Pipeline:
         self.table = table
         self.rate = RateState(table)
         self.seq = Sequencer(table, self_timed)
+        self.aux = AuxStage(table) if table.aux_gen == 1 else None
+        self.kc = 0                  # the internal sample counter (K when not given)
+        self.fresh = True            # power-on: the aux generators start as at a restart
         self.out_hold = 0
         self.bias_hold = 0
 
-    def step(self, p: int, r: int, mode, restart: bool = False, z: int = 0) -> Sample:
+    def step(self, p: int, r: int, mode, restart: bool = False, z: int = 0, chan=(), k: int | None = None) -> Sample:
+        """One sample: proxy word ``p``, rate word ``r``, logged ``mode`` (None: self-timed),
+        ``restart``, external ``z`` (aux_gen 0), channel words ``chan`` by code (aux_gen 1) and
+        the counter ``k`` (None: the internal count)."""
         t = self.table
         so = self.seq.step(mode, r, restart)
         mode = so.mode
         u, uc = proxy_u(p, t)
         v, vc, warm, s = self.rate.step(p, restart)
-        b, zc = evaluate(u, v, z, t)
+        k = self.kc if k is None else int(k)
+        self.kc = min(k + 1, F.K_LIMIT)
+        if self.aux is not None:
+            z, zc, _ = self.aux.step(chan, k, mode, restart or self.fresh, s, warm)
+        else:
+            z, zc = clamp(z, -F.ONE, F.ONE)
+        self.fresh = False
+        b, _ = evaluate(u, v, z, t)
         valid = so.valid and not warm and mode != 3
         sat = so.sat
         if valid:
@@ -84,20 +102,26 @@ class Pipeline:
                  | (F.FLAG_WARMUP if warm else 0) | (F.FLAG_EXCHANGE if mode == 3 else 0)
                  | (F.FLAG_STALE if (not so.valid and mode != 3) else 0)
                  | (F.FLAG_AUX_CLAMPED if zc else 0) | (F.FLAG_SAT if sat else 0))
-        return Sample(self.out_hold, self.bias_hold, valid, flags, u, v, b, so.y, s, so.state, so.vs, so.sign,
+        return Sample(self.out_hold, self.bias_hold, valid, flags, u, v, z, b, so.y, s, so.state, so.vs, so.sign,
                       so.acc, so.cnt)
 
 
-def run_reference(table, p, r, mode=None, restart=None, z=None, self_timed: bool = False) -> dict:
-    """The Python reference over arrays; returns the same dict as firmware_ref.kernel.run_words
-    with ``detail=True`` (plus ``vs``, ``sign``, ``acc``, ``cnt``), as int64/uint8 arrays."""
+def run_reference(table, p, r, mode=None, restart=None, z=None, self_timed: bool = False, f=None, t=None,
+                  aux=None, k=None) -> dict:
+    """The Python reference over arrays; same arguments and the same dict as
+    firmware_ref.kernel.run_words with ``detail=True`` (plus ``vs``, ``sign``, ``acc``, ``cnt``),
+    as int64/uint8 arrays."""
     n = len(p)
     pipe = Pipeline(table, self_timed)
-    cols = {name: [] for name in ("out", "bias", "valid", "flags", "u", "v", "b", "y", "s", "state", "vs", "sign",
-                                  "acc", "cnt")}
+    rows = channel_rows(table, n, p, f, t, aux) if table.aux_gen == 1 else []
+    chans = list(zip(*[row.tolist() for row in rows])) if rows else [()] * n
+    kin = None if k is None else np.asarray(k, np.int64).tolist()
+    cols = {name: [] for name in ("out", "bias", "valid", "flags", "u", "v", "z", "b", "y", "s", "state", "vs",
+                                  "sign", "acc", "cnt")}
     for i in range(n):
         s = pipe.step(int(p[i]), int(r[i]), None if mode is None else int(mode[i]),
-                      bool(i == 0 or (restart is not None and restart[i])), 0 if z is None else int(z[i]))
+                      bool(i == 0 or (restart is not None and restart[i])), 0 if z is None else int(z[i]),
+                      chans[i], None if kin is None else kin[i])
         for name in cols:
             cols[name].append(int(getattr(s, name)))
     out = {name: np.array(vals, np.int64) for name, vals in cols.items()}
@@ -109,20 +133,52 @@ def run_reference(table, p, r, mode=None, restart=None, z=None, self_timed: bool
 # -- host side: run logs --------------------------------------------------------------------------
 
 def log_words(log, config) -> dict:
-    """Input words of a run log under a ModelConfig: ``p``, ``r``, ``mode``, ``restart``, ``z``
-    (int64/uint8 arrays) and ``input_sat`` (bool[n]: some input value was saturated)."""
-    from host_tools.regressors import aux_regressor
-
+    """Input words of a run log under a ModelConfig: ``p`` (proxy), ``r`` (rate), ``mode``,
+    ``restart``, ``z`` (0: the external Z word is not used by the host), ``input_sat`` (bool[n]:
+    some input value the pipeline reads was saturated), and for an aux 'sum' generator the channel
+    words it reads: ``f`` (F), ``t`` (T), ``aux`` (int64[n, n_chan]: the aux_* columns of
+    firmware_ref.aux.aux_columns as A_c words with the quantizer's AF_c) and ``k`` (the counter
+    K = rint(t_s fs), fs of the aux params, as the golden); else those are None."""
     _, pcol = log.proxy(config.proxy.kind)
     p, psat = inputs.proxy_words(pcol, config.proxy.kind)
     r, rsat = inputs.rate_words(log.rate_dph)
-    z, zsat = inputs.aux_words(aux_regressor(log, config.aux))
-    restart = np.zeros(len(log), np.uint8)
+    n = len(log)
+    restart = np.zeros(n, np.uint8)
     restart[np.asarray(log.segments, np.int64)] = 1
-    if len(log):
+    if n:
         restart[0] = 1
-    return {"p": p, "r": r, "mode": np.asarray(log.mode, np.int64), "restart": restart, "z": z,
-            "input_sat": psat | rsat | zsat}
+    out = {"p": p, "r": r, "mode": np.asarray(log.mode, np.int64), "restart": restart, "z": np.zeros(n, np.int64),
+           "f": None, "t": None, "aux": None, "k": None}
+    sat = psat | rsat
+    if config.aux.generator != "none":
+        from host_tools.quantize import aux_channel_fracs
+        from host_tools.regressors import power_on_counter
+
+        where = f"{log.source}: the aux generator"
+        used = {tm["column"] for tm in config.aux.terms if tm["gen"] == "input"}
+        for col in sorted(used):
+            if col not in log:
+                raise ValueError(f"{where} needs column '{col}', which the log lacks "
+                                 f"(columns: {', '.join(log.columns)})")
+        if "freq_hz" in log:
+            out["f"], fsat = inputs.freq_words(log["freq_hz"])
+            sat |= fsat if "freq_hz" in used else False
+        if "temp_c" in log:
+            out["t"], tsat = inputs.temp_words(log["temp_c"])
+            sat |= tsat if "temp_c" in used else False
+        cols = aux_columns(config.aux)
+        fracs = aux_channel_fracs(config.aux)
+        a = np.zeros((n, len(cols)), np.int64)
+        for c, (col, frac) in enumerate(zip(cols, fracs)):
+            a[:, c], asat = inputs.aux_channel_words(log[col], frac, col)
+            sat |= asat
+        out["aux"] = a
+        k = power_on_counter(log.t_s, config.aux.params["fs"])
+        if n and int(np.max(np.abs(k))) > F.K_LIMIT:
+            raise ValueError(f"{where}: the sample counter rint(t_s fs) exceeds 2^62")
+        out["k"] = k
+    out["input_sat"] = sat
+    return out
 
 
 def check_table_matches(table, model) -> None:
@@ -132,7 +188,7 @@ def check_table_matches(table, model) -> None:
     expect = quantize(model).table
     diffs = [name for name in ("proxy_kind", "p_ref", "g_u", "u_off", "sh_u", "rate_est", "rate_n", "rate_shift",
                                "rate_warmup", "g_v", "sh_v", "combiner", "settle_n", "max_stale_n", "mant",
-                               "e_row", "e_7", "e_acc")
+                               "e_row", "e_7", "e_acc", "aux_gen", "aux_params")
              if getattr(table, name) != getattr(expect, name)]
     if diffs:
         raise ValueError(f"--table: the table does not match the model {model.source} "
@@ -145,7 +201,9 @@ def compensate_log(log, model, table=None, impl: str = "numba", return_flags: bo
     ``table``: a firmware_ref.table.Table (checked against the model) or None (the model is
     quantized on the fly by host_tools.quantize).  The log is converted to words
     (firmware_ref.inputs), run through the kernel (``impl='numba'``) or the Python reference
-    (``'python'``), and the output words are written back in deg/h: ``rate_dph`` (OUT),
+    (``'python'``) - an aux 'sum' generator runs in fixed point from the log's channels (F, T,
+    aux_* words and K, :func:`log_words`), 'none' gives z = 0 - and the output words are written
+    back in deg/h: ``rate_dph`` (OUT),
     ``bias_dph`` (BIAS), ``valid`` 1.0/0.0, the same columns as the float path; the metadata adds
     ``compensation_table_crc``.  Model/log mismatches are refused as in the float path.  With
     ``return_flags`` returns ``(log, flags)``, flags uint8[n] (formats.FLAGS bits)."""
@@ -172,11 +230,12 @@ def compensate_log(log, model, table=None, impl: str = "numba", return_flags: bo
     else:
         check_table_matches(table, model)
     w = log_words(log, cfg)
+    chans = {name: w[name] for name in ("f", "t", "aux", "k")}
     if impl == "numba":
         from firmware_ref.kernel import run_words
-        res = run_words(table, w["p"], w["r"], w["mode"], w["restart"], w["z"])
+        res = run_words(table, w["p"], w["r"], w["mode"], w["restart"], w["z"], **chans)
     elif impl == "python":
-        res = run_reference(table, w["p"], w["r"], w["mode"], w["restart"], w["z"])
+        res = run_reference(table, w["p"], w["r"], w["mode"], w["restart"], w["z"], **chans)
     else:
         raise ValueError(f"impl must be 'numba' or 'python', not {impl!r}")
     valid = res["valid"].astype(bool)

@@ -104,7 +104,27 @@ MODE_SIGN = (1, 1, -1, 0)           # rate sign per run-log mode 0..3
 COMBINERS = ("ftr", "pair", "trend")  # table combiner id 0, 1, 2
 ESTIMATORS = ("diff", "diffn", "lsq", "iir")
 PROXY_KINDS = ("freq", "temp")
-AUX_GENERATORS = ("none",)
+AUX_GENERATORS = ("none", "sum")      # table aux_gen 0 (z = the external Z word, 0 on the host), 1
+
+# -- the aux regressor z: generators of aux_gen 1 'sum' (host_tools.regressors module doc) -------------
+AUX_KINDS = ("input", "rate", "one", "decay_on", "decay_exchange", "ramp", "osc")   # term kind 0..6
+AUX_MAX_TERMS = 6         # terms of the sum (hdrg diagnose: 3 iterations x at most 2 terms)
+AUX_MAX_CHANNELS = 4      # aux input words A0..A3 (run-log aux_* columns)
+AUX_TERM_WORDS = 11       # table words per term
+AUX_FRAC_MAX = 48         # aux word A_c: int32, LSB 2^-AF_c of its column's unit, AF_c in 0..48 (table)
+CH_F, CH_T, CH_A0 = 0, 1, 2          # source channel codes: F word, T word, A_c = 2 + c
+AUX_STATE_FRAC = 60       # filter / decay state: int64 Q1.60 (30 bits below z)
+AUX_SB_MIN, AUX_SB_MAX = 31, 62      # filter / decay coefficient b = B 2^-SB, B < 2^31 (normalized >= 2^30)
+AUX_TAU_N_MIN = 1.0 / 16.0           # shortest time constant fs tau [samples] (B must fit at SB = 31)
+AUX_TAU_N_MAX = float(1 << 31)       # longest: B keeps 31 significant bits up to about 2^31 samples
+AUX_POWER_MAX = 5         # input power 1..5
+K_LIMIT = 1 << 62         # |K| (sample counter since power-on) accepted as an input
+OSC_PHASE_BITS = 64       # osc phase: uint64 turns x 2^64; step W = RHU(2^64 / (P fs)), 1 <= W < 2^63
+# sin(pi/2 x) = x (S_0 + S_1 x^2 + ... + S_5 x^10) for x in [0, 1], coefficients Q.30 (minimax fit,
+# then rounded); the integer evaluation (FORMATS.md) is within SIN_ERR_LSB LSB of sin (largest error
+# 3.07 LSB over all 2^30 + 1 arguments, computed once; tests/test_fixed_aux.py checks a dense sample)
+SIN_POLY = (1686629713, -693598663, 85569264, -5026852, 172032, -3670)
+SIN_ERR_LSB = 4
 
 
 @dataclass(frozen=True)
@@ -134,8 +154,12 @@ SIGNALS = (
     Fmt("R (raw rate word)", "int32", str(RATE_FRAC), f"2^-{RATE_FRAC} deg/h = {2.0 ** -RATE_FRAC:.4g} deg/h",
         "+-2^21 deg/h = +-582.5 deg/s", "RHU from float", "sym-sat, FLAG_INPUT_SAT", "inputs"),
     Fmt("mode, restart", "uint8", "-", "-", "mode 0..3; restart 0/1", "-", "mode outside 0..3: host error", "inputs"),
-    Fmt("Z (aux regressor word)", "int32", str(Q), "2^-30 (Q1.30)", "[-1, 1]", "RHU from float",
+    Fmt("Z (external aux word; aux_gen 0 only)", "int32", str(Q), "2^-30 (Q1.30)", "[-1, 1]", "RHU from float",
         "clamp [-2^30, 2^30], FLAG_AUX_CLAMPED", "inputs"),
+    Fmt("A_c (aux channel word, c = 0..3)", "int32", "AF_c (table, 0..48)", "2^-AF_c of the aux_* column's unit",
+        "+-2^(31-AF_c) units", "RHU from float", "sym-sat, FLAG_INPUT_SAT", "inputs"),
+    Fmt("K (sample counter since power-on)", "int64", "0", "1 sample", "|K| <= 2^62 (default: internal count)",
+        "rint(t_s fs) on the host", "refused beyond (host error / ERR RANGE)", "inputs"),
     # proxy
     Fmt("P_REF (proxy centre)", "same as P", "as P", "as P", "as P", "RHU from ref", "quantizer refuses", "table"),
     Fmt("dP = P - P_REF", "int64 -> int32", "as P", "as P", "|dP| <= 2^31 - 1", "exact", "clamp +-(2^31 - 1) (u clamps anyway)", "proxy"),
@@ -152,6 +176,28 @@ SIGNALS = (
         "RHU from 2^(30+SH_V) / S_span", "quantizer refuses (see quantize)", "table"),
     Fmt("v", "int32", str(Q), "2^-30", "[-2^30, 2^30]", "RHU (1 shift)", "clamp, FLAG_RATE_CLAMPED", "rate"),
     Fmt("k (warm-up counter)", "uint32", "0", "1 sample", "0 .. W", "-", "saturates at W", "rate"),
+    # aux generators (aux_gen 1)
+    Fmt("REF, G, OFF, SH (input term)", "int32, int32 > 0, int32, uint8", "-", "q = RHU(dX G + OFF, SH)",
+        "as P_REF, G_U, U_OFF, SH_U", "RHU from ref, 2^(30+SH) LSB/span", "quantizer refuses", "table"),
+    Fmt("q (normalized input)", "int32", str(Q), "2^-30", "[-2^30, 2^30]", "RHU (1 shift)", "clamp (no flag)", "aux"),
+    Fmt("B, SB (filter / decay coefficient)", "int32 > 0, uint8", "-", "b = B 2^-SB = 1 - a",
+        f"2^30 <= B < 2^31, SB in {AUX_SB_MIN}..{AUX_SB_MAX}", "RHU from the exact 1 - a",
+        "quantizer refuses fs tau outside 1/16 .. 2^31 samples", "table"),
+    Fmt("Y (filter / decay state)", "int64", str(AUX_STATE_FRAC), "2^-60", "[-2^60, 2^60]",
+        "RHU per update: Y += RHUW(B, X - Y, SB)", "cannot overflow (Y stays between Y and X)", "aux"),
+    Fmt("y, g (generator output)", "int32", str(Q), "2^-30", "[-2^30, 2^30]", "RHU (Y >> 30, powers, ramp, sine)",
+        "cannot overflow (clamped where a rounding could pass 2^30)", "aux"),
+    Fmt("N, G, SH (ramp)", "int32 > 0, int32 > 0, uint8", "-", "g = RHU(k G, SH) for k < N", "N < 2^31",
+        "RHU from 2^(30+SH) / N", "quantizer refuses N >= 2^31", "table"),
+    Fmt("W (osc phase step)", "uint64 (2 words)", "64", "2^-64 turn per sample", "1 .. 2^63 - 1",
+        "RHU from 2^64 / (P fs)", "quantizer refuses P fs <= 2 samples", "table"),
+    Fmt("phase = K W mod 2^64", "uint64", "64", "2^-64 turn", "[0, 2^64)", "exact (modular)", "wraps (a full turn)",
+        "aux"),
+    Fmt("w_j (term weights)", "int32", str(Q), "2^-30", "sum |w_j| <= 2^30 + n_terms", "RHU from float",
+        "quantizer refuses |w| > 1", "table"),
+    Fmt("acc_z = sum w_j g_j", "int64", str(2 * Q), "2^-60", "|.| <= 6 2^60", "exact", "cannot overflow", "aux"),
+    Fmt("z (generated)", "int32", str(Q), "2^-30", "[-2^30, 2^30]", "RHU(acc_z, 30)", "clamp, FLAG_AUX_CLAMPED",
+        "aux"),
     # sequencer
     Fmt("c = s R (rate-corrected)", "int32", str(RATE_FRAC), f"2^-{RATE_FRAC} deg/h", "sym int32", "exact",
         "cannot overflow (R sym-sat)", "sequencer"),
@@ -298,6 +344,51 @@ def op_counts(estimator: str = "diff", n: int = 1, combiner: str = "pair") -> di
     return c
 
 
+def aux_op_counts(kind: str, filtered: bool = False, power: int = 1) -> dict:
+    """Operations per sample that one aux term of ``kind`` adds (aux_gen 1; counted by construction
+    from FORMATS.md "Aux generators", steady state; ``filtered``: input with tau_s > 0; ``power``:
+    input power), same keys as :func:`op_counts` (no divisions).  The fixed cost of the stage
+    (K, RHU of the sum, z clamp) is :func:`aux_op_counts` ('sum')."""
+    c = {"mul": 0, "add": 0, "shift": 0, "cmp": 0, "mem": 0}
+
+    def add(**kw):
+        for key, val in kw.items():
+            c[key] += val
+
+    if kind == "sum":
+        add(add=1, shift=1, cmp=2, mem=2)                     # RHU(acc_z, 30), clamp; K (2 words)
+        return c
+    add(cmp=2, mul=1, add=1, mem=5)                           # dispatch, sign; w_j g (acc_z +=); 5 term words
+    wide = {"mul": 2, "add": 5, "shift": 3}                   # RHUW(B, D, SB): split, 2 products, RHU, shifts
+    if kind == "input":
+        add(add=3, cmp=4, mul=1, shift=1, mem=5)              # dX, clamp, dX G + OFF, RHU, clamp; word, REF, G, OFF, SH
+        if filtered:
+            add(**wide)
+            add(cmp=1, add=2, shift=2, mem=6)                 # restart?, D = q 2^30 - Y, Y +=, y = RHU(Y, 30); B, SB, Y
+        add(mul=power - 1, add=power - 1, shift=power - 1, mem=1)
+    elif kind == "rate":
+        add(cmp=5, mul=1, add=1, shift=1, mem=3)              # warm-up, clamp S, product, RHU, clamp v
+    elif kind == "one":
+        pass
+    elif kind in ("decay_on", "decay_exchange"):
+        add(**wide)
+        add(cmp=1, add=2, shift=1, mem=6)                     # restart?, D = -Y, Y +=, g = RHU(Y, 30); B, SB, Y
+        if kind == "decay_exchange":
+            add(cmp=2, mem=2)                                 # mode 3?, ex? (ex read/write)
+    elif kind == "ramp":
+        add(cmp=3, mul=1, add=1, shift=1, mem=3)              # max(K, 0), K >= N, product, RHU; N, G, SH
+    elif kind == "osc":
+        add(mul=7, add=15, shift=10, cmp=3, mem=3)            # K W (+2^62), quadrant, RHU of r, x^2, 5 Horner, x p
+    else:
+        raise ValueError(f"unknown aux term kind {kind!r}")
+    return c
+
+
+AUX_OP_ROWS = (("sum", False, 1), ("input", False, 1), ("input", True, 1), ("input", False, 5), ("rate", False, 1),
+               ("one", False, 1), ("decay_on", False, 1), ("decay_exchange", False, 1), ("ramp", False, 1),
+               ("osc", False, 1))
+
+
 OP_CONFIGS = (("diff", 1, "ftr"), ("diff", 1, "pair"), ("diff", 1, "trend"), ("diffn", 8, "pair"),
               ("lsq", 8, "pair"), ("lsq", 32, "trend"), ("iir", 4, "pair"))
 
@@ -341,6 +432,18 @@ def render_blocks() -> dict:
             ("ALIGN_MAX", "largest alignment shift e_g - E"),
             ("OUT_FRAC", "fractional bits of the output words"),
             ("OUT_SHIFT", "the final rounding shift (Y_FRAC - OUT_FRAC)"),
+            ("AUX_MAX_TERMS", "most terms of the aux sum"),
+            ("AUX_MAX_CHANNELS", "most aux input words A_c"),
+            ("AUX_TERM_WORDS", "table words per aux term"),
+            ("AUX_FRAC_MAX", "largest fractional bits AF_c of an aux word"),
+            ("AUX_STATE_FRAC", "fractional bits of the filter / decay state"),
+            ("AUX_SB_MIN", "smallest filter / decay coefficient shift"),
+            ("AUX_SB_MAX", "largest filter / decay coefficient shift"),
+            ("AUX_TAU_N_MIN", "shortest time constant fs tau (samples)"),
+            ("AUX_TAU_N_MAX", "longest time constant fs tau (samples)"),
+            ("K_LIMIT", "largest |K| input"),
+            ("SIN_POLY", "osc: sin(pi/2 x) = x sum S_i x^(2i), Q.30"),
+            ("SIN_ERR_LSB", "osc: largest error of the integer sine (LSB 2^-30)"),
         )])
     blocks["signals"] = _md_table(("signal", "type", "frac bits", "LSB", "range", "rounding", "overflow", "stage"),
                                   [(s.name, s.ctype, s.frac, s.lsb, s.range, s.rounding, s.overflow, s.stage)
@@ -382,8 +485,23 @@ def render_blocks() -> dict:
                                "div per window"), rows)
     blocks["layout"] = _md_table(("word", "field", "type", "meaning"),
                                  [(i, name, typ, text) for i, (name, typ, text) in enumerate(tbl.LAYOUT)]
-                                 + [("...", "aux params", "int32", "aux_nparams words"),
+                                 + [("...", "aux params", "int32", "aux_nparams words (aux_gen 1: below)"),
                                     ("last", "crc32", "uint32", "zlib.crc32 of all preceding words, little-endian bytes")])
+    blocks["aux_layout"] = _md_table(
+        ("aux param", "field", "type", "meaning"),
+        [(i, name, typ, text) for i, (name, typ, text) in enumerate(tbl.AUX_HEADER)]
+        + [("2 .. 1+n_chan", "af_c", "uint32", f"fractional bits AF_c of aux word A_c (0..{AUX_FRAC_MAX})")]
+        + [(f"+{i}", name, typ, text) for i, (name, typ, text) in enumerate(tbl.AUX_TERM_LAYOUT)])
+    blocks["aux_coef"] = _md_table(
+        ("kind", "id") + tuple(f"c{i}" for i in range(6)),
+        [(kind, k) + tuple(tbl.AUX_COEF[kind][i] if i < len(tbl.AUX_COEF[kind]) else "0" for i in range(6))
+         for k, kind in enumerate(AUX_KINDS)])
+    rows = []
+    for kind, filt, pw in AUX_OP_ROWS:
+        k = aux_op_counts(kind, filt, pw)
+        label = {"sum": "stage (once)"}.get(kind, kind) + (" tau > 0" if filt else "") + (f" power {pw}" if pw > 1 else "")
+        rows.append((label, k["mul"], k["add"], k["shift"], k["cmp"], k["mem"]))
+    blocks["aux_ops"] = _md_table(("aux term", "mul", "add", "shift", "cmp", "mem words"), rows)
     return blocks
 
 

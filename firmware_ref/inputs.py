@@ -5,7 +5,8 @@ The firmware receives integer words; the host converts run-log floats to them (a
 * drive frequency ``freq_hz`` -> F, uint32, LSB 2^-18 Hz, saturated to [0, 2^32 - 1];
 * temperature ``temp_c`` -> T, int32, LSB 2^-16 degC, symmetric saturation +-(2^31 - 1);
 * raw rate ``rate_dph`` -> R, int32, LSB 2^-10 deg/h, symmetric saturation;
-* aux regressor z -> Z, int32 Q1.30 (the evaluator clamps it to [-2^30, 2^30]);
+* aux regressor z -> Z, int32 Q1.30 (the external word of aux_gen 0; the evaluator clamps it);
+* an aux_* column -> A_c, int32, LSB 2^-AF_c of the column's unit (AF_c from the table);
 * output words OUT, BIAS (int32, LSB 2^-10 deg/h) -> deg/h.
 
 Rounding is round half up, exact for every float: ``w = floor(x 2^frac) + (frac part >= 1/2)``
@@ -100,3 +101,11 @@ def from_words(words, frac: int) -> np.ndarray:
 def out_dph(words) -> np.ndarray:
     """OUT / BIAS words -> deg/h."""
     return from_words(words, F.OUT_FRAC)
+
+
+def aux_channel_words(x, frac: int, what: str = "aux channel"):
+    """An aux_* column -> A_c words (int32, LSB 2^-frac of the column's unit, frac = AF_c of the
+    table, 0..formats.AUX_FRAC_MAX)."""
+    if not 0 <= frac <= F.AUX_FRAC_MAX:
+        raise ValueError(f"{what}: fractional bits {frac} not in 0..{F.AUX_FRAC_MAX}")
+    return to_words(x, frac, what=what)

@@ -1,13 +1,14 @@
 """The fixed-point pipeline as one numba batch kernel over int64 arrays (cache=True).
 
 Bit for bit the same algorithm as the Python-integer reference (firmware_ref.proxy, .rate,
-.sequencer, .evaluator, .compensate) and the pseudo-code of FORMATS.md: every intermediate is an
+.sequencer, .aux, .evaluator, .compensate) and the pseudo-code of FORMATS.md: every intermediate is an
 int64 whose range the formats prove (no overflow checks here; the reference asserts them).
 
 Batch organization (the per-sample results are unchanged by it): the samples are processed in
 blocks of CHUNK; per block (1) the rate sums, read straight from the word array (the firmware's
 ring of the last n + 1 words holds the same words within a segment), (2) pass A, the sequential
-state (timer, combiner, hold of y), (3) pass B, the stateless rest (u, v, B, the output
+state (timer, combiner, hold of y), (2b) the aux generators of an aux_gen 1 table (sequential:
+filter / decay states, the sample counter; firmware_ref.aux), (3) pass B, the stateless rest (u, v, B, the output
 candidates; branch-free so LLVM vectorizes it: products whose operands the formats bound to
 int32 are written as 32 x 32 -> 64 multiplies, vpmuldq) writing the output words and flags,
 (4) pass C, the hold: invalid samples take the last valid output words.
@@ -37,6 +38,8 @@ I_E0, I_E7, I_EACC, I_M0 = FI["e_0"], FI["e_7"], FI["e_acc"], FI["m_0"]
 
 _ONE = F.ONE
 _Q = F.Q
+_SIN = np.array(F.SIN_POLY, np.int64)
+_KLIM = np.int64(F.K_LIMIT)
 
 
 @numba.njit(cache=True, inline="always")
@@ -60,6 +63,117 @@ def _mul32(a, b):
     """a * b for operands known to fit int32 (the formats prove it): a 32x32 -> 64 product,
     which LLVM vectorizes (vpmuldq)."""
     return np.int64(np.int32(a)) * np.int64(np.int32(b))
+
+
+@numba.njit(cache=True, inline="always")
+def _rhu_wide(a, d, s):
+    """RHU(a * d, s) for |a| < 2^31, |d| <= 2^62, 31 <= s <= 62 (arith.mul_rshift_round_wide):
+    d = dh 2^31 + dl, 0 <= dl < 2^31."""
+    dh = d >> 31
+    dl = d - dh * (np.int64(1) << 31)
+    return (a * dh + ((a * dl + (np.int64(1) << (s - 1))) >> 31)) >> (s - 31)
+
+
+@numba.njit(cache=True)
+def _sin_q30(ph):
+    """firmware_ref.aux.sin_q30 of the uint64 phase held as int64 bits."""
+    one = np.int64(_ONE)
+    h = np.int64(1) << 29
+    quad = (ph >> 62) & 3
+    r = ((ph >> 32) & (one - 1)) + ((ph >> 31) & 1)
+    x = one - r if quad & 1 else r
+    x2 = (x * x + h) >> 30
+    p = _SIN[5]
+    for i in range(4, -1, -1):
+        p = ((p * x2 + h) >> 30) + _SIN[i]
+    sv = min((p * x + h) >> 30, one)
+    return -sv if quad >= 2 else sv
+
+
+@numba.njit(cache=True)
+def _aux_pass(terms, ch, kin, has_k, kc, c0, m_blk, restart, a_m, a_sraw, a_w, ystate, exst, zgen):
+    """The aux_gen 1 generators (firmware_ref.aux) over one block: the raw sum RHU(acc, 30) of
+    every sample into zgen (pass B clamps it and sets flag 32); returns the internal counter."""
+    one = np.int64(_ONE)
+    h = np.int64(1) << 29
+    s_one = np.int64(1) << 60
+    nt = terms.shape[0]
+    for jb in range(m_blk):
+        i = c0 + jb
+        kk = kin[i] if has_k else kc
+        kc = min(kk + 1, _KLIM)
+        if kk < 0:
+            kk = np.int64(0)
+        ars = restart[i] != 0 or i == 0
+        m = a_m[jb]
+        sm = np.int64(1) if m <= 1 else (np.int64(-1) if m == 2 else np.int64(0))
+        acc = np.int64(0)
+        for j in range(nt):
+            kind = terms[j, 0]
+            g = np.int64(0)
+            if kind == 0:                                  # input
+                dx = min(max(ch[terms[j, 2], i] - terms[j, 5], -2147483647), 2147483647)
+                sh = terms[j, 8]
+                q = dx * terms[j, 6] + terms[j, 7]
+                if sh > 0:
+                    q = (q + (np.int64(1) << (sh - 1))) >> sh
+                q = min(max(q, -one), one)
+                if terms[j, 10] == 0:
+                    y = q
+                else:
+                    if ars:
+                        ystate[j] = q << 30
+                    else:
+                        ystate[j] += _rhu_wide(terms[j, 9], (q << 30) - ystate[j], terms[j, 10])
+                    y = (ystate[j] + h) >> 30
+                g = y
+                for _ in range(terms[j, 3] - 1):
+                    g = (g * y + h) >> 30
+            elif kind == 1:                                # rate
+                if (a_w[jb] & 4) == 0:
+                    lim = (np.int64(1) << terms[j, 5]) - 1
+                    sc = min(max(a_sraw[jb], -lim), lim)
+                    sh = terms[j, 7]
+                    g = sc * terms[j, 6]
+                    if sh > 0:
+                        g = (g + (np.int64(1) << (sh - 1))) >> sh
+                    g = min(max(g, -one), one)
+            elif kind == 2:                                # one
+                g = one
+            elif kind == 3:                                # decay_on
+                if ars:
+                    ystate[j] = s_one
+                else:
+                    ystate[j] += _rhu_wide(terms[j, 5], -ystate[j], terms[j, 6])
+                g = (ystate[j] + h) >> 30
+            elif kind == 4:                                # decay_exchange
+                if ars:
+                    ystate[j] = 0
+                    exst[j] = 0
+                if m == 3:
+                    ystate[j] = 0
+                    exst[j] = 1
+                elif exst[j] != 0:
+                    ystate[j] = s_one
+                    exst[j] = 0
+                else:
+                    ystate[j] += _rhu_wide(terms[j, 5], -ystate[j], terms[j, 6])
+                g = (ystate[j] + h) >> 30
+            elif kind == 5:                                # ramp
+                if kk >= terms[j, 5]:
+                    g = one
+                else:
+                    sh = terms[j, 7]
+                    g = kk * terms[j, 6]
+                    if sh > 0:
+                        g = (g + (np.int64(1) << (sh - 1))) >> sh
+            else:                                          # osc: the phase wraps mod 2^64
+                g = _sin_q30(kk * terms[j, 5] + terms[j, 7] * (np.int64(1) << 62))
+            if terms[j, 1] != 0:
+                g = sm * g
+            acc += terms[j, 4] * g
+        zgen[jb] = (acc + h) >> 30
+    return kc
 
 
 @numba.njit(cache=True)
@@ -148,9 +262,10 @@ def _pass_b(co, pb, p_ref, g_u, u_off, sh_u, a_s, g_v, sh_v, a_y, zb, a_f, a_ok,
 
 @numba.njit(cache=True)
 def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
-            out, bias, valid, flags, u_o, v_o, b_o, y_o, st_o, s_o):
+            out, bias, valid, flags, u_o, v_o, b_o, y_o, st_o, s_o, terms, ch, kin, has_k, z_o):
     n = p.shape[0]
     one = np.int64(_ONE)
+    nt = terms.shape[0]
     # -- table fields
     p_ref = cfg[I_PREF]
     g_u = cfg[I_GU]
@@ -211,6 +326,12 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
     a_k = np.empty(CHUNK, np.int64)    # samples since the segment start
     a_y = np.empty(CHUNK, np.int64)    # combined output y (held)
     a_f = np.empty(CHUNK, np.uint8)    # pass-A flags
+    a_m = np.empty(CHUNK, np.int64)    # mode of each sample (logged or the timer's)
+    a_sraw = np.empty(CHUNK, np.int64)  # rate sum before its clamp (aux rate terms)
+    zgen = np.empty(CHUNK, np.int64)   # generated z before its clamp (aux_gen 1)
+    ystate = np.zeros(max(nt, 1), np.int64)
+    exst = np.zeros(max(nt, 1), np.int64)
+    kc = np.int64(0)
     zero_z = np.zeros(CHUNK, np.int64)
     for c0 in range(0, n, CHUNK):
         m_blk = min(CHUNK, n - c0)
@@ -247,6 +368,9 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
         if detail:
             for jb in range(m_blk):
                 s_o[c0 + jb] = a_s[jb]
+        if nt > 0:
+            for jb in range(m_blk):
+                a_sraw[jb] = a_s[jb]
         for jb in range(m_blk):
             sv = a_s[jb]
             w = np.uint8(a_k[jb] < warm_n)
@@ -368,9 +492,15 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
                 fl |= 16
             a_y[jb] = y_hold
             a_f[jb] = fl
+            a_m[jb] = m
             valid[i] = 1 if (cvalid and not warm and m != 3) else 0
+        # ---------------- aux generators (aux_gen 1): sequential, z before its clamp
+        if nt > 0:
+            kc = _aux_pass(terms, ch, kin, has_k, kc, c0, m_blk, restart, a_m, a_sraw, a_w, ystate, exst, zgen)
+            zb = zgen[:m_blk]
+        else:
+            zb = z[c0:c0 + m_blk] if has_z else zero_z[:m_blk]
         # ---------------- pass B: stateless, vectorized: u, v, B, output words and flags
-        zb = z[c0:c0 + m_blk] if has_z else zero_z[:m_blk]
         _pass_b(co, p[c0:c0 + m_blk], p_ref, g_u, u_off, sh_u, a_s[:m_blk], g_v, sh_v, a_y[:m_blk], zb,
                 a_f[:m_blk], valid[c0:c0 + m_blk], out[c0:c0 + m_blk], bias[c0:c0 + m_blk], flags[c0:c0 + m_blk])
         if detail:
@@ -383,7 +513,8 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
                 vv = min(max((a_s[jb] * g_v + h_v) >> sh_v, -one), one)
                 u_o[i] = uu
                 v_o[i] = vv
-                b_o[i] = _bias(co, uu, vv, min(max(zb[jb], -one), one))
+                z_o[i] = min(max(zb[jb], -one), one)
+                b_o[i] = _bias(co, uu, vv, z_o[i])
                 y_o[i] = a_y[jb]
         # ---------------- pass C: invalid samples hold the last valid output words
         for jb in range(m_blk):
@@ -397,13 +528,18 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
 
 
 def run_words(table, p, r, mode=None, restart=None, z=None, self_timed: bool = False,
-              detail: bool = False) -> dict:
+              detail: bool = False, f=None, t=None, aux=None, k=None) -> dict:
     """Run the kernel.  ``p`` proxy words, ``r`` rate words (int64[n]); ``mode`` 0..3 (int8[n]
     preferred; ignored and optional when ``self_timed``); ``restart`` bool/int[n] (default: only sample 0 restarts,
-    which is the power-on state anyway); ``z`` Q1.30 words (default 0).  Returns a dict of arrays:
-    ``out``, ``bias`` (int32 words, LSB 2^-10 deg/h), ``valid`` (uint8), ``flags`` (uint8) and with
-    ``detail`` also ``u``, ``v`` (Q1.30), ``b``, ``y`` (LSB 2^-21 deg/h), ``state`` and ``s`` (the
-    rate estimator's sum before its clamp)."""
+    which is the power-on state anyway); ``z`` Q1.30 words (default 0; aux_gen 0 only).  An aux_gen 1
+    table reads the channel words of its input terms: ``f`` (F words; default ``p`` for a freq
+    table), ``t`` (T words; default ``p`` for a temp table), ``aux`` (int64[n, n_chan], A_c words)
+    and the counter ``k`` (int64[n], K since power-on, |K| <= 2^62; default 0, 1, 2, ...).  Returns
+    a dict of arrays: ``out``, ``bias`` (int32 words, LSB 2^-10 deg/h), ``valid`` (uint8), ``flags``
+    (uint8) and with ``detail`` also ``u``, ``v``, ``z`` (Q1.30, z clamped), ``b``, ``y`` (LSB
+    2^-21 deg/h), ``state`` and ``s`` (the rate estimator's sum before its clamp)."""
+    from firmware_ref.aux import channel_rows
+
     p = np.ascontiguousarray(p, np.int64)
     n = p.shape[0]
     r = np.ascontiguousarray(r, np.int64)
@@ -425,15 +561,29 @@ def run_words(table, p, r, mode=None, restart=None, z=None, self_timed: bool = F
     for name, arr in (("mode", mode), ("restart", restart)) + ((("z", z),) if has_z else ()):
         if arr.shape != (n,):
             raise ValueError(f"{name}: shape {arr.shape}, expected ({n},)")
+    terms = table.aux_array()
+    if terms.shape[0]:
+        ch = np.ascontiguousarray(np.stack(channel_rows(table, n, p, f, t, aux)))
+    else:
+        ch = np.zeros((1, 1), np.int64)
+    has_k = k is not None
+    kin = np.ascontiguousarray(k, np.int64) if has_k else np.zeros(1, np.int64)
+    if has_k:
+        if kin.shape != (n,):
+            raise ValueError(f"k: shape {kin.shape}, expected ({n},)")
+        if n and int(np.max(np.abs(kin))) > F.K_LIMIT:
+            raise ValueError("k: the sample counter must be within +-2^62")
     res = {"out": np.empty(n, np.int32), "bias": np.empty(n, np.int32), "valid": np.empty(n, np.uint8),
            "flags": np.empty(n, np.uint8)}
     m = n if detail else 1
-    for name in ("u", "v", "b", "y", "state", "s"):
+    names = ("u", "v", "z", "b", "y", "state", "s")
+    for name in names:
         res[name] = np.zeros(m, np.int64)
     _kernel(table.config_array(), p, r, mode, restart, z, has_z, bool(self_timed), bool(detail), res["out"], res["bias"],
-            res["valid"], res["flags"], res["u"], res["v"], res["b"], res["y"], res["state"], res["s"])
+            res["valid"], res["flags"], res["u"], res["v"], res["b"], res["y"], res["state"], res["s"],
+            terms, ch, kin, has_k, res["z"])
     if not detail:
-        for name in ("u", "v", "b", "y", "state", "s"):
+        for name in names:
             del res[name]
     return res
 

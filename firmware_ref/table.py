@@ -7,8 +7,13 @@ Layout (version 1; ``LAYOUT`` below, rendered into FORMATS.md)::
     word 1   version (1)
     word 2   length: number of words including the CRC
     3..46    config words and the 17 coefficient mantissas (LAYOUT)
-    47..     aux generator parameters (aux_nparams int32 words)
+    47..     aux generator parameters (aux_nparams int32 words; aux_gen 1: AUX_HEADER, one AF_c per
+             aux channel, AUX_TERM_WORDS per term, :func:`decode_aux`)
     last     CRC-32 (IEEE, zlib.crc32) of all preceding words as little-endian bytes
+
+The aux generators (aux_gen 1) live entirely in the variable part, so the fixed part and the
+layout version (1) are those of the tables before them: an older reader refuses an aux_gen 1
+table by its aux_gen field (``aux_gen 1 not 0``), never misreads it.
 
 Signed fields are stored as two's complement.  :class:`Table` holds the decoded fields;
 ``to_words/from_words``, ``to_bytes/from_bytes``, ``to_memh``/``from_memh`` (one 8-digit hex word
@@ -82,12 +87,178 @@ LAYOUT = (
     ("e_7", "uint32", "exponent of k7 (aux)"),
     ("e_acc", "uint32", "exponent E of the outer accumulator"),
 ) + tuple((f"m_{k}", "int32", f"mantissa of k{k} ({TERM_NAMES[k]})") for k in range(N_TERMS)) + (
-    ("aux_gen", "uint32", "aux generator: 0 none (z = 0)"),
-    ("aux_nparams", "uint32", "number of aux parameter words that follow"),
+    ("aux_gen", "uint32", "aux generator: 0 none (z = the Z word, 0 on the host), 1 sum of generator terms"),
+    ("aux_nparams", "uint32", "number of aux parameter words that follow (aux_gen 1: 2 + n_chan + 11 n_terms)"),
 )
 FIELD_INDEX = {name: i for i, (name, _, _) in enumerate(LAYOUT)}
 N_FIXED = len(LAYOUT)            # 47
 SIGNED = {name for name, typ, _ in LAYOUT if typ == "int32"}
+
+# -- aux parameters of aux_gen 1 ('sum'): header, AF_c per aux channel, AUX_TERM_WORDS per term -------
+AUX_HEADER = (
+    ("n_terms", "uint32", f"number of terms, 1..{F.AUX_MAX_TERMS}"),
+    ("n_chan", "uint32", f"number of aux input words A_c, 0..{F.AUX_MAX_CHANNELS}"),
+)
+AUX_TERM_LAYOUT = (
+    ("kind", "uint32", "0 input, 1 rate, 2 one, 3 decay_on, 4 decay_exchange, 5 ramp, 6 osc"),
+    ("sign", "uint32", "1: times the mode sign s (+1 modes 0/1, -1 mode 2, 0 mode 3), else 0"),
+    ("src", "uint32", "input: source channel 0 F, 1 T, 2 + c A_c; rate: the proxy's (0 freq, 1 temp); else 0"),
+    ("power", "uint32", f"input: 1..{F.AUX_POWER_MAX}; else 1"),
+    ("weight", "int32", "w_j, Q1.30, |w_j| <= 2^30"),
+    ("c0", "int32", "coefficient 0 (by kind, below)"),
+    ("c1", "int32", "coefficient 1"),
+    ("c2", "int32", "coefficient 2"),
+    ("c3", "int32", "coefficient 3"),
+    ("c4", "int32", "coefficient 4"),
+    ("c5", "int32", "coefficient 5"),
+)
+AUX_COEF = {    # kind -> meaning of c0.. (unused words are 0)
+    "input": ("REF: centre in source-word LSB (F: uint32 pattern)", "G > 0", "OFF, |OFF| <= G/2 + 1",
+              "SH 0..62", "B: filter b = B 2^-SB (0: no filter)", "SB 31..62 (0: no filter)"),
+    "rate": ("SB: clamp |S| <= 2^SB - 1, 1..55", "G_V > 0, < 2^(62-SB)", "SH_V 0..62"),
+    "one": (),
+    "decay_on": ("B: b = 1 - a = B 2^-SB", "SB 31..62"),
+    "decay_exchange": ("B: b = 1 - a = B 2^-SB", "SB 31..62"),
+    "ramp": ("N >= 1", "G > 0: k / N = RHU(k G, SH)", "SH 0..62"),
+    "osc": ("W low word (uint32)", "W high word, 0..2^31-1 (W >= 1)", "part: 0 sin, 1 cos"),
+}
+KIND_INPUT, KIND_RATE, KIND_ONE, KIND_DECAY_ON, KIND_DECAY_EXCHANGE, KIND_RAMP, KIND_OSC = range(7)
+
+
+@dataclass(frozen=True)
+class AuxTerm:
+    """One decoded aux term: kind (0..6, formats.AUX_KINDS), sign (0/1), src (channel code), power,
+    weight (Q1.30) and the decoded coefficients ``c`` (6 ints): as stored, except input's REF of
+    an F source (uint32 value) and osc's c0 = W = low + 2^32 high (c1 then 0)."""
+
+    kind: int
+    sign: int
+    src: int
+    power: int
+    weight: int
+    c: tuple
+
+    @property
+    def name(self) -> str:
+        return F.AUX_KINDS[self.kind] if 0 <= self.kind < len(F.AUX_KINDS) else f"kind {self.kind}"
+
+
+@dataclass(frozen=True)
+class AuxTable:
+    """The decoded aux parameters of aux_gen 1: ``fracs`` (AF_c of each aux channel) and ``terms``."""
+
+    fracs: tuple
+    terms: tuple
+
+    @property
+    def n_chan(self) -> int:
+        return len(self.fracs)
+
+
+def _s32(w: int) -> int:
+    w &= 0xFFFFFFFF
+    return w - (1 << 32) if w >= 1 << 31 else w
+
+
+def decode_aux(params) -> AuxTable:
+    """Decode aux_gen 1 parameter words (signed ints) into an AuxTable; TableError if the counts do
+    not add up (the field ranges are checked by :func:`check_aux`)."""
+    p = [int(x) for x in params]
+    if len(p) < 2:
+        raise TableError(f"aux generator 1 (sum): needs at least 2 parameter words, has {len(p)}")
+    nt, nc = p[0], p[1]
+    if not 1 <= nt <= F.AUX_MAX_TERMS:
+        raise TableError(f"aux n_terms {nt} not in 1..{F.AUX_MAX_TERMS}")
+    if not 0 <= nc <= F.AUX_MAX_CHANNELS:
+        raise TableError(f"aux n_chan {nc} not in 0..{F.AUX_MAX_CHANNELS}")
+    want = 2 + nc + nt * F.AUX_TERM_WORDS
+    if len(p) != want:
+        raise TableError(f"aux params: {len(p)} words, n_terms {nt} and n_chan {nc} need {want}")
+    terms = []
+    for j in range(nt):
+        w = p[2 + nc + j * F.AUX_TERM_WORDS: 2 + nc + (j + 1) * F.AUX_TERM_WORDS]
+        kind, c = w[0], list(w[5:])
+        if kind == KIND_INPUT and w[2] == F.CH_F:
+            c[0] &= 0xFFFFFFFF
+        if kind == KIND_OSC:
+            c[0], c[1] = (c[0] & 0xFFFFFFFF) + (c[1] << 32), 0
+        terms.append(AuxTerm(kind, w[1], w[2], w[3], w[4], tuple(c)))
+    return AuxTable(tuple(p[2:2 + nc]), tuple(terms))
+
+
+def encode_aux(fracs, terms) -> tuple:
+    """The aux_gen 1 parameter words (signed ints) of channel fracs and AuxTerms (inverse of
+    :func:`decode_aux`)."""
+    out = [len(terms), len(fracs)] + [int(f) for f in fracs]
+    for t in terms:
+        c = list(t.c)
+        if t.kind == KIND_OSC:
+            c[0], c[1] = t.c[0] & 0xFFFFFFFF, t.c[0] >> 32
+        out += [t.kind, t.sign, t.src, t.power, t.weight] + [_s32(x) for x in c]
+    return tuple(out)
+
+
+def check_aux(aux: AuxTable, proxy_kind: int) -> None:
+    """Raise TableError naming the term and the field unless every aux field is in its legal range
+    (the firmware relies on these for the absence of overflow)."""
+    def need(cond, text):
+        if not cond:
+            raise TableError(f"coefficient table: {text}")
+
+    for c, f in enumerate(aux.fracs):
+        need(0 <= f <= F.AUX_FRAC_MAX, f"aux channel {c}: AF {f} not in 0..{F.AUX_FRAC_MAX}")
+    lim31 = (1 << 31) - 1
+    wsum = 0
+    for j, t in enumerate(aux.terms):
+        where = f"aux term {j} ({t.name})"
+        need(0 <= t.kind < len(F.AUX_KINDS), f"{where}: kind {t.kind} not in 0..{len(F.AUX_KINDS) - 1}")
+        need(t.sign in (0, 1), f"{where}: sign {t.sign} not 0 or 1")
+        need(abs(t.weight) <= F.ONE, f"{where}: weight {t.weight} outside [-2^30, 2^30]")
+        wsum += abs(t.weight)
+        c = t.c
+        used = len(AUX_COEF[F.AUX_KINDS[t.kind]])
+        if t.kind == KIND_INPUT:
+            need(0 <= t.src < F.CH_A0 + aux.n_chan,
+                 f"{where}: src {t.src} not a channel (0 F, 1 T, 2..{1 + aux.n_chan} A)")
+            need(1 <= t.power <= F.AUX_POWER_MAX, f"{where}: power {t.power} not in 1..{F.AUX_POWER_MAX}")
+            if t.src == F.CH_F:
+                need(0 <= c[0] <= F.UINT32_MAX, f"{where}: REF {c[0]} outside uint32")
+            else:
+                need(abs(c[0]) <= F.INT32_SYM, f"{where}: REF {c[0]} outside int32")
+            need(0 < c[1] <= lim31, f"{where}: G {c[1]} not in 1..2^31-1")
+            need(abs(c[2]) <= c[1] // 2 + 1, f"{where}: OFF {c[2]} exceeds G / 2")
+            need(0 <= c[3] <= 62, f"{where}: SH {c[3]} not in 0..62")
+            if c[5] == 0:
+                need(c[4] == 0, f"{where}: filter B {c[4]} with SB 0 (no filter) must be 0")
+            else:
+                need(F.AUX_SB_MIN <= c[5] <= F.AUX_SB_MAX, f"{where}: filter SB {c[5]} not 0 or "
+                                                           f"{F.AUX_SB_MIN}..{F.AUX_SB_MAX}")
+                need(0 < c[4] <= lim31, f"{where}: filter B {c[4]} not in 1..2^31-1")
+        else:
+            need(t.power == 1, f"{where}: power {t.power} must be 1")
+            if t.kind == KIND_RATE:
+                need(t.src == proxy_kind, f"{where}: src {t.src} must be the proxy's channel {proxy_kind} "
+                                          f"(the rate term reuses the model's rate sum S)")
+            else:
+                need(t.src == 0, f"{where}: src {t.src} must be 0")
+        if t.kind == KIND_RATE:
+            need(1 <= c[0] <= F.S_BITS_MAX, f"{where}: SB {c[0]} not in 1..{F.S_BITS_MAX}")
+            need(0 < c[1] <= lim31 and c[1] < (1 << (62 - max(1, min(c[0], F.S_BITS_MAX)))),
+                 f"{where}: G_V {c[1]} not in 1..min(2^31, 2^(62-SB))-1")
+            need(0 <= c[2] <= 62, f"{where}: SH_V {c[2]} not in 0..62")
+        elif t.kind in (KIND_DECAY_ON, KIND_DECAY_EXCHANGE):
+            need(0 < c[0] <= lim31, f"{where}: B {c[0]} not in 1..2^31-1")
+            need(F.AUX_SB_MIN <= c[1] <= F.AUX_SB_MAX, f"{where}: SB {c[1]} not in {F.AUX_SB_MIN}..{F.AUX_SB_MAX}")
+        elif t.kind == KIND_RAMP:
+            need(0 < c[0] <= lim31, f"{where}: N {c[0]} not in 1..2^31-1")
+            need(0 < c[1] <= lim31, f"{where}: G {c[1]} not in 1..2^31-1")
+            need(0 <= c[2] <= 62, f"{where}: SH {c[2]} not in 0..62")
+        elif t.kind == KIND_OSC:
+            need(1 <= c[0] < 1 << 63, f"{where}: phase step W {c[0]} not in 1..2^63-1")
+            need(c[2] in (0, 1), f"{where}: part {c[2]} not 0 (sin) or 1 (cos)")
+        if t.kind != KIND_INPUT:
+            need(all(x == 0 for x in c[used:]), f"{where}: unused coefficient words must be 0")
+    need(wsum <= F.ONE + len(aux.terms), f"aux weights: sum |w_j| = {wsum} exceeds 2^30 + n_terms")
 
 
 class TableError(ValueError):
@@ -168,7 +339,11 @@ class Table:
         need(F.EXP_MIN <= self.e_acc <= F.EXP_MAX, f"E {self.e_acc} not in {F.EXP_MIN}..{F.EXP_MAX}")
         for k, m in enumerate(self.mant):
             need(abs(m) <= F.INT32_SYM, f"mantissa m_{k} {m} outside int32")
-        need(self.aux_gen == 0 and not self.aux_params, "aux generator must be 0 (none) with no parameters")
+        need(self.aux_gen in (0, 1), f"aux_gen {self.aux_gen} not 0 (none) or 1 (sum)")
+        if self.aux_gen == 0:
+            need(not self.aux_params, "aux generator 0 (none) takes no parameters")
+        else:
+            check_aux(decode_aux(self.aux_params), self.proxy_kind)
         # (every check above passed: exponents, mantissas and the estimator are in range)
         rows, bounds = horner_bounds(self.e_row, self.e_7, self.e_acc, self.mant)
         for g, r in enumerate(rows):
@@ -265,6 +440,28 @@ class Table:
         """int64[N_FIXED]: the decoded LAYOUT fields (signed), indexed by FIELD_INDEX."""
         vals = self.field_values()
         return np.array([vals[name] for name, _, _ in LAYOUT], np.int64)
+
+    def aux(self) -> AuxTable | None:
+        """The decoded aux parameters (aux_gen 1), or None (aux_gen 0)."""
+        return decode_aux(self.aux_params) if self.aux_gen == 1 else None
+
+    def aux_array(self) -> np.ndarray:
+        """int64[n_terms, 11] for the kernel: kind, sign, src, power, weight, c0..c5 (decoded as
+        AuxTerm.c); shape (0, 11) for aux_gen 0."""
+        aux = self.aux()
+        rows = [] if aux is None else [[t.kind, t.sign, t.src, t.power, t.weight, *t.c] for t in aux.terms]
+        return np.array(rows, np.int64).reshape(len(rows), F.AUX_TERM_WORDS)
+
+    def param_names(self) -> list:
+        """Names of the aux parameter words (for messages and the C header's comments)."""
+        if self.aux_gen != 1 or len(self.aux_params) < 2:
+            return [f"aux_param_{i}" for i in range(len(self.aux_params))]
+        nc = max(0, self.aux_params[1])
+        names = ["aux_n_terms", "aux_n_chan"] + [f"aux_af_{c}" for c in range(nc)]
+        while len(names) < len(self.aux_params):
+            j, i = divmod(len(names) - 2 - nc, F.AUX_TERM_WORDS)
+            names.append(f"aux_t{j}_{AUX_TERM_LAYOUT[i][0]}")
+        return names[:len(self.aux_params)]
 
     @property
     def crc(self) -> int:

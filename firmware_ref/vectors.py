@@ -128,3 +128,114 @@ def corner_stream(table, reversal: bool = True) -> dict:
     restart = np.zeros(n, np.uint8)
     restart[[0, 4, len(modes) + 10, 2 * len(modes) + 50]] = 1
     return {"p": p, "r": r, "mode": mode, "restart": restart, "z": z}
+
+
+# -- aux generators (aux_gen 1) ----------------------------------------------------------------------
+
+AUX_COLUMNS = ("aux_a", "aux_b", "aux_c", "aux_d")
+
+
+def random_aux_terms(rng: np.random.Generator, config, n_terms: int | None = None, kinds=None,
+                     long_taus: bool = True) -> list:
+    """Random generator terms (host_tools.regressors) for a ModelConfig: every kind of
+    formats.AUX_KINDS (or ``kinds``), input terms on freq_hz / temp_c / aux_a..aux_d with random
+    ranges, filters (tau 0, short or up to ~10^6 samples), powers 1..5; rate terms on the model's
+    own estimator with another span; random signs; weights normalized to sum |w| in (0.3, 1]."""
+    fs = config.rate.fs
+    kinds = [str(k) for k in rng.permutation(list(F.AUX_KINDS if kinds is None else kinds))]
+    n_terms = int(rng.integers(1, F.AUX_MAX_TERMS + 1)) if n_terms is None else n_terms
+    aux_cols = list(AUX_COLUMNS[:int(rng.integers(1, F.AUX_MAX_CHANNELS + 1))])
+    terms = []
+    for j in range(n_terms):
+        kind = kinds[j % len(kinds)] if j < len(kinds) else str(rng.choice(kinds))
+        t = {"gen": kind, "weight": float(rng.uniform(0.1, 1.0) * rng.choice([-1.0, 1.0])),
+             "sign": bool(rng.random() < 0.4)}
+        if kind == "input":
+            col = str(rng.choice(["freq_hz", "temp_c"] + aux_cols))
+            if col == "freq_hz":
+                ref, span = float(rng.uniform(1000.0, 15000.0)), float(10 ** rng.uniform(-2, 1.5))
+            elif col == "temp_c":
+                ref, span = float(rng.uniform(-50.0, 80.0)), float(10 ** rng.uniform(-0.5, 2))
+            else:
+                ref, span = float(rng.uniform(-1e3, 1e3) * 10 ** rng.uniform(-3, 0)), float(10 ** rng.uniform(-3, 1))
+            tau = 0.0 if rng.random() < 0.3 else float(10 ** rng.uniform(-1, 6 if long_taus else 3)) / fs
+            t.update(column=col, ref=ref, span=span, tau_s=max(tau, 0.1 / fs) if tau else 0.0,
+                     power=int(rng.integers(1, F.AUX_POWER_MAX + 1)))
+        elif kind == "rate":
+            r = config.rate
+            t.update(column=config.proxy.column, estimator=r.estimator, n=r.n, shift=r.shift,
+                     span=float(r.span * 10 ** rng.uniform(0, 1)))
+        elif kind in ("decay_on", "decay_exchange"):
+            t["tau_s"] = float(10 ** rng.uniform(-1, 6 if long_taus else 2.5)) / fs
+        elif kind == "ramp":
+            t["n_samples"] = int(10 ** rng.uniform(0, 9))
+        elif kind == "osc":
+            t.update(period_s=float(10 ** rng.uniform(0.4, 6)) / fs, part=str(rng.choice(["sin", "cos"])))
+        terms.append(t)
+    total = sum(abs(t["weight"]) for t in terms)
+    scale = float(rng.uniform(0.3, 1.0)) / total
+    for t in terms:
+        t["weight"] = t["weight"] * scale
+    return terms
+
+
+def with_aux(model, terms):
+    """The model with an aux 'sum' generator of ``terms`` (k7 kept; 1 deg/h if it was 0)."""
+    import dataclasses
+
+    from host_tools.model import BiasModel
+    from host_tools.regressors import AuxConfig
+
+    coef = np.array(model.coef, np.float64)
+    if coef[7] == 0.0:
+        coef[7] = 1.0
+    cfg = dataclasses.replace(model.config, aux=AuxConfig.from_terms(terms, model.config.rate.fs))
+    return BiasModel(cfg, tuple(sorted(set(model.terms) | {7})), coef, source="<vectors aux>")
+
+
+def random_aux_model(rng: np.random.Generator, reversal: bool = True, estimator: str | None = None,
+                     n_terms: int | None = None, kinds=None, long_taus: bool = True):
+    """random_model with random aux terms (:func:`random_aux_terms`)."""
+    model = random_model(rng, reversal=reversal, estimator=estimator)
+    return with_aux(model, random_aux_terms(rng, model.config, n_terms, kinds, long_taus))
+
+
+def _walk(rng, centre: int, span_lsb: float, n: int, lo: int, hi: int, extreme: float) -> np.ndarray:
+    step = span_lsb * 10 ** rng.uniform(-4, -1, n) * rng.standard_normal(n)
+    w = centre + np.cumsum(step) % (3.0 * span_lsb) - 1.5 * span_lsb
+    w = np.clip(np.round(w), lo, hi).astype(np.int64)
+    ext = rng.random(n) < extreme
+    w[ext] = rng.choice([lo, hi, lo + 1, hi - 1, centre], int(ext.sum()))
+    return w
+
+
+def aux_stream(rng: np.random.Generator, table, n: int, reversal: bool = True, extreme: float = 0.01,
+               k_jumps: bool = True) -> dict:
+    """random_stream plus the channel words of an aux_gen 1 table: ``f``, ``t`` (the proxy words
+    for the proxy's channel), ``aux`` (int64[n, n_chan]) random walks around the input terms'
+    centres across 3 spans with extremes, and the counter ``k`` (mostly +1 per sample; with
+    ``k_jumps`` gaps, a negative start and, rarely, values near 2^62)."""
+    s = random_stream(rng, table, n, reversal=reversal, extreme=extreme)
+    info = table.aux()
+    nch = 0 if info is None else info.n_chan
+    centre = {}
+    for t in (() if info is None else info.terms):
+        if t.kind == 0 and t.src not in centre:
+            centre[t.src] = (t.c[0], max(2.0, (2.0 ** 30) * 2.0 ** t.c[3] / t.c[1]))
+    lims = {F.CH_F: (0, F.UINT32_MAX)}
+    chans = []
+    for code in range(F.CH_A0 + nch):
+        lo, hi = lims.get(code, (-F.INT32_SYM, F.INT32_SYM))
+        c, span = centre.get(code, ((lo + hi) // 2 if code == F.CH_F else 0, 1e6))
+        chans.append(_walk(rng, c, span, n, lo, hi, extreme))
+    chans[table.proxy_kind] = np.asarray(s["p"], np.int64)
+    s["f"], s["t"] = chans[F.CH_F], chans[F.CH_T]
+    s["aux"] = np.stack(chans[F.CH_A0:], axis=1) if nch else np.zeros((n, 0), np.int64)
+    if k_jumps:
+        k = np.cumsum(np.where(rng.random(n) < 0.01, rng.integers(2, 5000, n), 1)) - int(rng.integers(0, 50))
+        far = rng.random(n) < 0.002
+        k[far] = rng.integers((1 << 62) - 10 ** 6, 1 << 62, int(far.sum()))
+    else:
+        k = np.arange(n, dtype=np.int64)
+    s["k"] = k.astype(np.int64)
+    return s

@@ -18,6 +18,9 @@ uploads:
   sample on equals ``run_words(new_table, words[k:])``.
 * READ_TABLE: the active table's bytes in a TABLE frame.  GET_INFO: INFO.
 
+A table with aux generators (aux_gen 1) runs on the F and T words of the run; the virtual sensor
+has no aux_* channel, so its aux words read 0, and its sample counter K restarts with the table.
+
 Without ``--table`` the device starts with the *identity table*: the data flow of the run
 (host_tools.compensate.fit_config_from_logs; the pair combiner for a mode-reversal run) with all
 17 coefficients 0, quantized by host_tools.quantize, so OUT is the combined raw output.
@@ -199,8 +202,19 @@ class DeviceRun:
         from firmware_ref.kernel import run_words
 
         p, psat = (self.freq, self.sat_freq) if table.proxy_kind == 0 else (self.temp, self.sat_temp)
-        res = run_words(table, p[start:], self.rate[start:], self.mode[start:], detail=True)
+        # an aux generator (aux_gen 1) reads F and T; the virtual sensor has no aux_* channel: its
+        # aux words A_c read 0; the sample counter K counts from the table's power-on (start)
+        n = self.n - start
+        res = run_words(table, p[start:], self.rate[start:], self.mode[start:], detail=True, f=self.freq[start:],
+                        t=self.temp[start:], aux=np.zeros((n, F.AUX_MAX_CHANNELS), np.int64))
         sat = (psat | self.sat_rate)[start:]
+        if table.aux_gen == 1:
+            from firmware_ref.aux import needed_channels
+            read = needed_channels(table)
+            if F.CH_F in read:
+                sat = sat | self.sat_freq[start:]
+            if F.CH_T in read:
+                sat = sat | self.sat_temp[start:]
         res["flags"] = res["flags"] | np.where(sat, F.FLAG_INPUT_SAT, 0).astype(np.uint8)
         return res
 

@@ -68,6 +68,7 @@ def c_header(table: Table, name: str = DEFAULT_NAME, info: dict | None = None) -
     coef = (info or {}).get("coef_dph")
     src = (info or {}).get("model_source")
     frac_p = F.FREQ_FRAC if table.proxy_kind == 0 else F.TEMP_FRAC
+    aux_names = table.param_names()          # aux parameter words (FORMATS.md "Aux generators")
     lines = [
         f"/* hdrg coefficient table: layout version {LAYOUT_VERSION}, {len(words)} words, "
         f"CRC-32 0x{words[-1]:08x}.",
@@ -113,7 +114,7 @@ def c_header(table: Table, name: str = DEFAULT_NAME, info: dict | None = None) -
                 if coef is not None and k < len(coef):
                     text += f" (float {float(coef[k]):.9g})"
         elif i < len(words) - 1:
-            text = f"{i:2d} aux_param    int32  {w - (1 << 32) if w >= 1 << 31 else w}"
+            text = f"{i:2d} {aux_names[i - N_FIXED]:<12s} int32  {w - (1 << 32) if w >= 1 << 31 else w}"
         else:
             text = f"{i:2d} crc32        uint32 CRC-32 of words 0..{i - 1}"
         text = text.replace("*/", "* /")

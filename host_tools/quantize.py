@@ -25,13 +25,27 @@ firmware_ref/FORMATS.md):
   exponent 0, a model whose |B| bound exceeds the output word (2^21 deg/h), or a bound on
   |fixed - golden| above ``max_error_dph`` when given.
 
+* **aux generators** (AuxConfig 'sum', table aux_gen 1, FORMATS.md "Aux generators"): at most 6
+  terms and 4 aux_* columns; each aux column gets the largest AF_c in 0..48 with
+  ``(|ref| + 2 span) 2^AF_c <= 2^31 - 1`` (:func:`aux_channel_fracs`); input terms are normalized
+  like the proxy on their word (F, T or A_c); filter / decay coefficients ``b = 1 - a = B 2^-SB``
+  with 31 significant bits (``1/16 <= fs tau <= 2^31`` samples); ramps ``G = RHU(2^(30+SH) / N)``
+  (N < 2^31); oscillators ``W = RHU(2^64 / (P fs))`` (more than 2 samples per period); a rate
+  term must be the model's own estimator on the proxy column (its own span); weights
+  ``RHU(w 2^30)``.  Refused, with the reason: too many terms or columns, a column without an
+  input word, a time constant, ramp or period out of range, a rate term of another estimator or
+  column, a span below one word LSB.  The k7 mantissa and exponent are quantized as before.
+
 The **bound** on |fixed - golden| (deg/h, golden fed with the dequantized input words) adds:
 coefficient quantization (exact), the evaluator's roundings (1.5 LSB_e per row, 0.5 LSB_E per
 alignment, 1.5 LSB_E outer, 0.5 LSB_E for k7, 0.5 LSB_21), the u and v errors (gain and centre
 quantization, rounding, iir state rounding) times the Lipschitz constants ``sum i |c_ij|`` and
-``sum j |c_ij|``, the combiner (window-mean and slope roundings, for trend at the table's timing)
-and the final output rounding 2^-11 deg/h.  ``measured`` gives max |B_fixed - B_golden| on the
-3^3 corners of (u, v, z) and on a random grid.
+``sum j |c_ij|``, |k7| times the z generators' error (analytic per generator, ``_aux_part``;
+the oscillator's at the horizon K < 2^31), the combiner (window-mean and slope roundings, for
+trend at the table's timing) and the final output rounding 2^-11 deg/h.  ``measured`` gives max
+|B_fixed - B_golden| on the 3^3 corners of (u, v, z) and on a random grid; for an aux model the
+report's ``aux`` adds the channels, each term's bound and ``measured_z``, max |z_fixed - z_golden|
+on a synthetic run (:func:`measure_aux`).
 
 table.json (:meth:`Quantized.to_dict`): format, version, the table fields, the layout words and
 CRC-32, the float model, the quantized coefficients, formats, timing, bound, measured, warnings.
@@ -131,25 +145,40 @@ def quantized_coef(t: Table) -> np.ndarray:
 
 # -- the parts ----------------------------------------------------------------------------------------
 
-def _proxy_part(pc) -> dict:
-    frac = F.FREQ_FRAC if pc.kind == "freq" else F.TEMP_FRAC
+def _norm_part(ref: float, span: float, frac: int, unsigned: bool, what: str, unit: str, word: str) -> dict:
+    """The word-level normalization q = RHU((X - REF) G + OFF, SH) of (x - ref) / span for a word
+    with LSB 2^-frac (the proxy's, and the aux input terms'); QuantizeError names ``what``."""
     lsb = Fraction(1, 1 << frac)
-    unit = pc.unit
-    p_ref = rhu(Fraction(pc.ref) / lsb)
-    if pc.kind == "freq" and not 0 <= p_ref <= F.UINT32_MAX:
-        raise QuantizeError(f"proxy ref {pc.ref} {unit} is outside the drive-frequency word (0 .. 16384 Hz)")
-    if pc.kind == "temp" and abs(p_ref) > F.INT32_SYM:
-        raise QuantizeError(f"proxy ref {pc.ref} {unit} is outside the temperature word (+-32768 degC)")
-    span_lsb = Fraction(pc.span) / lsb
+    p_ref = rhu(Fraction(ref) / lsb)
+    if (unsigned and not 0 <= p_ref <= F.UINT32_MAX) or (not unsigned and abs(p_ref) > F.INT32_SYM):
+        raise QuantizeError(f"{what} ref {ref} {unit} is outside the {word}")
+    span_lsb = Fraction(span) / lsb
     if span_lsb > F.SPAN_LSB_MAX:
-        raise QuantizeError(f"proxy span {pc.span} {unit} exceeds 2^30 word LSB ({float(lsb * F.SPAN_LSB_MAX):g} {unit})")
+        raise QuantizeError(f"{what} span {span} {unit} exceeds 2^30 word LSB ({float(lsb * F.SPAN_LSB_MAX):g} {unit})")
     sh, g = _gain(Fraction(1), span_lsb, (1 << F.GAIN_BITS) - 1)
     if sh is None:
-        raise QuantizeError(f"proxy span {pc.span} {unit} is below one word LSB ({float(lsb):g} {unit}): "
-                            f"the proxy gain 2^30 LSB/span does not fit int32")
-    u_off = rhu((p_ref - Fraction(pc.ref) / lsb) * g)
-    return {"proxy_kind": 0 if pc.kind == "freq" else 1, "p_ref": p_ref, "g_u": g, "u_off": u_off, "sh_u": sh,
-            "_span_lsb": span_lsb, "_lsb": lsb}
+        raise QuantizeError(f"{what} span {span} {unit} is below one word LSB ({float(lsb):g} {unit}): "
+                            f"the gain 2^30 LSB/span does not fit int32")
+    off = rhu((p_ref - Fraction(ref) / lsb) * g)
+    return {"ref": p_ref, "g": g, "off": off, "sh": sh, "span_lsb": span_lsb, "lsb": lsb}
+
+
+def _norm_error(ref: float, n: dict) -> Fraction:
+    """Bound on |q_fixed - (x - ref) / span| at dequantized inputs (gain and centre quantization,
+    the rounding), in units of q."""
+    lsb, span_lsb = n["lsb"], n["span_lsb"]
+    g = Fraction(n["g"], 1 << (F.Q + n["sh"]))
+    return (Fraction(1, 1 << (F.Q + 1)) + (span_lsb + 1) * abs(g - 1 / span_lsb)
+            + abs((n["ref"] - Fraction(ref) / lsb) * g - Fraction(n["off"], 1 << (F.Q + n["sh"])))
+            + abs(Fraction(ref) / lsb - n["ref"]) * abs(g - 1 / span_lsb))
+
+
+def _proxy_part(pc) -> dict:
+    frac = F.FREQ_FRAC if pc.kind == "freq" else F.TEMP_FRAC
+    word = "drive-frequency word (0 .. 16384 Hz)" if pc.kind == "freq" else "temperature word (+-32768 degC)"
+    n = _norm_part(pc.ref, pc.span, frac, pc.kind == "freq", "proxy", pc.unit, word)
+    return {"proxy_kind": 0 if pc.kind == "freq" else 1, "p_ref": n["ref"], "g_u": n["g"], "u_off": n["off"],
+            "sh_u": n["sh"], "_span_lsb": n["span_lsb"], "_lsb": n["lsb"], "_norm": n}
 
 
 def _gain(num: Fraction, den: Fraction, gmax: int):
@@ -226,6 +255,165 @@ def _coef_part(coef) -> dict:
                         "at any legal exponent (sum of |coefficients| too large)")
 
 
+def _rate_error(rc, s_span: Fraction, g_v: int, sh_v: int) -> Fraction:
+    """Bound on |v_fixed - v_golden| (units of v): rounding, gain quantization, iir state rounding."""
+    dv = Fraction(1, 1 << (F.Q + 1)) + (s_span + 1) * abs(Fraction(g_v, 1 << (F.Q + sh_v)) - 1 / s_span)
+    if rc.estimator == "iir":
+        dv += Fraction(1 << rc.shift, 2) / s_span
+    return dv
+
+
+# -- the aux generators (aux_gen 1) ----------------------------------------------------------------------
+
+AUX_CHANNEL_WORDS = {"freq_hz": (F.CH_F, F.FREQ_FRAC, True, "Hz", "drive-frequency word (0 .. 16384 Hz)"),
+                     "temp_c": (F.CH_T, F.TEMP_FRAC, False, "degC", "temperature word (+-32768 degC)")}
+OSC_HORIZON = 1 << 31        # the osc error bound holds for K < 2^31 samples (the golden's float drift grows)
+GOLDEN_OSC_STEP_EPS = Fraction(8, 1 << 53)   # golden rotation: float64 error per step (estimate)
+
+
+def aux_channel_fracs(aux) -> list:
+    """AF_c of every aux channel of an AuxConfig (firmware_ref.aux.aux_columns order): the largest
+    in 0..AUX_FRAC_MAX with (max over its input terms of |ref| + 2 span) 2^AF <= 2^31 - 1, so a
+    saturated word is at least 2 spans from the centre (q clamps as in the golden)."""
+    from firmware_ref.aux import aux_columns
+
+    out = []
+    for col in aux_columns(aux):
+        top = max(abs(Fraction(t["ref"])) + 2 * Fraction(t["span"]) for t in aux.terms
+                  if t["gen"] == "input" and t["column"] == col)
+        fr = None
+        for f in range(F.AUX_FRAC_MAX, -1, -1):
+            if top * (1 << f) <= F.INT32_SYM:
+                fr = f
+                break
+        if fr is None:
+            raise QuantizeError(f"aux column {col!r}: |ref| + 2 span = {float(top):.6g} exceeds the aux word "
+                                f"range (2^31 - 1 units at AF = 0)")
+        out.append(fr)
+    return out
+
+
+def _coef_shift(b: Fraction, what: str, n_samples: float) -> tuple:
+    """(B, SB) of a filter / decay coefficient b = 1 - a: the largest SB in 31..62 with
+    B = RHU(b 2^SB) <= 2^31 - 1, B >= 2^30 (31 significant bits)."""
+    if not F.AUX_TAU_N_MIN <= n_samples <= F.AUX_TAU_N_MAX:
+        raise QuantizeError(f"{what}: the time constant fs tau = {n_samples:.6g} samples is outside "
+                            f"{F.AUX_TAU_N_MIN:g} .. 2^31 samples (the filter coefficient 1 - a = B 2^-SB "
+                            f"needs 2^30 <= B < 2^31 with SB in {F.AUX_SB_MIN}..{F.AUX_SB_MAX})")
+    best = None
+    for sb in range(F.AUX_SB_MIN, F.AUX_SB_MAX + 1):
+        bb = rhu(b * (1 << sb))
+        if bb > F.INT32_SYM:
+            break
+        best = (bb, sb)
+    if best is None or best[0] < (1 << 30):
+        raise QuantizeError(f"{what}: the coefficient 1 - a = {float(b):.6g} cannot be held with 31 significant "
+                            f"bits (fs tau = {n_samples:.6g} samples)")
+    return best
+
+
+def _aux_part(cfg, pp: dict) -> dict:
+    """aux_gen, aux_params (the table words) and the z-error bound ``_z_error`` (units of z) of the
+    model's AuxConfig; QuantizeError names the term and the reason."""
+    from firmware_ref.aux import aux_columns
+    from firmware_ref.table import AuxTerm, encode_aux
+    from host_tools.rate import RateConfig
+
+    aux = cfg.aux
+    if aux.generator == "none":
+        return {"aux_gen": 0, "aux_params": (), "_z_error": 0, "_info": None}
+    terms = aux.terms
+    fs = aux.params["fs"]
+    if len(terms) > F.AUX_MAX_TERMS:
+        raise QuantizeError(f"aux generator 'sum' has {len(terms)} terms; the firmware holds at most {F.AUX_MAX_TERMS}")
+    cols = aux_columns(aux)
+    if len(cols) > F.AUX_MAX_CHANNELS:
+        raise QuantizeError(f"aux generator reads {len(cols)} aux_* columns ({', '.join(cols)}); the firmware has "
+                            f"{F.AUX_MAX_CHANNELS} aux input words")
+    fracs = aux_channel_fracs(aux)
+    out, info = [], []
+    half = Fraction(1, 1 << (F.Q + 1))
+    z_err = half                                                  # RHU(acc, 30)
+    for j, tm in enumerate(terms):
+        gen = tm["gen"]
+        where = f"aux term {j} ({gen})"
+        c = [0] * 6
+        src, power, err = 0, 1, Fraction(0)
+        d = {"term": j, "gen": gen}
+        if gen == "input":
+            col = tm["column"]
+            if col in AUX_CHANNEL_WORDS:
+                src, frac, unsigned, unit, word = AUX_CHANNEL_WORDS[col]
+            elif col.startswith("aux_"):
+                src, frac, unsigned, unit, word = (F.CH_A0 + cols.index(col), fracs[cols.index(col)], False,
+                                                   "units", f"aux word of {col} (LSB 2^-{fracs[cols.index(col)]})")
+            else:
+                raise QuantizeError(f"{where}: column {col!r} has no input word (the firmware reads freq_hz, "
+                                    f"temp_c and aux_* columns)")
+            n = _norm_part(tm["ref"], tm["span"], frac, unsigned, f"{where} {col}", unit, word)
+            c[:4] = [n["ref"], n["g"], n["off"], n["sh"]]
+            err = _norm_error(tm["ref"], n)
+            if tm["tau_s"] > 0:
+                a = math.exp(-1.0 / (fs * tm["tau_s"]))
+                b = Fraction(1.0 - a)                             # the golden's b (float)
+                c[4], c[5] = _coef_shift(b, where, fs * tm["tau_s"])
+                db = abs(Fraction(c[4], 1 << c[5]) - b) / b
+                err += 2 * db + Fraction(1, 1 << 61) / b + half + Fraction(fs * tm["tau_s"]) * Fraction(1, 1 << 52)
+            power = tm["power"]
+            err = power * err + (power - 1) * half
+            d.update(column=col, channel=src, frac=frac)
+        elif gen == "rate":
+            r = cfg.rate
+            if tm["column"] != cfg.proxy.column:
+                raise QuantizeError(f"{where}: a rate of column {tm['column']!r} has no fixed-point form (only the "
+                                    f"proxy column {cfg.proxy.column!r}, whose rate sum the firmware has)")
+            rt = RateConfig(tm["estimator"], tm["n"], tm["shift"], tm["span"], fs)
+            same = (rt.estimator == r.estimator and rt.divisor == r.divisor and rt.warmup == r.warmup
+                    and (r.estimator != "iir" or rt.shift == r.shift))
+            if not same:
+                raise QuantizeError(f"{where}: the estimator {rt.estimator} n={rt.n} shift={rt.shift} differs from "
+                                    f"the model's ({r.estimator} n={r.n} shift={r.shift}): the firmware has one rate sum")
+            rp = _rate_part(rt, pp["_lsb"])
+            c[:3] = [rp["s_bits"], rp["g_v"], rp["sh_v"]]
+            src = pp["proxy_kind"]
+            err = _rate_error(rt, rp["_s_span"], rp["g_v"], rp["sh_v"])
+        elif gen == "one":
+            pass
+        elif gen in ("decay_on", "decay_exchange"):
+            a = math.exp(-1.0 / (fs * tm["tau_s"]))
+            b = 1 - Fraction(a)                                   # the golden multiplies by a
+            c[0], c[1] = _coef_shift(b, where, fs * tm["tau_s"])
+            db = abs(Fraction(c[0], 1 << c[1]) - b) / b
+            err = db + Fraction(1, 1 << 61) / b + half + Fraction(fs * tm["tau_s"]) * Fraction(1, 1 << 53)
+        elif gen == "ramp":
+            nn = tm["n_samples"]
+            if nn > F.INT32_SYM:
+                raise QuantizeError(f"{where}: n_samples {nn} exceeds 2^31 - 1")
+            sh, g = _gain(Fraction(1), Fraction(nn), F.INT32_SYM)
+            c[:3] = [nn, g, sh]
+            err = nn * abs(Fraction(g, 1 << (F.Q + sh)) - Fraction(1, nn)) + half
+        else:  # osc
+            pfs = Fraction(tm["period_s"]) * Fraction(fs)
+            w = rhu(Fraction(1 << 64) / pfs)
+            if not 1 <= w < 1 << 63:
+                raise QuantizeError(f"{where}: the period {tm['period_s']} s is {float(pfs):.6g} samples; the "
+                                    f"oscillator needs more than 2 samples per period")
+            c[0], c[2] = w, 1 if tm["part"] == "cos" else 0
+            phase = abs(Fraction(w) - Fraction(1 << 64) / pfs) * OSC_HORIZON * 2 * Fraction(math.pi) / (1 << 64)
+            err = Fraction(F.SIN_ERR_LSB, 1 << F.Q) + phase + OSC_HORIZON * GOLDEN_OSC_STEP_EPS
+        wq = max(-F.ONE, min(F.ONE, rhu(Fraction(tm["weight"]) * F.ONE)))
+        z_err += abs(Fraction(tm["weight"])) * err + abs(Fraction(tm["weight"]) - Fraction(wq, F.ONE))
+        kind = F.AUX_KINDS.index(gen)
+        out.append(AuxTerm(kind, int(tm["sign"]), src, power, wq, tuple(c)))
+        d.update(weight_q30=wq, g_error=float(err))
+        info.append(d)
+    params = encode_aux(fracs, out)
+    return {"aux_gen": 1, "aux_params": params, "_z_error": z_err,
+            "_info": {"channels": [{"column": col, "word": f"A{c}", "frac": fr} for c, (col, fr) in
+                                   enumerate(zip(cols, fracs))], "terms": info, "z_error": float(z_err),
+                      "osc_horizon_samples": OSC_HORIZON}}
+
+
 # -- the bound -------------------------------------------------------------------------------------------
 
 def error_bound(table: Table, model, parts: dict | None = None) -> dict:
@@ -251,21 +439,16 @@ def error_bound(table: Table, model, parts: dict | None = None) -> dict:
     # input-map errors
     if parts is None:
         parts = {**_proxy_part(cfg.proxy), **_rate_part(cfg.rate, _proxy_part(cfg.proxy)["_lsb"])}
-    lsb = parts["_lsb"]
-    span_lsb = parts["_span_lsb"]
-    half_q = Fraction(1, 1 << (F.Q + 1))
-    gu = Fraction(t.g_u, 1 << (F.Q + t.sh_u))
-    du = (half_q + (span_lsb + 1) * abs(gu - 1 / span_lsb)
-          + abs((t.p_ref - Fraction(cfg.proxy.ref) / lsb) * gu - Fraction(t.u_off, 1 << (F.Q + t.sh_u)))
-          + abs(Fraction(cfg.proxy.ref) / lsb - t.p_ref) * abs(gu - 1 / span_lsb))
-    s_span = parts["_s_span"]
-    dv = half_q + (s_span + 1) * abs(Fraction(t.g_v, 1 << (F.Q + t.sh_v)) - 1 / s_span)
-    if cfg.rate.estimator == "iir":
-        dv += Fraction(1 << t.rate_shift, 2) / s_span
+    du = _norm_error(cfg.proxy.ref, {"lsb": parts["_lsb"], "span_lsb": parts["_span_lsb"], "g": t.g_u,
+                                     "sh": t.sh_u, "off": t.u_off, "ref": t.p_ref})
+    dv = _rate_error(cfg.rate, parts["_s_span"], t.g_v, t.sh_v)
     lip_u = sum(TERM_POWERS[k][0] * abs(coef[k]) for k in range(N_TERMS) if k != K_AUX)
     lip_v = sum(TERM_POWERS[k][1] * abs(coef[k]) for k in range(N_TERMS) if k != K_AUX)
     float_eps = sum(abs(c) for c in coef) * Fraction(1, 1 << 48)   # golden float64 roundings
-    bias_b = eps_coef + rnd + lip_u * du + lip_v * dv + float_eps
+    dz = Fraction(0)
+    if t.aux_gen == 1:
+        dz = Fraction(parts["_aux"]["z_error"]) if "_aux" in parts else Fraction(_aux_part(cfg, parts)["_z_error"])
+    bias_b = eps_coef + rnd + lip_u * du + lip_v * dv + abs(coef[K_AUX]) * dz + float_eps
     half_out = Fraction(1, 1 << (F.OUT_FRAC + 1))
     # combiner
     if t.combiner == 0:
@@ -282,7 +465,8 @@ def error_bound(table: Table, model, parts: dict | None = None) -> dict:
             "out": float(bias_b + comb + half_out),
             "parts": {"coef_quantization": float(eps_coef), "evaluator_rounding": float(rnd),
                       "u_error": float(du), "v_error": float(dv), "lipschitz_u_dph": float(lip_u),
-                      "lipschitz_v_dph": float(lip_v), "output_rounding": float(half_out)},
+                      "lipschitz_v_dph": float(lip_v), "z_error": float(dz), "k7_dph": float(abs(coef[K_AUX])),
+                      "output_rounding": float(half_out)},
             "note": "deg/h; golden fed with the dequantized input words; trend combiner at the table's timing"}
 
 
@@ -302,6 +486,61 @@ def measure(table: Table, model, n_random: int = 20000, seed: int = 0) -> dict:
         out[name] = float(np.max(np.abs(b - gold)))
     out["n_random"] = int(n_random)
     return out
+
+
+def measure_aux(table: Table, model, n: int = 3000, seed: int = 0) -> dict:
+    """max |z_fixed - z_golden| on a synthetic run of ``n`` samples (units of z): every channel the
+    terms read sweeps 1.2 x its range (clamps included) with noise, the modes of a 30/120-sample
+    reversal cycle (FTR models: mode 0), one time gap (a restart); the golden
+    (host_tools.regressors.aux_regressor) is fed the dequantized words, the fixed z comes from the
+    kernel."""
+    import warnings as _warnings
+
+    from firmware_ref import inputs
+    from firmware_ref.aux import aux_columns
+    from firmware_ref.kernel import run_words
+    from host_tools.regressors import aux_regressor, power_on_counter
+    from host_tools.runlog import RunLog
+
+    cfg = model.config
+    aux = cfg.aux
+    fs = aux.params["fs"]
+    rng = np.random.default_rng(seed)
+    i = np.arange(n)
+    t_s = i / fs
+    t_s[n // 2:] += 50.0 / fs                                   # a gap: the recursive generators restart
+    if cfg.reversal is not None:
+        cycle = np.array([3] * 30 + [1] * 120 + [3] * 30 + [2] * 120)
+        mode = np.resize(cycle, n)
+    else:
+        mode = np.zeros(n, np.int64)
+    ranges = {cfg.proxy.column: (cfg.proxy.ref, cfg.proxy.span)}
+    for tm in aux.terms:
+        if tm["gen"] == "input":
+            ranges.setdefault(tm["column"], (tm["ref"], tm["span"]))
+    ranges.setdefault("freq_hz" if cfg.proxy.column == "temp_c" else "temp_c",
+                      (6000.0, 1.0) if cfg.proxy.column == "temp_c" else (20.0, 1.0))
+    vals = {col: ref + 1.2 * span * np.sin(2 * np.pi * i / max(n / 3.0, 1.0) + k)
+            + 1e-3 * span * rng.standard_normal(n) for k, (col, (ref, span)) in enumerate(ranges.items())}
+    cols = aux_columns(aux)
+    fracs = aux_channel_fracs(aux)
+    f_w, _ = inputs.freq_words(vals["freq_hz"])
+    t_w, _ = inputs.temp_words(vals["temp_c"])
+    a_w = np.zeros((n, len(cols)), np.int64)
+    deq = {"freq_hz": inputs.from_words(f_w, F.FREQ_FRAC), "temp_c": inputs.from_words(t_w, F.TEMP_FRAC)}
+    for c, (col, fr) in enumerate(zip(cols, fracs)):
+        a_w[:, c], _ = inputs.aux_channel_words(vals[col], fr, col)
+        deq[col] = inputs.from_words(a_w[:, c], fr)
+    with _warnings.catch_warnings():
+        _warnings.simplefilter("ignore")
+        log = RunLog.from_arrays(t_s=t_s, rate_dph=np.zeros(n), mode=mode, **deq)
+    p = f_w if table.proxy_kind == 0 else t_w
+    restart = np.zeros(n, np.uint8)
+    restart[np.asarray(log.segments, np.int64)] = 1
+    res = run_words(table, p, np.zeros(n, np.int64), mode, restart, f=f_w, t=t_w, aux=a_w,
+                    k=power_on_counter(log.t_s, fs), detail=True)
+    err = np.abs(res["z"] * 2.0 ** -F.Q - aux_regressor(log, aux))
+    return {"z_max": float(np.max(err)), "n": int(n)}
 
 
 def quantize(model, exchange_s: float = 30.0, dwell_s: float = 120.0, power_on_s: float = 0.0,
@@ -330,21 +569,21 @@ def quantize(model, exchange_s: float = 30.0, dwell_s: float = 120.0, power_on_s
         if total > out_range:
             raise QuantizeError(f"the bias bound sum |k| = {total:.6g} deg/h exceeds the output word "
                                 f"range +-{out_range:.6g} deg/h")
-        if cfg.aux.generator != "none":
-            raise QuantizeError(f"aux generator {cfg.aux.generator!r} has no fixed-point form yet (only 'none')")
+        ap = _aux_part(cfg, pp)
         table = Table(proxy_kind=pp["proxy_kind"], p_ref=pp["p_ref"], g_u=pp["g_u"], u_off=pp["u_off"],
                       sh_u=pp["sh_u"],
                       rate_est=rp["rate_est"], rate_n=rp["rate_n"], rate_shift=rp["rate_shift"],
                       rate_warmup=rp["rate_warmup"], s_bits=rp["s_bits"], g_v=rp["g_v"], sh_v=rp["sh_v"],
                       fs_q16=fs_q16, combiner=comb, settle_n=settle_n, max_stale_n=stale_n, **timing,
-                      e_row=cp["e_row"], e_7=cp["e_7"], e_acc=cp["e_acc"], mant=cp["mant"])
+                      e_row=cp["e_row"], e_7=cp["e_7"], e_acc=cp["e_acc"], mant=cp["mant"],
+                      aux_gen=ap["aux_gen"], aux_params=ap["aux_params"])
     except (QuantizeError, TableError) as exc:
         raise QuantizeError(f"{where}: {exc}") from None
     warnings = []
     if comb == 2 and 2 * stale_n + timing["dwell_n"] > F.D_MAX:
         warnings.append(f"trend distance 2 max_stale_n + dwell_n = {2 * stale_n + timing['dwell_n']} half-samples "
                         f"exceeds D_MAX = {F.D_MAX}: it saturates (FLAG_SAT) on stale-limit samples")
-    bound = error_bound(table, model, {**pp, **rp})
+    bound = error_bound(table, model, {**pp, **rp, "_aux": {"z_error": ap["_z_error"]}})
     if max_error_dph is not None and bound["out"] > max_error_dph:
         raise QuantizeError(f"{where}: the bound on |fixed - golden| {bound['out']:.3g} deg/h exceeds "
                             f"--max-error {max_error_dph:g} deg/h")
@@ -357,6 +596,8 @@ def quantize(model, exchange_s: float = 30.0, dwell_s: float = 120.0, power_on_s
         "measured_dph": measure(table, model, n_random),
         "warnings": warnings,
     }
+    if ap["_info"] is not None:
+        report["aux"] = {**ap["_info"], "measured_z": measure_aux(table, model)}
     return Quantized(table, model, report)
 
 
@@ -432,6 +673,12 @@ def run_cli(args) -> int:
           f"{list(t.e_row)}, k7 {t.e_7}, E {t.e_acc}")
     print(f"|fixed - golden| bound: B {b['bias_B']:.3g}, OUT {b['out']:.3g} deg/h; measured B max "
           f"{m['corners']:.3g} (corners), {m['random']:.3g} (random, n={m['n_random']}) deg/h")
+    if "aux" in q.report:
+        a = q.report["aux"]
+        gens = ", ".join(x["gen"] for x in a["terms"])
+        words = ", ".join("{word}={column} (AF {frac})".format(**c) for c in a["channels"]) or "none"
+        print(f"aux generators: {len(a['terms'])} terms ({gens}), aux words {words}; |z_fixed - z_golden| "
+              f"bound {a['z_error']:.3g}, measured {a['measured_z']['z_max']:.3g}")
     for w in q.report["warnings"]:
         print(f"warning: {w}")
     return 0

@@ -16,7 +16,13 @@ Sets (each a CSV with a header, a ``$readmemh`` file and, where tables are used,
   host_tools.fit.fit_logs on host_tools.compensate.fit_config_from_logs and quantized, through
   the whole pipeline with every intermediate: the input words (proxy F or T, rate R), u, v, z,
   the rate sum, the window sum, the Horner rows, the k7 term, the accumulator t, B, y, the
-  output words, valid, flags.
+  output words, valid, flags;
+* ``aux``: tables with aux generators (aux_gen 1, FORMATS.md "Aux generators"): every kind alone
+  (z = its g), signs, powers, short and long filters, decays with restarts and exchange resets,
+  ramps, oscillators at large and negative K, weight-sum clamps, coefficient extremes, random
+  multi-term tables, and a simulated run with a fitted aux model; the inputs add K and the aux
+  words A0..A3 (an ``S`` line of 11 fields), the outputs are the 16 ``O`` fields (z is the
+  generated z).
 
 Everything in the vector files is an integer (the CSV op names of ``primitives`` aside); seeds are
 fixed; the manifest has no timestamps.  Outputs come from the numba kernel
@@ -55,20 +61,21 @@ from firmware_ref import formats as F
 from firmware_ref.table import Table, TableError, horner_bounds
 from firmware_ref.terms import K_AUX, N_TERMS, POLY_INDEX
 
-FORMAT_VERSION = 1          # file layout (columns, record layout, manifest keys)
-GENERATOR_VERSION = 1       # the cases and their values; bump when a vector changes
+FORMAT_VERSION = 2          # file layout (columns, record layout, manifest keys); 2: the aux set (K, A0..A3)
+GENERATOR_VERSION = 2       # the cases and their values; bump when a vector changes; 2: RHUW, SIN, aux
 STALE_MESSAGE = ("vectors are stale: regenerate with `hdrg vectors generate -o vectors/` and bump "
                  "GENERATOR_VERSION/FORMAT_VERSION")
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_DIR = ROOT / "vectors"
 SOURCE_GLOBS = ("firmware_ref/*.py", "firmware_ref/c/*.c", "firmware_ref/c/*.h")
-SETS = ("primitives", "evaluator", "sequencer", "e2e")
+SETS = ("primitives", "evaluator", "sequencer", "e2e", "aux")
 PY_CHECK = 300              # samples per case cross-checked with the Python reference
 SEED = 20240611             # the one seed; every set derives its generators from it
 
 # -- columns ------------------------------------------------------------------------------------------
-PRIM_OPS = ("RHU", "MULRHU", "FLOORDIV", "DIVROUND", "DIVRS", "CLAMP", "SAT")
-PRIM_ARITY = {"RHU": 2, "MULRHU": 3, "FLOORDIV": 2, "DIVROUND": 2, "DIVRS": 3, "CLAMP": 3, "SAT": 2}
+PRIM_OPS = ("RHU", "MULRHU", "FLOORDIV", "DIVROUND", "DIVRS", "CLAMP", "SAT", "RHUW", "SIN")
+PRIM_ARITY = {"RHU": 2, "MULRHU": 3, "FLOORDIV": 2, "DIVROUND": 2, "DIVRS": 3, "CLAMP": 3, "SAT": 2, "RHUW": 3,
+              "SIN": 1}
 PRIM_FLAGGED = ("CLAMP", "SAT")          # answer "R value clamped"
 # (name, bits in the $readmemh record); the CSV has these columns plus the extra ones
 PRIM_FIELDS = (("op", 8), ("a", 64), ("b", 64), ("c", 64), ("result", 64), ("flag", 8))
@@ -84,6 +91,9 @@ ROW_FIELDS = (("row0", 32), ("row1", 32), ("row2", 32), ("row3", 32), ("zterm", 
 SEQ_FIELDS = (("case", 16),) + IN_FIELDS + O_FIELDS
 E2E_FIELDS = SEQ_FIELDS + ROW_FIELDS
 SEQ_INPUTS = ("case", "i") + tuple(n for n, _ in IN_FIELDS)
+AUX_IN_FIELDS = IN_FIELDS + (("K", 64), ("A0", 32), ("A1", 32), ("A2", 32), ("A3", 32))
+AUX_FIELDS = (("case", 16),) + AUX_IN_FIELDS + O_FIELDS
+AUX_INPUTS = ("case", "i") + tuple(n for n, _ in AUX_IN_FIELDS)
 
 
 class VectorsError(ValueError):
@@ -254,6 +264,11 @@ def _prim_eval(op: str, a: int, b: int, c: int):
         assert b <= c
         v, f = arith.clamp(a, b, c)
         return v, int(f)
+    if op == "RHUW":
+        return arith.mul_rshift_round_wide(a, b, c), 0
+    if op == "SIN":
+        from firmware_ref.aux import sin_q30
+        return sin_q30(a & 0xFFFFFFFFFFFFFFFF), 0
     assert 1 <= b <= 63
     v, f = arith.sat_signed(a, b)
     return v, int(f)
@@ -322,6 +337,24 @@ def _prim_cases(rng) -> list:
             cases.append(("SAT", x, w, 0))
         for _ in range(3):
             cases.append(("SAT", rnd(), w, 0))
+    lim31, lim62 = (1 << 31) - 1, 1 << 62
+    for s in (31, 32, 40, 52, 61, 62):
+        h = 1 << (s - 1)
+        for a, d in ((lim31, lim62), (-lim31, lim62), (lim31, -lim62), (-lim31, -lim62), (1, h), (-1, h), (1, -h),
+                     (3, h), (-3, h), (lim31, 0), (0, lim62), (1 << 30, 1 << 60), (-(1 << 30), 1 << 60),
+                     (1 << 30, -(1 << 60)), (lim31, (1 << 31) - 1), (lim31, -(1 << 31)), (2, h - 1), (-2, h + 1)):
+            cases.append(("RHUW", a, d, s))
+        for _ in range(10):
+            cases.append(("RHUW", rnd(-lim31, lim31), rnd(-lim62, lim62), s))
+            k = rnd(-(1 << 20), 1 << 20)
+            cases.append(("RHUW", 2 * k + 1, h, s))                           # ties: odd * 2^(s-1)
+    quarter = 1 << 62
+    for ph in (0, 1, quarter - 1, quarter, quarter + 1, 2 * quarter, 3 * quarter, -1, MIN, MAX, MIN + 1,
+               (1 << 31) - 1, 1 << 31, (1 << 31) + 1, quarter - (1 << 31), quarter + (1 << 31), -(1 << 31),
+               3 * quarter - (1 << 31) - 1):
+        cases.append(("SIN", ph, 0, 0))
+    for _ in range(120):
+        cases.append(("SIN", rnd(), 0, 0))
     out = []
     for op, a, b, c in cases:
         if not (MIN <= a <= MAX and MIN <= b <= MAX and MIN <= c <= MAX):
@@ -341,8 +374,9 @@ def primitives_set(rng) -> VectorSet:
             "b": np.array([c[2] for c in cases], np.int64),
             "c": np.array([c[3] for c in cases], np.int64)}
     vs = VectorSet("primitives", "fixed-point primitives (firmware_ref.arith): RHU(a, s=b), MULRHU(a, b, s=c), "
-                   "FLOORDIV(a, b), DIVROUND(a, b), DIVRS(a, b, k=c), CLAMP(x=a, lo=b, hi=c), SAT(x=a, width=b); "
-                   "flag = clamped (CLAMP, SAT), else 0", cols, PRIM_INPUTS, PRIM_FIELDS,
+                   "FLOORDIV(a, b), DIVROUND(a, b), DIVRS(a, b, k=c), CLAMP(x=a, lo=b, hi=c), SAT(x=a, width=b), "
+                   "RHUW(a, d=b, s=c) = RHU(a d, s) wider than int64, SIN(phase=a: the uint64 phase as int64 bits, "
+                   "firmware_ref.aux.sin_q30); flag = clamped (CLAMP, SAT), else 0", cols, PRIM_INPUTS, PRIM_FIELDS,
                    cases=[{"name": op, "description": f"{op} requests"} for op in PRIM_OPS])
     compute_primitives(vs)
     return vs
@@ -538,6 +572,7 @@ def compute_pipeline(vs: VectorSet, rows: bool, check_python: int = PY_CHECK) ->
 
     c = vs.columns
     n = len(c["F"])
+    has_aux = "K" in c                                   # the aux set: K and A0..A3 inputs
     res = {name: np.zeros(n, np.int64) for name in O_NAMES + (tuple(k for k, _ in ROW_FIELDS) if rows else ())}
     for case in vs.cases:
         lo, hi = case["rows"]
@@ -548,13 +583,17 @@ def compute_pipeline(vs: VectorSet, rows: bool, check_python: int = PY_CHECK) ->
             raise VectorsError(f"{vs.name} case {case['name']}: MODE must be all -1 (self-timed) or all 0..3")
         p = (c["F"] if t.proxy_kind == 0 else c["T"])[lo:hi]
         r, rs, z = c["R"][lo:hi], c["RESTART"][lo:hi], c["Z"][lo:hi]
-        k = run_words(t, p, r, None if timed else mode, rs, z, self_timed=timed, detail=True)
+        kw = {}
+        if has_aux:
+            kw = {"f": c["F"][lo:hi], "t": c["T"][lo:hi], "k": c["K"][lo:hi],
+                  "aux": np.stack([c[f"A{j}"][lo:hi] for j in range(F.AUX_MAX_CHANNELS)], axis=1)}
+        k = run_words(t, p, r, None if timed else mode, rs, z, self_timed=timed, detail=True, **kw)
         state = k["state"]
         m = np.asarray(F.STATE_MODE, np.int64)[state] if timed else mode
         acc, cnt = window_sums(t, m, r, rs)
         o = {"state": state, "vs": np.asarray(F.STATE_VS, np.int64)[state],
              "mode": m, "sign": np.asarray(F.STATE_SIGN, np.int64)[state], "u": k["u"], "v": k["v"],
-             "z": np.clip(z, -F.ONE, F.ONE), "s": k["s"], "acc": acc, "cnt": cnt, "y": k["y"], "b": k["b"],
+             "z": k["z"], "s": k["s"], "acc": acc, "cnt": cnt, "y": k["y"], "b": k["b"],
              "out": k["out"], "bias": k["bias"], "valid": k["valid"], "flags": k["flags"]}
         if rows:
             hr = horner_rows(t, k["u"], k["v"], z)
@@ -564,8 +603,8 @@ def compute_pipeline(vs: VectorSet, rows: bool, check_python: int = PY_CHECK) ->
         m_py = min(check_python, hi - lo)
         if m_py:
             ref = run_reference(t, p[:m_py], r[:m_py], None if timed else mode[:m_py], rs[:m_py], z[:m_py],
-                                self_timed=timed)
-            for name in ("state", "vs", "sign", "u", "v", "s", "acc", "cnt", "y", "b", "out", "bias", "valid",
+                                self_timed=timed, **{key: val[:m_py] for key, val in kw.items()})
+            for name in ("state", "vs", "sign", "u", "v", "z", "s", "acc", "cnt", "y", "b", "out", "bias", "valid",
                          "flags"):
                 if not np.array_equal(np.asarray(ref[name], np.int64), np.asarray(o[name][:m_py], np.int64)):
                     i = int(np.argmax(np.asarray(ref[name], np.int64) != o[name][:m_py]))
@@ -573,7 +612,7 @@ def compute_pipeline(vs: VectorSet, rows: bool, check_python: int = PY_CHECK) ->
                                        f"{o[name][i]} != Python reference {ref[name][i]}")
         for name in res:
             res[name][lo:hi] = o[name]
-    cols = {k: c[k] for k in SEQ_INPUTS}
+    cols = {k: c[k] for k in (AUX_INPUTS if has_aux else SEQ_INPUTS)}
     cols.update(res)
     vs.columns = cols
 
@@ -585,6 +624,7 @@ class _Cases:
         self.cases, self.tables, self.parts = [], [], []
 
     def add(self, name, desc, table, s, self_timed=False, t_words=None):
+        """A case: stream ``s`` (p, r, mode, restart, z; for the aux set also f, t, aux, k)."""
         n = len(s["p"])
         rec = {"F": np.zeros(n, np.int64), "T": np.zeros(n, np.int64),
                "R": np.asarray(s["r"], np.int64),
@@ -594,6 +634,13 @@ class _Cases:
         rec["F" if table.proxy_kind == 0 else "T"] = np.asarray(s["p"], np.int64)
         if t_words is not None:                        # the other word from the log (e2e)
             rec["T" if table.proxy_kind == 0 else "F"] = np.asarray(t_words, np.int64)
+        if s.get("k") is not None:                     # the aux set: every channel word, K, A0..A3
+            rec["F"], rec["T"] = np.asarray(s["f"], np.int64), np.asarray(s["t"], np.int64)
+            rec["F" if table.proxy_kind == 0 else "T"] = np.asarray(s["p"], np.int64)
+            rec["K"] = np.asarray(s["k"], np.int64)
+            a = np.asarray(s["aux"], np.int64).reshape(n, -1)
+            for j in range(F.AUX_MAX_CHANNELS):
+                rec[f"A{j}"] = a[:, j] if j < a.shape[1] else np.zeros(n, np.int64)
         rec["RESTART"][0] = 1
         try:
             ti = next(i for i, t in enumerate(self.tables) if t == table)
@@ -610,7 +657,7 @@ class _Cases:
             start += len(p["R"])
         cols = {"case": np.concatenate([np.full(len(p["R"]), c, np.int64) for c, p in enumerate(self.parts)]),
                 "i": np.concatenate([np.arange(len(p["R"]), dtype=np.int64) for p in self.parts])}
-        for name, _ in IN_FIELDS:
+        for name, _ in (AUX_IN_FIELDS if "K" in self.parts[0] else IN_FIELDS):
             cols[name] = np.concatenate([p[name] for p in self.parts])
         return cols
 
@@ -784,6 +831,206 @@ def e2e_set() -> tuple:
     return vs, _jsonable(config)
 
 
+# -- aux generators ----------------------------------------------------------------------------------------
+
+def _aux_table(base, terms, fracs=()) -> Table:
+    """``base`` (aux_gen 0) with aux_gen 1 terms (firmware_ref.table.AuxTerm) and channel fracs."""
+    from firmware_ref.table import encode_aux
+
+    return dataclasses.replace(base, aux_gen=1, aux_params=encode_aux(tuple(fracs), tuple(terms)))
+
+
+def _one_kind(base_model, term, fs=1.0):
+    """The quantized table of ``base_model`` with a single generator term of weight 1 (z = g)."""
+    from firmware_ref.vectors import with_aux
+
+    return quantize_aux(with_aux(base_model, [{**term, "weight": 1.0}]))
+
+
+def _aux_steps(table, n, rng, step_every=175, reversal=True) -> dict:
+    """A stream whose channel words, for each input term, cycle every ``step_every`` samples through
+    +1.2 spans (a step: filters settle, clamps), a ramp from -1.1 to +1.1 spans, -1.2 spans, and a
+    random walk (aux_stream); modes of a short reversal cycle, K = i."""
+    from firmware_ref.vectors import aux_stream
+
+    s = aux_stream(rng, table, n, reversal=reversal, extreme=0.0, k_jumps=False)
+    info = table.aux()
+    i = np.arange(n)
+    phase = (i // step_every) % 4
+    level = np.select([phase == 0, phase == 1, phase == 2],
+                      [1.2, -1.1 + 2.2 * (i % step_every) / step_every, -1.2], np.nan)
+    chans = {0: s["f"], 1: s["t"]}
+    for c in range(info.n_chan):
+        chans[2 + c] = s["aux"][:, c]
+    for tm in info.terms:
+        if tm.kind == 0:
+            span = (2.0 ** 30) * 2.0 ** tm.c[3] / tm.c[1]
+            lo, hi = (0, F.UINT32_MAX) if tm.src == 0 else (-F.INT32_SYM, F.INT32_SYM)
+            set_ = ~np.isnan(level)
+            chans[tm.src][set_] = np.clip(np.round(tm.c[0] + level[set_] * span), lo, hi).astype(np.int64)
+    s["p"] = chans[table.proxy_kind]
+    if reversal:
+        s["mode"] = np.resize(np.array([3] * 4 + [1] * 12 + [3] * 4 + [2] * 12), n)
+    return s
+
+
+def aux_set(rng) -> VectorSet:
+    from firmware_ref.table import AuxTerm
+    from firmware_ref.vectors import aux_stream, make_model, random_aux_model, with_aux
+
+    cs = _Cases()
+    base_model = make_model(coef=[3e3, -2e3, 1e3, -5e2, 7e2, -3e2, 1e2, 5e2, -4e2, 3e2, -2e2, 1e2, -9e1, 8e1, -7e1,
+                                  6e1, -5e1], settle_s=2.0, max_stale_s=25.0)
+    temp_model = make_model("temp", ref=20.0, span=30.0, estimator="lsq", n=5, rate_span=0.5, combiner="trend",
+                            settle_s=1.0, max_stale_s=25.0)
+    # every kind alone, weight 1: z = g
+    singles = [
+        ("input_proxy", base_model, {"gen": "input", "column": "freq_hz", "ref": 6227.0, "span": 3.0},
+         "the proxy itself (z = u)"),
+        ("input_proxy_u5_sign", base_model, {"gen": "input", "column": "freq_hz", "ref": 6227.0, "span": 3.0,
+                                             "power": 5, "sign": True}, "s u^5"),
+        ("input_lag_freq", base_model, {"gen": "input", "column": "freq_hz", "ref": 6227.5, "span": 2.0, "tau_s": 37.0,
+                                        "power": 2}, "the proxy lagged by 37 samples, squared"),
+        ("input_temp_long_lag", base_model, {"gen": "input", "column": "temp_c", "ref": 25.0, "span": 40.0,
+                                             "tau_s": 16384.0}, "temperature word (not the proxy) through a "
+                                                                  "2^14-sample filter: no dead band"),
+        ("input_temp_short_lag", base_model, {"gen": "input", "column": "temp_c", "ref": -5.0, "span": 0.5,
+                                              "tau_s": 0.0625}, "the shortest legal filter (1/16 sample)"),
+        ("input_aux_word", base_model, {"gen": "input", "column": "aux_vdd", "ref": 3.3, "span": 0.05, "tau_s": 5.0,
+                                        "power": 3, "sign": True}, "aux word A0 (AF from the range), s y^3"),
+        ("input_freq_of_temp_model", temp_model, {"gen": "input", "column": "freq_hz", "ref": 6227.0, "span": 3.0},
+         "temp proxy table reading the F word"),
+        ("rate_sign", base_model, {"gen": "rate", "column": "freq_hz", "estimator": "diff", "span": 0.01,
+                                   "sign": True}, "s v with its own span"),
+        ("rate_lsq", temp_model, {"gen": "rate", "column": "temp_c", "estimator": "lsq", "n": 5, "span": 0.05},
+         "the lsq rate sum with another span"),
+        ("one_sign", base_model, {"gen": "one", "sign": True}, "s"),
+        ("decay_on_short", base_model, {"gen": "decay_on", "tau_s": 4.0}, "decay since power-on / restarts, 4 samples"),
+        ("decay_on_long", base_model, {"gen": "decay_on", "tau_s": 3.0e6}, "3 10^6 samples"),
+        ("decay_exchange", base_model, {"gen": "decay_exchange", "tau_s": 6.0}, "decay since the last exchange"),
+        ("decay_exchange_sign", base_model, {"gen": "decay_exchange", "tau_s": 2.5, "sign": True}, "s times it"),
+        ("ramp", base_model, {"gen": "ramp", "n_samples": 300}, "k / 300, 1 from K = 300 on"),
+        ("osc_sin", base_model, {"gen": "osc", "period_s": 7.3, "part": "sin"}, "sin, 7.3-sample period"),
+        ("osc_cos", base_model, {"gen": "osc", "period_s": 86400.0, "part": "cos"}, "cos, 1-day period"),
+    ]
+    for name, model, term, desc in singles:
+        t = _one_kind(model, term)
+        s = _aux_steps(t, 700, rng, reversal=True)
+        s["restart"][[350, 351, 520]] = 1
+        cs.add(f"single_{name}", f"one term, weight 1 (z = g): {desc}; channel words cycle through +1.2 spans, a "
+               f"ramp, -1.2 spans and a random walk (175 samples each), restarts at 350, 351, 520", t, s)
+    # K: gaps, negative start, near 2^62 (osc wrap, ramp)
+    t = _one_kind(base_model, {"gen": "osc", "period_s": 3.1, "part": "sin"})
+    t2 = _aux_table(t, (AuxTerm(6, 0, 0, 1, 1 << 29, (1, 0, 1, 0, 0, 0)),
+                        AuxTerm(6, 0, 0, 1, -(1 << 29), ((1 << 63) - 1, 0, 0, 0, 0, 0))))
+    for name, tab in (("osc_k_edges", t), ("osc_w_extremes", t2)):
+        s = aux_stream(rng, tab, 400, extreme=0.0, k_jumps=True)
+        s["k"][:40] = np.arange(-20, 20)
+        s["k"][40:80] = F.K_LIMIT - 40 + np.arange(40)
+        s["k"][80:90] = -F.K_LIMIT
+        cs.add(name, "oscillators at K = -20..19, 2^62 - 40 .. 2^62 - 1, -2^62 and random gaps "
+               + ("(period 3.1 samples)" if tab is t else "(W = 1 cos, W = 2^63 - 1 sin)"), tab, s)
+    t = _one_kind(base_model, {"gen": "ramp", "n_samples": 2 ** 31 - 1})
+    s = aux_stream(rng, t, 200, extreme=0.0, k_jumps=True)
+    s["k"][:50] = np.r_[np.arange(-5, 20), (1 << 31) - 14 + np.arange(25)]
+    cs.add("ramp_longest", "ramp N = 2^31 - 1 around K = 0 and K = N", t, s)
+    # weight-sum clamp (flag 32) and coefficient extremes (hand-made tables)
+    base = _one_kind(base_model, {"gen": "one"})
+    clamp_t = _aux_table(base, (AuxTerm(2, 0, 0, 1, (1 << 29) + 1, (0,) * 6),
+                                AuxTerm(2, 1, 0, 1, (1 << 29) + 1, (0,) * 6)))
+    cs.add("weight_sum_clamp", "two 'one' terms of weight 2^29 + 1 (sum |w| = 2^30 + 2): z = 2^30 + 2 is "
+           "clamped (flag 32) in modes 0/1", clamp_t, aux_stream(rng, clamp_t, 150, extreme=0.0))
+    lim = F.INT32_SYM
+    ext_terms = (AuxTerm(0, 0, 2, 5, 1 << 28, (-lim, lim, lim // 2, 62, lim, 31)),
+                 AuxTerm(0, 1, 0, 1, -(1 << 28), (F.UINT32_MAX, 1, 0, 0, 1, 62)),
+                 AuxTerm(3, 0, 0, 1, 1 << 27, (lim, 31, 0, 0, 0, 0)),
+                 AuxTerm(4, 1, 0, 1, -(1 << 27), (1, 62, 0, 0, 0, 0)),
+                 AuxTerm(5, 0, 0, 1, 1 << 27, (1, lim, 0, 0, 0, 0)),
+                 AuxTerm(0, 0, 5, 4, (1 << 27) + 1, (0, 1 << 30, 0, 1, 1 << 30, 40)))
+    ext = _aux_table(base, ext_terms, fracs=(0, 48, 17, 30))
+    s = aux_stream(rng, ext, 600, extreme=0.05)
+    cs.add("coefficient_extremes", "hand-made: REF -(2^31 - 1) with G 2^31 - 1, SH 62, B 2^31 - 1 at SB 31, "
+           "power 5; REF 2^32 - 1 with G 1, B 1 at SB 62; decays at B = 2^31 - 1 / SB 31 and B = 1 / SB 62; "
+           "ramp N = 1; A3 power 4; AF 0, 48, 17, 30", ext, s)
+    # the four aux words at very different scales (AF from 48 down to a few bits)
+    words = [{"gen": "input", "column": col, "ref": ref, "span": span, "tau_s": tau, "weight": 0.25}
+             for col, ref, span, tau in (("aux_a", 2.0e-7, 5.0e-8, 0.0), ("aux_b", 3.3, 0.05, 12.0),
+                                         ("aux_c", -150.0, 40.0, 0.0), ("aux_d", 2.5e5, 1.0e4, 300.0))]
+    t = quantize_aux(with_aux(base_model, words))
+    cs.add("aux_words", f"four input terms on A0..A3 (AF {', '.join(map(str, t.aux().fracs))}), two filtered", t,
+           _aux_steps(t, 700, rng))
+    # random multi-term tables
+    for j in range(6):
+        reversal = j != 4
+        est = ("diff", "diffn", "lsq", "iir", "diff", "lsq")[j]
+        model = random_aux_model(rng, reversal=reversal, estimator=est, n_terms=[6, 6, 4, 3, 5, 6][j])
+        t = quantize_aux(model)
+        timed = j == 5
+        cs.add(f"random_{j}", f"firmware_ref.vectors.random_aux_model ({est}, {len(t.aux().terms)} terms) and "
+               f"aux_stream{', self-timed' if timed else ''}", t, aux_stream(rng, t, 500, reversal=reversal), timed)
+    # a simulated run with a fitted aux model
+    case, cfg = aux_sim_case()
+    cs.add(*case)
+    vs = VectorSet("aux", "tables with aux generators (aux_gen 1): inputs F T R MODE RESTART Z K A0 A1 A2 A3 (MODE "
+                   "-1: self-timed), outputs the 16 fields of the protocol's O line (z: the generated z)",
+                   cs.columns(), AUX_INPUTS, AUX_FIELDS, cs.cases, cs.tables)
+    vs.config = cfg
+    compute_pipeline(vs, rows=False)
+    return vs
+
+
+def quantize_aux(model) -> Table:
+    from host_tools.quantize import quantize
+
+    return quantize(model, exchange_s=3.0, dwell_s=7.0, n_random=10).table
+
+
+AUX_SIM = ("paper-mr-cycle-4dpm", 13, 2400.0, {"turn_on": {"amp_dph": 3.0, "tau_s": 300.0}})
+
+
+def aux_sim_case() -> tuple:
+    """(the arguments of _Cases.add, configuration) of the simulated aux run: host_tools.sim with an
+    undeclared turn-on transient, a model with a decay_on, a lagged-proxy and a board-temperature
+    term (fixed generator parameters), fitted, rounded to 7 significant digits, quantized."""
+    import warnings as _warnings
+
+    from firmware_ref.compensate import log_words
+    from host_tools import compensate as hc
+    from host_tools.fit import fit_logs
+    from host_tools.model import BiasModel, ModelConfig
+    from host_tools.proxy import ProxyConfig
+    from host_tools.rate import RateConfig
+    from host_tools.regressors import AuxConfig
+    from host_tools.sim import simulate
+
+    scenario, seed, duration, undeclared = AUX_SIM
+    with _warnings.catch_warnings():
+        _warnings.simplefilter("ignore")
+        log = simulate(scenario, seed=seed, duration_s=duration, undeclared=undeclared)
+    cfg0 = hc.fit_config_from_logs([log])
+    tr = (float(np.min(log["temp_c"])), float(np.max(log["temp_c"])))
+    terms = [{"gen": "decay_on", "tau_s": 300.0, "weight": 0.5},
+             {"gen": "input", "column": cfg0.proxy.column, "ref": _round_sig(cfg0.proxy.ref),
+              "span": _round_sig(cfg0.proxy.span), "tau_s": 900.0, "weight": -0.25},
+             {"gen": "input", "column": "temp_c", "ref": _round_sig(0.5 * (tr[0] + tr[1])),
+              "span": _round_sig(0.6 * (tr[1] - tr[0])), "tau_s": 60.0, "weight": 0.25, "sign": True}]
+    cfg = ModelConfig(ProxyConfig(cfg0.proxy.kind, _round_sig(cfg0.proxy.ref), _round_sig(cfg0.proxy.span)),
+                      RateConfig(cfg0.rate.estimator, cfg0.rate.n, cfg0.rate.shift, _round_sig(cfg0.rate.span),
+                                 cfg0.rate.fs), cfg0.reversal, AuxConfig.from_terms(terms, cfg0.rate.fs))
+    fitted, _ = fit_logs([log], cfg, tuple(range(17)))
+    coef = np.array([_round_sig(c) for c in fitted.coef], np.float64)
+    model = BiasModel(cfg, fitted.terms, coef, source="<vectors aux sim>")
+    table = quantize_aux(model)
+    w = log_words(log, cfg)
+    s = {"p": w["p"], "r": w["r"], "mode": w["mode"], "restart": w["restart"], "z": w["z"], "f": w["f"],
+         "t": w["t"], "aux": np.zeros((len(log), 0), np.int64), "k": w["k"]}
+    desc = (f"host_tools.sim.simulate({scenario!r}, seed={seed}, duration_s={duration:g}, undeclared={undeclared}); "
+            f"aux decay_on + lagged proxy + s x lagged board temperature, fitted, quantized; log-driven")
+    config = {"scenario": scenario, "seed": seed, "duration_s": repr(duration), "undeclared": undeclared,
+              "model": {"config": cfg.to_dict(), "terms": list(model.terms), "coef": list(model.coef)}}
+    return ("sim_aux", desc, table, s), _jsonable(config)
+
+
 # -- generate -----------------------------------------------------------------------------------------
 
 def build_sets(names=SETS) -> tuple:
@@ -803,9 +1050,13 @@ def build_sets(names=SETS) -> tuple:
             out.append(evaluator_set(rng))
         elif name == "sequencer":
             out.append(sequencer_set(rng))
-        else:
+        elif name == "e2e":
             vs, cfg = e2e_set()
             config["e2e"] = cfg
+            out.append(vs)
+        else:
+            vs = aux_set(rng)
+            config["aux"] = vs.config
             out.append(vs)
     return out, config
 
@@ -813,6 +1064,15 @@ def build_sets(names=SETS) -> tuple:
 def _table_entry(t: Table) -> dict:
     words = t.to_words()
     return {"crc32": f"{words[-1]:08x}", "words": [f"{w:08x}" for w in words], "fields": t.field_values()}
+
+
+def _offsets(tables) -> list:
+    """First word of each table in <set>.tables.mem (the tables are concatenated)."""
+    out, at = [], 0
+    for t in tables:
+        out.append(at)
+        at += len(t.to_words())
+    return out
 
 
 def make_manifest(sets, config, files: dict) -> dict:
@@ -836,7 +1096,11 @@ def make_manifest(sets, config, files: dict) -> dict:
             "mem_record": [{"name": n, "bits": b} for n, b in vs.mem_fields],
             "mem_record_bits": sum(b for _, b in vs.mem_fields),
             "tables_mem": f"{vs.name}.tables.mem" if vs.tables else None,
-            "table_words": len(vs.tables[0].to_words()) if vs.tables else None,
+            # words per table when every table of the set has the same length (aux_gen 0: 48), else None
+            # (the aux set: each table's length is its word 2 and the length of its manifest entry)
+            "table_words": (len(vs.tables[0].to_words())
+                            if vs.tables and len({len(t.to_words()) for t in vs.tables}) == 1 else None),
+            "table_offsets": _offsets(vs.tables),
             "op_codes": list(PRIM_OPS) if vs.name == "primitives" else None,
             "cases": vs.cases,
             "tables": [_table_entry(t) for t in vs.tables],
@@ -929,12 +1193,14 @@ def _load_set(directory: Path, name: str, meta: dict) -> VectorSet:
     tables = []
     if meta.get("tables_mem"):
         text = (directory / meta["tables_mem"]).read_text().split()
-        nw = meta["table_words"]
-        if len(text) != nw * len(meta["tables"]):
+        sizes = [len(entry["words"]) for entry in meta["tables"]]
+        if len(text) != sum(sizes):
             raise VectorsError(f"{directory / meta['tables_mem']}: {len(text)} words, expected "
-                               f"{nw} x {len(meta['tables'])} tables")
+                               f"{sum(sizes)} ({len(sizes)} tables)")
+        at = 0
         for k, entry in enumerate(meta["tables"]):
-            words = [int(w, 16) for w in text[k * nw:(k + 1) * nw]]
+            words = [int(w, 16) for w in text[at:at + sizes[k]]]
+            at += sizes[k]
             if [f"{w:08x}" for w in words] != entry["words"]:
                 raise VectorsError(f"{directory / meta['tables_mem']}: table {k} differs from the manifest's")
             try:
@@ -1068,9 +1334,11 @@ def _requests(vs: VectorSet, fields) -> list:
                 reqs.append((f"EVAL {c['u'][i]} {c['v'][i]} {c['z'][i]}", ["E", str(c["b"][i]),
                                                                           str(c["zclamped"][i])], i, None))
         else:
-            arr = np.stack([c[n] for n, _ in IN_FIELDS] + [c[n] for n in O_NAMES], axis=1)[lo:hi].tolist()
+            fin = AUX_IN_FIELDS if "K" in c else IN_FIELDS
+            arr = np.stack([c[n] for n, _ in fin] + [c[n] for n in O_NAMES], axis=1)[lo:hi].tolist()
+            w = len(fin)
             for k, row in enumerate(arr):
-                reqs.append(("S " + " ".join(map(str, row[:6])), ["O"] + [str(x) for x in row[6:]], lo + k, pos))
+                reqs.append(("S " + " ".join(map(str, row[:w])), ["O"] + [str(x) for x in row[w:]], lo + k, pos))
     return reqs
 
 

@@ -25,7 +25,8 @@ from firmware_ref.evaluator import evaluate
 from firmware_ref.kernel import evaluate_words, run_words
 from firmware_ref.table import FIELD_INDEX, Table, TableError, crc32_words
 from firmware_ref.terms import K_AUX
-from firmware_ref.vectors import corner_stream, make_model, random_model, random_stream
+from firmware_ref.vectors import (aux_stream, corner_stream, make_model, random_aux_model, random_model,
+                                  random_stream, with_aux)
 from host_tools.quantize import quantize
 
 GCC = shutil.which("gcc")
@@ -39,7 +40,7 @@ STRICT = CFLAGS + ("-Wconversion", "-Wsign-conversion", "-Wshadow", "-Wcast-qual
 UBSAN = ("-std=c99", "-O1", "-g", "-Wall", "-Wextra", "-Werror", "-fsanitize=undefined",
          "-fno-sanitize-recover=all")
 FIELDS = ("state", "vs", "mode", "sign", "u", "v", "z", "s", "acc", "cnt", "y", "b", "out", "bias", "valid", "flags")
-KERNEL_KEYS = ("out", "bias", "valid", "flags", "u", "v", "b", "y", "s", "state")
+KERNEL_KEYS = ("out", "bias", "valid", "flags", "u", "v", "z", "b", "y", "s", "state")
 REF_KEYS = KERNEL_KEYS + ("vs", "sign", "acc", "cnt")
 
 
@@ -60,9 +61,17 @@ def table_line(table) -> str:
 
 
 def input_records(table, s, self_timed=False) -> np.ndarray:
-    """int64[n, 6]: F T R MODE RESTART Z (the proxy word in the column of the table's kind)."""
+    """int64[n, 6]: F T R MODE RESTART Z (the proxy word in the column of the table's kind); a
+    stream with aux channels (``k`` not None: firmware_ref.vectors.aux_stream) gives int64[n, 11]
+    with F and T from ``f``, ``t`` and K A0 A1 A2 A3 after Z."""
     n = len(s["p"])
-    rec = np.zeros((n, 6), np.int64)
+    aux = s.get("k") is not None
+    rec = np.zeros((n, 11 if aux else 6), np.int64)
+    if aux:
+        rec[:, 0], rec[:, 1] = s["f"], s["t"]
+        rec[:, 6] = s["k"]
+        a = np.asarray(s["aux"], np.int64).reshape(n, -1)
+        rec[:, 7:7 + a.shape[1]] = a
     rec[:, 0 if table.proxy_kind == 0 else 1] = s["p"]
     rec[:, 2] = s["r"]
     rec[:, 3] = -1 if self_timed else s["mode"]
@@ -72,10 +81,12 @@ def input_records(table, s, self_timed=False) -> np.ndarray:
 
 
 def run_bin(exe, table, s, self_timed=False) -> dict:
-    """The driver on a stream through a BIN block; dict of int64 arrays named FIELDS."""
+    """The driver on a stream through a BIN block (record width 6, or 11 with the aux inputs);
+    dict of int64 arrays named FIELDS."""
     rec = input_records(table, s, self_timed)
     n = len(rec)
-    data = f"{table_line(table)}\nBIN {n}\n".encode() + rec.astype("<i8").tobytes()
+    width = "" if rec.shape[1] == 6 else f" {rec.shape[1]}"
+    data = f"{table_line(table)}\nBIN {n}{width}\n".encode() + rec.astype("<i8").tobytes()
     pr = subprocess.run([str(exe)], input=data, capture_output=True)
     assert pr.returncode == 0 and not pr.stderr, pr.stderr.decode(errors="replace")[-2000:]
     i = pr.stdout.index(b"\n")
@@ -114,14 +125,18 @@ def assert_same(ref, got, keys=KERNEL_KEYS, what=""):
                                  f"C {got[key][i]}")
 
 
+def _chans(s) -> dict:
+    return {k: s[k] for k in ("f", "t", "aux", "k") if s.get(k) is not None}
+
+
 def kernel(table, s, self_timed=False):
     return run_words(table, s["p"], s["r"], None if self_timed else s["mode"], s.get("restart"), s.get("z"),
-                     self_timed=self_timed, detail=True)
+                     self_timed=self_timed, detail=True, **_chans(s))
 
 
 def reference(table, s, self_timed=False):
     return run_reference(table, s["p"], s["r"], None if self_timed else s["mode"], s.get("restart"), s.get("z"),
-                         self_timed=self_timed)
+                         self_timed=self_timed, **_chans(s))
 
 
 def table_of(est="diff", combiner="pair", n=5, shift=2, settle_s=2.0, max_stale_s=25.0, coef=None, **kw):
@@ -400,6 +415,16 @@ def primitive_cases(rng):
             expect(f"SAT {x} {w}", lambda: arith.sat_signed(x, w), two)
     for x in (-5, 0, 5, I64_MIN, I64_MAX):
         expect(f"CLAMP {x} -3 4", lambda: arith.clamp(x, -3, 4), two)
+    from firmware_ref.aux import sin_q30
+    lim31, lim62 = (1 << 31) - 1, 1 << 62
+    for s in (30, 31, 32, 45, 61, 62, 63):
+        for a in (lim31, -lim31, 1 << 31, 0, 3, -3, int(rng.integers(-lim31, lim31))):
+            for d in (lim62, -lim62, lim62 + 1, (1 << (s - 1)) if s < 63 else 1, -(1 << 31), (1 << 31) - 1,
+                      int(rng.integers(-lim62, lim62))):
+                expect(f"RHUW {a} {d} {s}", lambda: arith.mul_rshift_round_wide(a, d, s), one)
+    phases = [0, 1, -1, I64_MIN, I64_MAX, 1 << 62, -(1 << 62), 3 << 61]
+    for ph in phases + [int(x) for x in rng.integers(I64_MIN, I64_MAX, 40)]:
+        expect(f"SIN {ph}", lambda: sin_q30(ph & 0xFFFFFFFFFFFFFFFF), one)
     return cases
 
 
@@ -414,7 +439,8 @@ def test_primitives_equal_arith(c_exe):
            (not exp.startswith("ERR") and got != exp)]
     assert not bad, bad[:5]
     assert sum(exp == "ERR RANGE" for _, exp in cases) > 10
-    assert sum(req.startswith("RHU") for req, _ in cases) > 2000
+    assert sum(req.startswith("RHU ") for req, _ in cases) > 2000
+    assert sum(req.startswith("RHUW") and exp == "ERR RANGE" for req, exp in cases) > 10
 
 
 def test_evaluator_alone(c_exe):
@@ -492,7 +518,8 @@ def table_cases():
         ("e_1_below_E", field("e_1", base.e_acc - 1), "FIELD", 23),
         ("e_7_align", field("e_7", base.e_acc + 32), "FIELD", 26),
         ("mant_min", field("m_5", -(1 << 31)), "FIELD", FI["m_5"]),
-        ("aux_gen", field("aux_gen", 1), "FIELD", 45),
+        ("aux_gen", field("aux_gen", 2), "FIELD", 45),
+        ("aux_gen_1_no_params", field("aux_gen", 1), "FIELD", 46),
     ]
     return base, cases
 
@@ -619,6 +646,12 @@ def test_ubsan_build(ubsan_exe):
         table = quantize(random_model(rng, estimator=est), exchange_s=3.0, dwell_s=7.0, n_random=10).table
         s = random_stream(rng, table, 20_000)
         assert_same(kernel(table, s), run_bin(ubsan_exe, table, s), what=f"ubsan random {est}")
+    for seed in range(6):                     # aux generators of every kind, long K jumps, extremes
+        table, s = aux_case(seed, 20_000)
+        assert_same(kernel(table, s), run_bin(ubsan_exe, table, s), what=f"ubsan aux {seed}")
+    table = aux_extreme_table()
+    s = aux_stream(np.random.default_rng(3), table, 5000, extreme=0.05)
+    assert_same(kernel(table, s), run_bin(ubsan_exe, table, s), what="ubsan aux extremes")
     cases = primitive_cases(np.random.default_rng(1))
     out = run_text(ubsan_exe, [req for req, _ in cases], expect_rc=1)
     assert all(got.startswith(exp) for (_, exp), got in zip(cases, out)) and len(out) == len(cases)
@@ -644,3 +677,159 @@ def test_broken_rounding_build_is_caught(tmp_path):
     with pytest.raises(AssertionError, match="differs first"):
         assert_same(kernel(table, s), run_bin(broken, table, s), what="broken build")
     assert run_text(broken, ["RHU 3 1"]) == ["R 1"]          # 1.5 truncated (the correct build: 2)
+
+
+# -- aux generators (aux_gen 1) -------------------------------------------------------------------------
+
+def aux_case(seed, n, reversal=None):
+    """A random aux model (3..6 terms of random kinds) quantized, and an aux stream for it."""
+    rng = np.random.default_rng(3000 + seed)
+    reversal = seed % 3 != 2 if reversal is None else reversal
+    est = ("diff", "diffn", "lsq", "iir")[seed % 4]
+    model = random_aux_model(rng, reversal=reversal, estimator=est, n_terms=3 + seed % 4)
+    table = quantize(model, exchange_s=3.0, dwell_s=7.0, power_on_s=2.0, n_random=10).table
+    return table, aux_stream(rng, table, n, reversal=reversal)
+
+
+def aux_extreme_table():
+    """Hand-made: every coefficient at an edge (REF at the word limits, G 1 and 2^31 - 1, SH 62,
+    B 1 / 2^31 - 1 at SB 62 / 31, ramp N = 1, osc W = 1 and 2^63 - 1, power 5, AF 0 and 48)."""
+    from firmware_ref.table import AuxTerm, encode_aux
+    lim = F.INT32_SYM
+    terms = (AuxTerm(0, 0, 2, 5, 1 << 27, (-lim, lim, lim // 2, 62, lim, 31)),
+             AuxTerm(0, 1, 0, 1, -(1 << 27), (F.UINT32_MAX, 1, 0, 0, 1, 62)),
+             AuxTerm(3, 0, 0, 1, 1 << 27, (lim, 31, 0, 0, 0, 0)),
+             AuxTerm(4, 1, 0, 1, -(1 << 27), (1, 62, 0, 0, 0, 0)),
+             AuxTerm(6, 1, 0, 1, 1 << 27, (1, 0, 1, 0, 0, 0)),
+             AuxTerm(6, 0, 0, 1, (1 << 27) + 5, ((1 << 63) - 1, 0, 0, 0, 0, 0)))
+    return with_fields(table_of("diff", "trend"), aux_gen=1, aux_params=encode_aux((0, 48, 13), terms))
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_aux_random_streams_equal_numba(c_exe, seed):
+    """Random aux tables (every kind, signs, powers, filters up to 10^6 samples, K gaps and values
+    near 2^62) through BIN blocks of width 11, logged and self-timed: == the kernel, z included."""
+    table, s = aux_case(seed, 100_000)
+    got = run_bin(c_exe, table, s)
+    assert_same(kernel(table, s), got, what=f"aux seed {seed}")
+    assert len(np.unique(got["z"])) > 100
+    if table.combiner:
+        assert_same(kernel(table, s, True), run_bin(c_exe, table, s, True), what=f"aux seed {seed} self-timed")
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_aux_streams_equal_python_reference(c_exe, seed):
+    table, s = aux_case(10 + seed, 5000)
+    assert_same(reference(table, s), run_bin(c_exe, table, s), REF_KEYS + ("z",), f"aux seed {seed}")
+
+
+def test_aux_extreme_table(c_exe):
+    table = aux_extreme_table()
+    rng = np.random.default_rng(4)
+    for s in (aux_stream(rng, table, 3000, extreme=0.05), aux_stream(rng, table, 3000, extreme=0.5)):
+        got = run_bin(c_exe, table, s)
+        assert_same(reference(table, s), got, REF_KEYS + ("z",), "aux extremes")
+        assert_same(kernel(table, s), got, what="aux extremes (kernel)")
+
+
+def test_aux_text_protocol_and_internal_counter(c_exe):
+    """S lines of 7..11 fields: K given (and the aux words) or, with 6 fields, the internal
+    counter (0, 1, 2, ... since TABLE/RESET; restarts do not reset it) and aux words 0."""
+    base = table_of("diff", "pair")
+    model = make_model(coef=[3e3, -2e3, 1e3, -5e2, 7e2, -3e2, 1e2, 5e2, -4e2, 3e2, -2e2, 1e2, -9e1, 8e1, -7e1,
+                             6e1, -5e1], settle_s=2.0, max_stale_s=25.0)
+    table = quantize(with_aux(model, [{"gen": "ramp", "n_samples": 40, "weight": 0.4},
+                                      {"gen": "osc", "period_s": 9.0, "part": "cos", "weight": 0.3},
+                                      {"gen": "input", "column": "aux_x", "ref": 1.0, "span": 2.0, "weight": 0.3}]),
+                     n_random=10).table
+    assert table.e_row != base.e_row or table.aux_gen == 1
+    rng = np.random.default_rng(6)
+    s = aux_stream(rng, table, 300, k_jumps=False)
+    got = run_samples_text(c_exe, table, s)                 # 11 fields, K = 0, 1, 2, ...
+    assert_same(kernel(table, s), got, what="text, K given")
+    s6 = {k: s[k] for k in ("p", "r", "mode", "restart", "z")}
+    got6 = run_samples_text(c_exe, table, s6)               # 6 fields: the internal counter, A0 = 0
+    ref6 = run_words(table, s["p"], s["r"], s["mode"], s["restart"], s["z"], detail=True, t=s["t"],
+                     aux=np.zeros((300, 1), np.int64))
+    assert_same(ref6, got6, what="text, internal counter")
+    assert not np.array_equal(got6["z"], got["z"])         # the A0 word matters
+    lines = [table_line(table), "S 0 0 0 1 1 0 5", "S 0 0 0 1 0 0 6 1 2 3 4", f"S 0 0 0 1 0 0 {(1 << 62) + 1}",
+             "S 0 0 0 1 0 0 0 1 2 3 4 5", f"S 0 0 0 1 0 0 0 {1 << 31}"]
+    out = run_text(c_exe, lines, expect_rc=1)
+    assert out[0].startswith("T ") and out[1].startswith("O ") and out[2].startswith("O ")
+    assert out[3].startswith("ERR RANGE K") and out[4].startswith("ERR SYNTAX") and out[5].startswith("ERR RANGE A")
+
+
+def test_aux_table_checks(c_exe):
+    """Every aux field out of range: Table (Python) raises TableError naming it, the C parser
+    refuses it with FIELD and the word index; counts that do not add up: FIELD at aux_nparams."""
+    from firmware_ref.table import N_FIXED
+    table = aux_extreme_table()
+    w = table.to_words()
+    nc = table.aux().n_chan
+    t0 = N_FIXED + 2 + nc                     # first word of term 0
+    term = lambda j, i: t0 + 11 * j + i       # noqa: E731
+
+    def put(changes, length=None):
+        ww = list(w[:-1])
+        for i, v in changes.items():
+            ww[i] = v & 0xFFFFFFFF
+        if length is not None:
+            ww = ww[:length]
+            ww[2] = len(ww) + 1
+            ww[FIELD_INDEX["aux_nparams"]] = len(ww) - N_FIXED
+        return ww + [crc32_words(ww)]
+
+    cases = [
+        ("n_terms_0", put({N_FIXED: 0}), N_FIXED),
+        ("n_terms_7", put({N_FIXED: 7}), N_FIXED),
+        ("n_chan_5", put({N_FIXED + 1: 5}), N_FIXED + 1),
+        ("count_mismatch", put({N_FIXED: 5}), FIELD_INDEX["aux_nparams"]),
+        ("af_49", put({N_FIXED + 3: 49}), N_FIXED + 3),
+        ("kind_7", put({term(2, 0): 7}), term(2, 0)),
+        ("sign_2", put({term(0, 1): 2}), term(0, 1)),
+        ("weight_big", put({term(0, 4): (1 << 30) + 1}), term(0, 4)),
+        ("input_src", put({term(0, 2): 2 + nc}), term(0, 2)),
+        ("input_power_0", put({term(0, 3): 0}), term(0, 3)),
+        ("input_power_6", put({term(0, 3): 6}), term(0, 3)),
+        ("input_ref_min", put({term(0, 5): -(1 << 31)}), term(0, 5)),
+        ("input_g_0", put({term(0, 6): 0}), term(0, 6)),
+        ("input_off", put({term(1, 7): 2}), term(1, 7)),
+        ("input_sh", put({term(0, 8): 63}), term(0, 8)),
+        ("input_sb_30", put({term(0, 10): 30}), term(0, 10)),
+        ("input_b_0", put({term(0, 9): 0}), term(0, 9)),
+        ("input_b_without_sb", put({term(0, 10): 0}), term(0, 9)),
+        ("decay_power", put({term(2, 3): 2}), term(2, 3)),
+        ("decay_src", put({term(2, 2): 1}), term(2, 2)),
+        ("decay_b_0", put({term(2, 5): 0}), term(2, 5)),
+        ("decay_sb_63", put({term(3, 6): 63}), term(3, 6)),
+        ("decay_unused", put({term(3, 7): 1}), term(3, 7)),
+        ("osc_w_0", put({term(4, 5): 0}), term(4, 5)),
+        ("osc_w_hi_negative", put({term(5, 6): 0x80000000}), term(5, 6)),
+        ("osc_part_2", put({term(4, 7): 2}), term(4, 7)),
+        ("osc_unused", put({term(4, 8): 1}), term(4, 8)),
+        ("rate_src", put({term(2, 0): 1, term(2, 5): 20, term(2, 6): 5, term(2, 2): 1}), term(2, 2)),
+        ("rate_sb_0", put({term(2, 0): 1, term(2, 5): 0}), term(2, 5)),
+        ("rate_g_big", put({term(2, 0): 1, term(2, 5): 40, term(2, 6): 1 << 22}), term(2, 6)),
+        ("ramp_n_0", put({term(2, 0): 5, term(2, 5): 0, term(2, 6): 7}), term(2, 5)),
+        ("ramp_sh", put({term(2, 0): 5, term(2, 5): 4, term(2, 6): 7, term(2, 7): 63}), term(2, 7)),
+        ("one_coef", put({term(2, 0): 2, term(2, 6): 0}), term(2, 5)),
+        ("weight_sum", put({term(j, 4): 1 << 29 for j in range(6)}), term(5, 4)),
+    ]
+    lines = [table_line(table)]
+    for name, words, _ in cases:
+        with pytest.raises(TableError):
+            Table.from_words(words, name)
+        lines.append("TABLE " + " ".join(f"{x:08x}" for x in words))
+    out = run_text(c_exe, lines, expect_rc=1)
+    assert out[0] == f"T {len(w)} {table.crc:08x}"
+    for (name, _, word), got in zip(cases, out[1:]):
+        assert got.startswith(f"ERR FIELD word {word} "), (name, got)
+
+
+def test_bin_block_width_errors_are_fatal(c_exe):
+    table = table_of("diff", "pair")
+    rec = np.zeros((2, 11), "<i8")
+    for head, body in (("BIN 2 7", rec.tobytes()), ("BIN 2 11", rec.tobytes()[:100]), ("BENCH 2 1 12", b"")):
+        pr = subprocess.run([str(c_exe)], input=f"{table_line(table)}\n{head}\n".encode() + body, capture_output=True)
+        assert pr.returncode == 2 and b"fatal" in pr.stderr, head

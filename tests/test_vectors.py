@@ -142,13 +142,38 @@ def test_sets_cover_what_they_claim(manifest):
     for col in ("F", "T", "R", "u", "v", "z", "row0", "row3", "zterm", "t", "b", "acc", "y", "out", "flags"):
         assert col in e2e
     assert e2e["valid"].mean() > 0.5 and (e2e["acc"] != 0).any() and (e2e["T"] != 0).all()
+    # aux: every generator kind, signs, powers, filters, K edges, the weight-sum clamp, every aux word
+    meta = manifest["sets"]["aux"]
+    aux = V._load_set(VECTORS, "aux", meta)
+    c = aux.columns
+    from firmware_ref.table import Table
+    kinds, signs, powers, filt, chans = set(), set(), set(), False, set()
+    for t in aux.tables:
+        assert isinstance(t, Table) and t.aux_gen == 1
+        for tm in t.aux().terms:
+            kinds.add(F.AUX_KINDS[tm.kind])
+            signs.add(tm.sign)
+            powers.add(tm.power)
+            filt |= tm.kind == 0 and tm.c[5] != 0
+            if tm.kind == 0:
+                chans.add(tm.src)
+    assert kinds == set(F.AUX_KINDS) and signs == {0, 1} and {1, 2, 3, 5} <= powers and filt
+    assert chans == set(range(2 + F.AUX_MAX_CHANNELS))
+    assert (np.bitwise_or.reduce(c["flags"]) & F.FLAG_AUX_CLAMPED) and (np.abs(c["z"]) == F.ONE).any()
+    assert (c["K"] >= F.K_LIMIT - 40).any() and (c["K"] < 0).any() and (c["K"] == -F.K_LIMIT).any()
+    for j in range(F.AUX_MAX_CHANNELS):
+        assert (c[f"A{j}"] != 0).any()
+    assert (c["MODE"] == -1).any() and len(meta["cases"]) == len(aux.tables)
+    assert meta["table_words"] is None and len({len(e["words"]) for e in meta["tables"]}) > 2
 
 
 def test_pipeline_vectors_equal_python_reference_on_whole_cases(manifest):
     """Independent of the numba kernel: whole short cases replayed by the per-sample reference."""
     for set_name, names in (("sequencer", ("power_on_timed", "dwell1_timed", "stale_edge_log", "slope_clamp_log",
                                            "bias_saturation_log", "corner_lsq_ftr")),
-                            ("e2e", ("mode_reversal",))):
+                            ("e2e", ("mode_reversal",)),
+                            ("aux", ("single_decay_exchange_sign", "single_input_temp_long_lag", "osc_k_edges",
+                                     "weight_sum_clamp", "coefficient_extremes", "random_5", "sim_aux"))):
         vs = V._load_set(VECTORS, set_name, manifest["sets"][set_name])
         c = vs.columns
         for case in vs.cases:
@@ -158,9 +183,13 @@ def test_pipeline_vectors_equal_python_reference_on_whole_cases(manifest):
             hi = min(hi, lo + 700)
             t = vs.tables[case["table"]]
             timed = c["MODE"][lo] == -1
+            kw = {}
+            if "K" in c:
+                kw = {"f": c["F"][lo:hi], "t": c["T"][lo:hi], "k": c["K"][lo:hi],
+                      "aux": np.stack([c[f"A{j}"][lo:hi] for j in range(F.AUX_MAX_CHANNELS)], axis=1)}
             ref = run_reference(t, (c["F"] if t.proxy_kind == 0 else c["T"])[lo:hi], c["R"][lo:hi],
-                                None if timed else c["MODE"][lo:hi], c["RESTART"][lo:hi], c["Z"][lo:hi], timed)
-            for name in ("state", "vs", "sign", "u", "v", "s", "acc", "cnt", "y", "b", "out", "bias", "valid",
+                                None if timed else c["MODE"][lo:hi], c["RESTART"][lo:hi], c["Z"][lo:hi], timed, **kw)
+            for name in ("state", "vs", "sign", "u", "v", "z", "s", "acc", "cnt", "y", "b", "out", "bias", "valid",
                          "flags"):
                 assert np.array_equal(ref[name].astype(np.int64), c[name][lo:hi]), (case["name"], name)
 
@@ -170,7 +199,7 @@ def test_pipeline_vectors_equal_python_reference_on_whole_cases(manifest):
 def test_verify_committed_passes():
     lines = []
     assert V.verify(VECTORS, log=lines.append) == []
-    assert len([line for line in lines if "identical" in line]) == 4
+    assert len([line for line in lines if "identical" in line]) == len(V.SETS) == 5
 
 
 def test_verify_reports_first_mismatch_with_inputs(tmp_path):

@@ -105,6 +105,40 @@ int64_t hdrg_sat_signed(int64_t x, unsigned width, int *clamped)
     return hdrg_clamp(x, -m, m, clamped);
 }
 
+int64_t hdrg_rhuw(int64_t a, int64_t d, unsigned s)
+{
+    /* d = dh 2^31 + dl with 0 <= dl < 2^31: |a dh| <= 2^62, 0 <= a dl + 2^(s-1) < 2^63 for a >= 0
+     * (|a dl| < 2^62 in general), and floor(floor(x / 2^31) / 2^(s-31)) = floor(x / 2^s) */
+    int64_t dh = hdrg_asr(d, 31u);
+    int64_t dl = d - dh * P2(31);
+#ifdef HDRG_BREAK_ROUNDING
+    return hdrg_asr(a * dh + hdrg_asr(a * dl, 31u), s - 31u);
+#else
+    return hdrg_asr(a * dh + hdrg_asr(a * dl + P2(s - 1u), 31u), s - 31u);
+#endif
+}
+
+/* sin(pi/2 x) = x (S0 + S1 x^2 + ... + S5 x^10), Q.30 (formats.SIN_POLY) */
+static const int64_t SIN_POLY[6] = {1686629713, -693598663, 85569264, -5026852, 172032, -3670};
+
+int32_t hdrg_sin_q30(uint64_t phase)
+{
+    unsigned quad = (unsigned)(phase >> 62);
+    int64_t r = (int64_t)((phase >> 32) & 0x3FFFFFFFu) + (int64_t)((phase >> 31) & 1u);
+    int64_t x = (quad & 1u) ? HDRG_ONE - r : r;      /* 0 .. 2^30 */
+    int64_t x2 = hdrg_rhu(x * x, HDRG_Q);
+    int64_t p = SIN_POLY[5];
+    int i;
+    for (i = 4; i >= 0; i--) {
+        p = hdrg_rhu(p * x2, HDRG_Q) + SIN_POLY[i];  /* |p| < 2^31 */
+    }
+    p = hdrg_rhu(p * x, HDRG_Q);
+    if (p > HDRG_ONE) {
+        p = HDRG_ONE;
+    }
+    return (int32_t)(quad >= 2u ? -p : p);
+}
+
 uint32_t hdrg_crc32_words(const uint32_t *words, size_t n)
 {
     uint32_t crc = 0xFFFFFFFFu;
@@ -123,7 +157,7 @@ uint32_t hdrg_crc32_words(const uint32_t *words, size_t n)
 
 /* ---------------------------------------------------------------- table (table.py) ------- */
 
-static const char *const WORD_NAMES[HDRG_TABLE_WORDS_MAX] = {
+static const char *const WORD_NAMES[HDRG_N_FIXED + 1u] = {
     "magic", "version", "length", "proxy_kind", "p_ref", "g_u", "u_off", "sh_u", "rate_est",
     "rate_n", "rate_shift", "rate_warmup", "s_bits", "g_v", "sh_v", "fs_q16", "combiner",
     "settle_n", "max_stale_n", "power_on_n", "exchange_n", "dwell_n", "e_0", "e_1", "e_2", "e_3",
@@ -133,7 +167,10 @@ static const char *const WORD_NAMES[HDRG_TABLE_WORDS_MAX] = {
 
 const char *hdrg_word_name(unsigned index)
 {
-    return index < HDRG_TABLE_WORDS_MAX ? WORD_NAMES[index] : "?";
+    if (index < HDRG_N_FIXED) {
+        return WORD_NAMES[index];
+    }
+    return index == HDRG_N_FIXED ? "crc32/aux_param" : index < HDRG_TABLE_WORDS_MAX ? "aux_param" : "?";
 }
 
 const char *hdrg_error_name(int err)
@@ -206,8 +243,99 @@ static int check_fields(const hdrg_table_t *t, unsigned *bad)
     for (g = 0; g < HDRG_N_TERMS; g++) {
         NEED(t->mant[g] != INT32_MIN, HDRG_W_M_0 + g);
     }
-    NEED(t->aux_gen == 0u, HDRG_W_AUX_GEN);
-    NEED(t->aux_nparams == 0u, HDRG_W_AUX_NPARAMS);
+    NEED(t->aux_gen <= 1u, HDRG_W_AUX_GEN);
+    NEED(t->aux_gen == 1u || t->aux_nparams == 0u, HDRG_W_AUX_NPARAMS);
+    return HDRG_OK;
+}
+
+/* table.decode_aux + table.check_aux: the aux_gen 1 parameters p[0 .. aux_nparams-1] (words 47..)
+ * decoded into t->aux_*; a field outside its range gives HDRG_ERR_FIELD with its word index. */
+static int parse_aux(hdrg_table_t *t, const uint32_t *p, unsigned *bad)
+{
+    const unsigned base = HDRG_N_FIXED;
+    uint32_t nt, nc, c, j, i;
+    int64_t wsum = 0;
+    if (t->aux_gen == 0u) {
+        return HDRG_OK;
+    }
+    NEED(t->aux_nparams >= 2u, HDRG_W_AUX_NPARAMS);
+    nt = p[0];
+    nc = p[1];
+    NEED(nt >= 1u && nt <= HDRG_AUX_MAX_TERMS, base);
+    NEED(nc <= HDRG_AUX_MAX_CH, base + 1u);
+    NEED(t->aux_nparams == 2u + nc + nt * HDRG_AUX_TERM_WORDS, HDRG_W_AUX_NPARAMS);
+    t->aux_nterms = nt;
+    t->aux_nch = nc;
+    for (c = 0; c < nc; c++) {
+        NEED(p[2u + c] <= HDRG_AUX_FRAC_MAX, base + 2u + c);
+        t->aux_frac[c] = p[2u + c];
+    }
+    for (j = 0; j < nt; j++) {
+        unsigned off = 2u + nc + j * HDRG_AUX_TERM_WORDS, w0 = base + off, used;
+        const uint32_t *wd = p + off;
+        hdrg_aux_term_t *a = &t->aux_term[j];
+        a->kind = wd[0];
+        a->sign = wd[1];
+        a->src = wd[2];
+        a->power = wd[3];
+        a->w = s32(wd[4]);
+        for (i = 0; i < 6u; i++) {
+            a->c[i] = s32(wd[5u + i]);
+        }
+        NEED(a->kind <= HDRG_AUX_OSC, w0);
+        NEED(a->sign <= 1u, w0 + 1u);
+        NEED(abs64(a->w) <= HDRG_ONE, w0 + 4u);
+        wsum += abs64(a->w);
+        if (a->kind == HDRG_AUX_INPUT) {
+            NEED(a->src < 2u + nc, w0 + 2u);
+            NEED(a->power >= 1u && a->power <= HDRG_AUX_POWER_MAX, w0 + 3u);
+            if (a->src == 0u) {
+                a->c[0] = I64(wd[5]);                   /* an F word: uint32 */
+            } else {
+                NEED(abs64(a->c[0]) <= HDRG_INT32_SYM, w0 + 5u);
+            }
+            NEED(a->c[1] > 0, w0 + 6u);
+            NEED(abs64(a->c[2]) <= a->c[1] / 2 + 1, w0 + 7u);
+            NEED(a->c[3] >= 0 && a->c[3] <= 62, w0 + 8u);
+            if (a->c[5] == 0) {
+                NEED(a->c[4] == 0, w0 + 9u);
+            } else {
+                NEED(a->c[5] >= (int64_t)HDRG_AUX_SB_MIN && a->c[5] <= (int64_t)HDRG_AUX_SB_MAX, w0 + 10u);
+                NEED(a->c[4] > 0, w0 + 9u);
+            }
+            used = 6u;
+        } else {
+            NEED(a->power == 1u, w0 + 3u);
+            NEED(a->src == (a->kind == HDRG_AUX_RATE ? t->proxy_kind : 0u), w0 + 2u);
+            used = 0u;
+        }
+        if (a->kind == HDRG_AUX_RATE) {
+            NEED(a->c[0] >= 1 && a->c[0] <= HDRG_S_BITS_MAX, w0 + 5u);
+            NEED(a->c[1] > 0 && a->c[1] < P2(62u - (unsigned)a->c[0]), w0 + 6u);
+            NEED(a->c[2] >= 0 && a->c[2] <= 62, w0 + 7u);
+            used = 3u;
+        } else if (a->kind == HDRG_AUX_DECAY_ON || a->kind == HDRG_AUX_DECAY_EXCHANGE) {
+            NEED(a->c[0] > 0, w0 + 5u);
+            NEED(a->c[1] >= (int64_t)HDRG_AUX_SB_MIN && a->c[1] <= (int64_t)HDRG_AUX_SB_MAX, w0 + 6u);
+            used = 2u;
+        } else if (a->kind == HDRG_AUX_RAMP) {
+            NEED(a->c[0] > 0, w0 + 5u);
+            NEED(a->c[1] > 0, w0 + 6u);
+            NEED(a->c[2] >= 0 && a->c[2] <= 62, w0 + 7u);
+            used = 3u;
+        } else if (a->kind == HDRG_AUX_OSC) {
+            NEED(a->c[1] >= 0, w0 + 6u);                /* W < 2^63 */
+            a->c[0] = I64(wd[5]) + a->c[1] * P2(32);
+            a->c[1] = 0;
+            NEED(a->c[0] >= 1, w0 + 5u);
+            NEED(a->c[2] == 0 || a->c[2] == 1, w0 + 7u);
+            used = 3u;
+        }
+        for (i = used; i < 6u; i++) {
+            NEED(a->c[i] == 0, w0 + 5u + i);
+        }
+    }
+    NEED(wsum <= HDRG_ONE + I64(nt), base + 2u + nc + (nt - 1u) * HDRG_AUX_TERM_WORDS + 4u);
     return HDRG_OK;
 }
 
@@ -301,6 +429,9 @@ int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, uns
     t->n_words = (uint32_t)n_words;
     t->crc = words[n_words - 1u];
     err = check_fields(t, bad);
+    if (err == HDRG_OK) {
+        err = parse_aux(t, words + HDRG_N_FIXED, bad);
+    }
     if (err != HDRG_OK) {
         return err;
     }
@@ -366,6 +497,12 @@ void hdrg_reset(hdrg_state_t *st)
     st->y_hold = 0;
     st->out_hold = 0;
     st->bias_hold = 0;
+    for (o = 0; o < HDRG_AUX_MAX_TERMS; o++) {
+        st->aux_y[o] = 0;
+        st->aux_ex[o] = 0;
+    }
+    st->kc = 0;
+    st->fresh = 1;
 }
 
 /* the value of a stored proxy word */
@@ -579,17 +716,110 @@ int64_t hdrg_evaluate(const hdrg_table_t *t, int32_t u, int32_t v, int32_t z, in
     return acc * P2(HDRG_Y_FRAC - E);               /* |acc| < 2^31: below 2^52 */
 }
 
+/* aux.normalize: q = clamp(RHU(clamp(x - REF) G + OFF, SH), +-2^30) */
+static int64_t aux_norm(int64_t x, const int64_t *c)
+{
+    int64_t dx = hdrg_clamp(x - c[0], -I64(HDRG_INT32_SYM), HDRG_INT32_SYM, NULL);
+    return hdrg_clamp(hdrg_rhu(dx * c[1] + c[2], (unsigned)c[3]), -HDRG_ONE, HDRG_ONE, NULL);
+}
+
+/* aux.AuxStage.step: the raw sum RHU(acc, 30) (the caller clamps it) */
+static int64_t aux_step(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input_t *ax, int64_t k,
+                        unsigned mode, int restart, int64_t s, int warm)
+{
+    const hdrg_table_t *t = &st->t;
+    int64_t acc = 0, kk = k < 0 ? 0 : k, sm = mode <= 1u ? 1 : (mode == 2u ? -1 : 0);
+    const int64_t one60 = P2(60);
+    unsigned j, i;
+    for (j = 0; j < t->aux_nterms; j++) {
+        const hdrg_aux_term_t *a = &t->aux_term[j];
+        const int64_t *c = a->c;
+        int64_t g = 0, y, x;
+        switch (a->kind) {
+        case HDRG_AUX_INPUT:
+            x = a->src == 0u ? I64(in->f) : a->src == 1u ? I64(in->t) : (ax != NULL ? I64(ax->a[a->src - 2u]) : 0);
+            y = aux_norm(x, c);
+            if (c[5] != 0) {
+                if (restart) {
+                    st->aux_y[j] = y * HDRG_ONE;
+                } else {
+                    st->aux_y[j] += hdrg_rhuw(c[4], y * HDRG_ONE - st->aux_y[j], (unsigned)c[5]);
+                }
+                y = hdrg_rhu(st->aux_y[j], HDRG_Q);
+            }
+            g = y;
+            for (i = 1; i < a->power; i++) {
+                g = hdrg_rhu(g * y, HDRG_Q);
+            }
+            break;
+        case HDRG_AUX_RATE:
+            if (!warm) {
+                int64_t lim = P2((unsigned)c[0]) - 1;
+                g = hdrg_rhu(hdrg_clamp(s, -lim, lim, NULL) * c[1], (unsigned)c[2]);
+                g = hdrg_clamp(g, -HDRG_ONE, HDRG_ONE, NULL);
+            }
+            break;
+        case HDRG_AUX_ONE:
+            g = HDRG_ONE;
+            break;
+        case HDRG_AUX_DECAY_ON:
+            if (restart) {
+                st->aux_y[j] = one60;
+            } else {
+                st->aux_y[j] += hdrg_rhuw(c[0], -st->aux_y[j], (unsigned)c[1]);
+            }
+            g = hdrg_rhu(st->aux_y[j], HDRG_Q);
+            break;
+        case HDRG_AUX_DECAY_EXCHANGE:
+            if (restart) {
+                st->aux_y[j] = 0;
+                st->aux_ex[j] = 0;
+            }
+            if (mode == 3u) {
+                st->aux_y[j] = 0;
+                st->aux_ex[j] = 1;
+            } else if (st->aux_ex[j]) {
+                st->aux_y[j] = one60;
+                st->aux_ex[j] = 0;
+            } else {
+                st->aux_y[j] += hdrg_rhuw(c[0], -st->aux_y[j], (unsigned)c[1]);
+            }
+            g = hdrg_rhu(st->aux_y[j], HDRG_Q);
+            break;
+        case HDRG_AUX_RAMP:
+            g = kk >= c[0] ? HDRG_ONE : hdrg_rhu(kk * c[1], (unsigned)c[2]);   /* kk < N < 2^31 */
+            break;
+        default:                                    /* osc: the phase K W mod 2^64 (unsigned) */
+            g = hdrg_sin_q30((uint64_t)kk * (uint64_t)c[0] + (c[2] != 0 ? UINT64_C(0x4000000000000000) : 0u));
+            break;
+        }
+        if (a->sign) {
+            g = sm * g;
+        }
+        acc += a->w * g;                            /* |.| <= 6 2^60 */
+    }
+    return hdrg_rhu(acc, HDRG_Q);
+}
+
 /* compensate.Pipeline.step */
 int hdrg_step(hdrg_state_t *st, const hdrg_input_t *in, hdrg_sample_t *o)
+{
+    return hdrg_step_aux(st, in, NULL, o);
+}
+
+int hdrg_step_aux(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input_t *ax, hdrg_sample_t *o)
 {
     const hdrg_table_t *t = &st->t;
     int restart = in->restart != 0;
     int uc = 0, vc = 0, warm = 0, zc = 0, sat = 0, cvalid, valid;
     unsigned state, mode, flags;
     uint32_t pw;
-    int64_t s = 0, b;
+    int64_t s = 0, b, k, z;
     int32_t u, v;
     if (in->mode < -1 || in->mode > 3) {
+        return HDRG_ERR_INPUT;
+    }
+    if (ax != NULL && ax->k_given && (ax->k > HDRG_K_LIMIT || ax->k < -HDRG_K_LIMIT)) {
         return HDRG_ERR_INPUT;
     }
     /* 1. sequencer state: self-timed or logged */
@@ -610,8 +840,14 @@ int hdrg_step(hdrg_state_t *st, const hdrg_input_t *in, hdrg_sample_t *o)
     pw = t->proxy_kind == 0u ? in->f : (uint32_t)in->t;   /* bit pattern, decoded by pword */
     u = proxy_u(t, pword(st, pw), &uc);
     v = rate_step(st, pw, restart, &s, &vc, &warm);
+    /* 4b. aux: the generators (aux_gen 1) or the Z word */
+    k = (ax != NULL && ax->k_given) ? ax->k : st->kc;
+    st->kc = k < HDRG_K_LIMIT ? k + 1 : HDRG_K_LIMIT;
+    z = t->aux_gen == 1u ? aux_step(st, in, ax, k, mode, restart || st->fresh, s, warm) : I64(in->z);
+    st->fresh = 0;
+    z = hdrg_clamp(z, -HDRG_ONE, HDRG_ONE, &zc);
     /* 5. evaluator */
-    b = hdrg_evaluate(t, u, v, in->z, &zc);
+    b = hdrg_evaluate(t, u, v, (int32_t)z, NULL);
     /* 6. compensate */
     valid = cvalid && !warm && mode != 3u;
     if (valid) {
@@ -631,7 +867,7 @@ int hdrg_step(hdrg_state_t *st, const hdrg_input_t *in, hdrg_sample_t *o)
     o->sign = STATE_SIGN[state];
     o->u = u;
     o->v = v;
-    o->z = (int32_t)hdrg_clamp(in->z, -HDRG_ONE, HDRG_ONE, NULL);
+    o->z = (int32_t)z;
     o->s = s;
     o->acc = st->acc;
     o->cnt = st->cnt;

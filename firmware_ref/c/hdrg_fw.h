@@ -13,12 +13,14 @@
  *   - uint32 -> int32 reinterpretation is done arithmetically, never by a cast.
  *
  * Usage:
- *     static hdrg_state_t st;                     (16.7 kB with HDRG_N_HIST_MAX = 4096)
+ *     static hdrg_state_t st;                     (17.5 kB with HDRG_N_HIST_MAX = 4096)
  *     if (hdrg_init(&st, words, n_words) != HDRG_OK) ... refuse the table
  *     per sample: hdrg_step(&st, &in, &out);      (in: input words, out: outputs + intermediates)
+ *     or hdrg_step_aux(&st, &in, &aux, &out) with the aux words A_c and the counter K (aux_gen 1)
  *
  * Units (FORMATS.md): F uint32 LSB 2^-18 Hz; T int32 LSB 2^-16 degC; R int32 LSB 2^-10 deg/h;
- * u, v, z int32 Q1.30; y, B int64 LSB 2^-21 deg/h; OUT, BIAS int32 LSB 2^-10 deg/h.
+ * u, v, z int32 Q1.30; y, B int64 LSB 2^-21 deg/h; OUT, BIAS int32 LSB 2^-10 deg/h; A_c int32
+ * LSB 2^-AF_c (table); K int64 samples since power-on.
  */
 #ifndef HDRG_FW_H
 #define HDRG_FW_H
@@ -40,8 +42,14 @@
 #define HDRG_MAGIC 0x47524448u          /* 'HDRG' as little-endian bytes */
 #define HDRG_LAYOUT_VERSION 1u
 #define HDRG_N_FIXED 47u                /* words 0..46: header, config, mantissas, aux header */
-#define HDRG_TABLE_WORDS_MAX 48u        /* version 1: no aux parameters, CRC last */
 #define HDRG_N_TERMS 17u
+/* aux generators (aux_gen 1 'sum'): parameters n_terms, n_chan, AF_c per channel, 11 words per term */
+#define HDRG_AUX_MAX_TERMS 6u
+#define HDRG_AUX_MAX_CH 4u
+#define HDRG_AUX_TERM_WORDS 11u
+#define HDRG_AUX_FRAC_MAX 48u
+#define HDRG_AUX_PARAMS_MAX (2u + HDRG_AUX_MAX_CH + HDRG_AUX_MAX_TERMS * HDRG_AUX_TERM_WORDS)   /* 72 */
+#define HDRG_TABLE_WORDS_MAX (HDRG_N_FIXED + HDRG_AUX_PARAMS_MAX + 1u)                     /* 120 */
 
 enum hdrg_word {
     HDRG_W_MAGIC = 0, HDRG_W_VERSION, HDRG_W_LENGTH, HDRG_W_PROXY_KIND, HDRG_W_P_REF, HDRG_W_G_U,
@@ -69,6 +77,14 @@ enum hdrg_word {
 #define HDRG_ALIGN_MAX 31
 #define HDRG_Y_FRAC 21
 #define HDRG_OUT_SHIFT 11
+#define HDRG_AUX_SB_MIN 31u
+#define HDRG_AUX_SB_MAX 62u
+#define HDRG_AUX_POWER_MAX 5u
+#define HDRG_K_LIMIT ((int64_t)1 << 62)
+enum hdrg_aux_kind {
+    HDRG_AUX_INPUT = 0, HDRG_AUX_RATE, HDRG_AUX_ONE, HDRG_AUX_DECAY_ON, HDRG_AUX_DECAY_EXCHANGE,
+    HDRG_AUX_RAMP, HDRG_AUX_OSC
+};
 
 /* ---- status flags ---------------------------------------------------------------------- */
 #define HDRG_FLAG_PROXY_CLAMPED 1u
@@ -100,8 +116,16 @@ enum hdrg_error {
     HDRG_ERR_CRC,       /* the last word is not the CRC-32 of the others */
     HDRG_ERR_FIELD,     /* a field outside its legal range (which: *bad_word) */
     HDRG_ERR_HORNER,    /* the mantissas break the Horner interval bound (|acc| <= 2^31 - 1) */
-    HDRG_ERR_INPUT      /* hdrg_step: mode not in -1..3 */
+    HDRG_ERR_INPUT      /* hdrg_step: mode not in -1..3; hdrg_step_aux: |K| > 2^62 */
 };
+
+/* One decoded aux term (FORMATS.md "Aux generators"; firmware_ref/table.py AuxTerm): c[] as
+ * stored, except input's REF of an F source (the uint32 value) and osc's c[0] = W (64 bits). */
+typedef struct hdrg_aux_term {
+    uint32_t kind, sign, src, power;
+    int64_t w;                  /* weight, Q1.30 */
+    int64_t c[6];
+} hdrg_aux_term_t;
 
 /* The decoded table fields (FORMATS.md "Coefficient table layout"); signed fields decoded from
  * two's complement, p_ref of a freq table kept as the uint32 value. */
@@ -118,6 +142,9 @@ typedef struct hdrg_table {
     uint32_t e_row[4], e_7, e_acc;
     int32_t mant[HDRG_N_TERMS];
     uint32_t aux_gen, aux_nparams;
+    uint32_t aux_nterms, aux_nch;               /* aux_gen 1 */
+    uint32_t aux_frac[HDRG_AUX_MAX_CH];
+    hdrg_aux_term_t aux_term[HDRG_AUX_MAX_TERMS];
     uint32_t n_words, crc;
 } hdrg_table_t;
 
@@ -131,13 +158,23 @@ typedef struct hdrg_input {
     uint8_t restart;    /* 1 at the start of a gap-free segment */
 } hdrg_input_t;
 
+/* The extra input words of one sample for an aux_gen 1 table (hdrg_step_aux): the aux words
+ * A_c (int32, LSB 2^-AF_c of the aux_* column's unit) and the sample counter K since power-on
+ * (|K| <= 2^62; k_given 0: the internal count, K = previous K + 1, 0 at power-on).  F and T come
+ * from hdrg_input_t (both are read when a term uses them). */
+typedef struct hdrg_aux_input {
+    int32_t a[HDRG_AUX_MAX_CH];
+    int64_t k;
+    uint8_t k_given;
+} hdrg_aux_input_t;
+
 /* The outputs and every intermediate of one sample. */
 typedef struct hdrg_sample {
     uint8_t state;      /* sequencer state (enum hdrg_seq_state) */
     uint8_t vs;         /* virtual-switch bits of the state */
     uint8_t mode;       /* run-log mode 0..3 */
     int8_t sign;        /* rate sign of the state: 1, -1, 0 (sense loop open) */
-    int32_t u, v, z;    /* Q1.30 (clamped) */
+    int32_t u, v, z;    /* Q1.30 (clamped; z: the Z word (aux_gen 0) or the generated z) */
     int64_t s;          /* rate-estimator sum before its clamp (P LSB; iir: 2^-24 P LSB) */
     int64_t acc;        /* window sum after this sample (LSB 2^-10 deg/h) */
     uint32_t cnt;       /* window count after this sample */
@@ -169,6 +206,11 @@ typedef struct hdrg_state {
     /* held outputs */
     int64_t y_hold;
     int32_t out_hold, bias_hold;
+    /* aux generators: filter / decay states (Q1.60), exchange flags, sample counter, power-on */
+    int64_t aux_y[HDRG_AUX_MAX_TERMS];
+    uint8_t aux_ex[HDRG_AUX_MAX_TERMS];
+    int64_t kc;
+    uint8_t fresh;
 } hdrg_state_t;
 
 /* ---- primitives (FORMATS.md "primitives"; preconditions as firmware_ref/arith.py) ------- */
@@ -190,6 +232,11 @@ int64_t hdrg_clamp(int64_t x, int64_t lo, int64_t hi, int *clamped);
 int64_t hdrg_sat_signed(int64_t x, unsigned width, int *clamped);
 /* CRC-32 (IEEE 802.3, zlib.crc32) of n words as little-endian bytes. */
 uint32_t hdrg_crc32_words(const uint32_t *words, size_t n);
+/* RHUW(a, d, s) = RHU(a * d, s) for |a| < 2^31, |d| <= 2^62, 31 <= s <= 62 (a product wider than
+ * int64, computed from d = dh 2^31 + dl; arith.mul_rshift_round_wide). */
+int64_t hdrg_rhuw(int64_t a, int64_t d, unsigned s);
+/* sin(2 pi phase / 2^64) in Q1.30 (firmware_ref/aux.py sin_q30), phase a uint64. */
+int32_t hdrg_sin_q30(uint64_t phase);
 
 /* ---- table, pipeline ------------------------------------------------------------------- */
 /* Decode and check a table (magic, version, length, CRC, every field range and the Horner
@@ -205,8 +252,12 @@ const char *hdrg_error_name(int err);
 int hdrg_init(hdrg_state_t *st, const uint32_t *words, size_t n_words, unsigned *bad_word);
 /* Power-on reset (everything, including the held outputs). */
 void hdrg_reset(hdrg_state_t *st);
-/* One sample.  Returns HDRG_OK, or HDRG_ERR_INPUT (mode outside -1..3; the state is unchanged). */
+/* One sample.  Returns HDRG_OK, or HDRG_ERR_INPUT (mode outside -1..3; the state is unchanged).
+ * Same as hdrg_step_aux(st, in, NULL, out): aux words 0, the internal sample counter. */
 int hdrg_step(hdrg_state_t *st, const hdrg_input_t *in, hdrg_sample_t *out);
+/* One sample with the aux generators' extra inputs (aux may be NULL); HDRG_ERR_INPUT also when
+ * |K| > 2^62. */
+int hdrg_step_aux(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input_t *aux, hdrg_sample_t *out);
 /* The bias B (LSB 2^-21 deg/h) at u, v in [-2^30, 2^30] (precondition) and any z (clamped;
  * *z_clamped may be NULL). */
 int64_t hdrg_evaluate(const hdrg_table_t *t, int32_t u, int32_t v, int32_t z, int *z_clamped);

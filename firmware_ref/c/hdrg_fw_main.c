@@ -22,8 +22,11 @@
 #endif
 
 #define LINE_MAX_CHARS 8192
+#define P31 ((int64_t)1 << 31)
+#define P62 ((int64_t)1 << 62)
 #define MAX_TOKENS 300
 #define REC_IN 6        /* binary input record: F T R MODE RESTART Z, int64 little-endian */
+#define REC_IN_AUX 11   /* ... with K A0 A1 A2 A3 (BIN N 11, BENCH N REPEATS 11) */
 #define REC_OUT 16      /* binary output record: the 16 fields of an O line, int64 little-endian */
 
 static hdrg_state_t g_st;
@@ -161,7 +164,7 @@ static void load_table(const uint32_t *words, size_t n)
     g_run_kind = 0;
     e = hdrg_init(&g_st, words, n, &bad);
     if (e != HDRG_OK) {
-        sprintf(detail, "word %u %s", bad, hdrg_word_name(bad));
+        sprintf(detail, "word %u %s", bad, n > 0 && bad == n - 1u ? "crc32" : hdrg_word_name(bad));
         err(hdrg_error_name(e), detail);
         return;
     }
@@ -192,21 +195,33 @@ static void req_table(char **tok, int ntok)
     load_table(words, (size_t)(ntok - 1));
 }
 
-/* validate and convert one sample's inputs; returns an error text or NULL */
-static const char *make_input(const int64_t *a, hdrg_input_t *in)
+/* validate and convert one sample's inputs (na = 6 .. 11 values: F T R MODE RESTART Z, then
+ * optionally K and the aux words A0..A3, missing ones 0; without K the internal counter counts);
+ * returns an error text or NULL */
+static const char *make_input(const int64_t *a, int na, hdrg_input_t *in, hdrg_aux_input_t *ax)
 {
+    int c;
     if (a[0] < 0 || a[0] > 4294967295LL) return "F outside uint32";
     if (a[1] < INT32_MIN || a[1] > INT32_MAX) return "T outside int32";
     if (a[2] < INT32_MIN || a[2] > INT32_MAX) return "R outside int32";
     if (a[3] < -1 || a[3] > 3) return "MODE not in -1..3";
     if (a[4] != 0 && a[4] != 1) return "RESTART not 0 or 1";
     if (a[5] < INT32_MIN || a[5] > INT32_MAX) return "Z outside int32";
+    if (na > 6 && (a[6] > HDRG_K_LIMIT || a[6] < -HDRG_K_LIMIT)) return "K outside +-2^62";
+    for (c = 7; c < na; c++) {
+        if (a[c] < INT32_MIN || a[c] > INT32_MAX) return "A (aux word) outside int32";
+    }
     in->f = (uint32_t)a[0];
     in->t = (int32_t)a[1];
     in->r = (int32_t)a[2];
     in->mode = (int8_t)a[3];
     in->restart = (uint8_t)a[4];
     in->z = (int32_t)a[5];
+    ax->k_given = (uint8_t)(na > 6);
+    ax->k = na > 6 ? a[6] : 0;
+    for (c = 0; c < (int)HDRG_AUX_MAX_CH; c++) {
+        ax->a[c] = 7 + c < na ? (int32_t)a[7 + c] : 0;
+    }
     return NULL;
 }
 
@@ -242,20 +257,25 @@ static void sample_fields(const hdrg_sample_t *o, int64_t *f)
 
 static void req_sample(char **tok, int ntok)
 {
-    static const char usage[] = "S <F> <T> <R> <MODE> <RESTART> <Z>";
-    int64_t a[6], f[REC_OUT];
+    static const char usage[] = "S <F> <T> <R> <MODE> <RESTART> <Z> [<K> [<A0> [<A1> [<A2> [<A3>]]]]]";
+    int64_t a[REC_IN_AUX], f[REC_OUT];
     hdrg_input_t in;
+    hdrg_aux_input_t ax;
     hdrg_sample_t o;
     const char *e;
     int i;
-    if (!need_args(ntok, 7, usage) || !parse_args(tok + 1, 6, a, usage)) {
+    if (ntok < 1 + REC_IN || ntok > 1 + REC_IN_AUX) {
+        err("SYNTAX", usage);
+        return;
+    }
+    if (!parse_args(tok + 1, ntok - 1, a, usage)) {
         return;
     }
     if (!g_have_table) {
         err("NOTABLE", "send TABLE first");
         return;
     }
-    e = make_input(a, &in);
+    e = make_input(a, ntok - 1, &in, &ax);
     if (e == NULL) {
         e = check_run_kind(&in);
     }
@@ -263,7 +283,7 @@ static void req_sample(char **tok, int ntok)
         err("RANGE", e);
         return;
     }
-    hdrg_step(&g_st, &in, &o);
+    hdrg_step_aux(&g_st, &in, &ax, &o);
     sample_fields(&o, f);
     fputs("O", stdout);
     for (i = 0; i < REC_OUT; i++) {
@@ -343,6 +363,17 @@ static void req_prim(const char *name, char **tok, int ntok)
         }
         r = hdrg_clamp(a[0], a[1], a[2], &c);
         printf("R %" PRId64 " %d\n", r, c);
+    } else if (strcmp(name, "RHUW") == 0) {
+        if (!need_args(ntok, 4, "RHUW <A> <D> <S>") || !parse_args(tok + 1, 3, a, "RHUW <A> <D> <S>")) return;
+        if (a[0] <= -P31 || a[0] >= P31 || a[1] < -P62 || a[1] > P62 || a[2] < 31 || a[2] > 62) {
+            err("RANGE", "RHUW needs |A| < 2^31, |D| <= 2^62 and 31 <= S <= 62");
+            return;
+        }
+        printf("R %" PRId64 "\n", hdrg_rhuw(a[0], a[1], (unsigned)a[2]));
+    } else if (strcmp(name, "SIN") == 0) {
+        if (!need_args(ntok, 2, "SIN <PHASE>") || !parse_args(tok + 1, 1, a, "SIN <PHASE>")) return;
+        /* the uint64 phase given as the int64 of its bits: (uint64_t)a is a mod 2^64 */
+        printf("R %" PRId32 "\n", hdrg_sin_q30((uint64_t)a[0]));
     } else { /* SAT */
         if (!need_args(ntok, 3, "SAT <X> <WIDTH>") || !parse_args(tok + 1, 2, a, "SAT <X> <WIDTH>")) return;
         if (a[1] < 1 || a[1] > 63) {
@@ -369,18 +400,18 @@ static void req_crc(char **tok, int ntok)
 
 /* ------------------------------------------------------------------ binary blocks -------- */
 
-static void read_record(hdrg_input_t *in, long long index)
+static void read_record(hdrg_input_t *in, hdrg_aux_input_t *ax, int width, long long index)
 {
-    unsigned char buf[8 * REC_IN];
-    int64_t a[REC_IN];
+    unsigned char buf[8 * REC_IN_AUX];
+    int64_t a[REC_IN_AUX];
     const char *e;
     int i, j;
     char msg[160];
-    if (fread(buf, 1, sizeof buf, stdin) != sizeof buf) {
+    if (fread(buf, 1, (size_t)(8 * width), stdin) != (size_t)(8 * width)) {
         sprintf(msg, "binary block truncated at record %lld", index);
         fatal(msg);
     }
-    for (i = 0; i < REC_IN; i++) {
+    for (i = 0; i < width; i++) {
         uint64_t u = 0;
         for (j = 7; j >= 0; j--) {
             u = (u << 8) | buf[8 * i + j];
@@ -388,7 +419,7 @@ static void read_record(hdrg_input_t *in, long long index)
         /* two's complement uint64 -> int64 without the implementation-defined cast */
         a[i] = u >= UINT64_C(0x8000000000000000) ? -(int64_t)(UINT64_C(0xFFFFFFFFFFFFFFFF) - u) - 1 : (int64_t)u;
     }
-    e = make_input(a, in);
+    e = make_input(a, width, in, ax);
     if (e == NULL) {
         e = check_run_kind(in);
     }
@@ -415,33 +446,40 @@ static void write_record(const hdrg_sample_t *o)
     }
 }
 
-/* the header of a binary block; any error is fatal (the block's bytes follow on stdin) */
-static void parse_count(char **tok, int ntok, int want, int64_t *a)
+/* the header of a binary block: want - 1 counts, then an optional record width (6 or 11);
+ * any error is fatal (the block's bytes follow on stdin); returns the width */
+static int parse_count(char **tok, int ntok, int want, int64_t *a)
 {
     int i;
-    if (ntok != want) {
-        fatal(want == 2 ? "usage: BIN <N>" : "usage: BENCH <N> <REPEATS>");
+    int64_t width = REC_IN;
+    if (ntok != want && ntok != want + 1) {
+        fatal(want == 2 ? "usage: BIN <N> [<WIDTH>]" : "usage: BENCH <N> <REPEATS> [<WIDTH>]");
     }
     for (i = 0; i < want - 1; i++) {
         if (!parse_i64(tok[i + 1], &a[i]) || a[i] < 0) {
             fatal("binary block: the count is not a non-negative integer");
         }
     }
+    if (ntok == want + 1 && (!parse_i64(tok[want], &width) || (width != REC_IN && width != REC_IN_AUX))) {
+        fatal("binary block: the record width must be 6 or 11");
+    }
     if (!g_have_table) {
         fatal("binary block without a table");
     }
+    return (int)width;
 }
 
 static void req_bin(char **tok, int ntok)
 {
     int64_t a[1], i;
     hdrg_input_t in;
+    hdrg_aux_input_t ax;
     hdrg_sample_t o;
-    parse_count(tok, ntok, 2, a);
+    int width = parse_count(tok, ntok, 2, a);
     printf("BIN %" PRId64 "\n", a[0]);
     for (i = 0; i < a[0]; i++) {
-        read_record(&in, (long long)i);
-        hdrg_step(&g_st, &in, &o);
+        read_record(&in, &ax, width, (long long)i);
+        hdrg_step_aux(&g_st, &in, &ax, &o);
         write_record(&o);
     }
 }
@@ -450,15 +488,17 @@ static void req_bench(char **tok, int ntok)
 {
     int64_t a[2], i, rep;
     hdrg_input_t *ins;
+    hdrg_aux_input_t *axs;
     hdrg_sample_t o;
     uint64_t best = UINT64_MAX, sum = 0;
-    parse_count(tok, ntok, 3, a);
+    int width = parse_count(tok, ntok, 3, a);
     ins = (hdrg_input_t *)malloc((size_t)(a[0] > 0 ? a[0] : 1) * sizeof *ins);
-    if (ins == NULL) {
+    axs = (hdrg_aux_input_t *)malloc((size_t)(a[0] > 0 ? a[0] : 1) * sizeof *axs);
+    if (ins == NULL || axs == NULL) {
         fatal("out of memory");
     }
     for (i = 0; i < a[0]; i++) {
-        read_record(&ins[i], (long long)i);
+        read_record(&ins[i], &axs[i], width, (long long)i);
     }
     for (rep = 0; rep < (a[1] > 0 ? a[1] : 1); rep++) {
         clock_t t0, t1;
@@ -467,7 +507,7 @@ static void req_bench(char **tok, int ntok)
         sum = 0;
         t0 = clock();
         for (i = 0; i < a[0]; i++) {
-            hdrg_step(&g_st, &ins[i], &o);
+            hdrg_step_aux(&g_st, &ins[i], &axs[i], &o);
             sum += ((uint64_t)(uint32_t)o.out ^ ((uint64_t)(uint32_t)o.bias << 32)) + o.flags;
         }
         t1 = clock();
@@ -477,6 +517,7 @@ static void req_bench(char **tok, int ntok)
         }
     }
     free(ins);
+    free(axs);
     hdrg_reset(&g_st);
     g_run_kind = 0;
     printf("BENCH %" PRId64 " %" PRIu64 " %016" PRIx64 "\n", a[0], best, sum);
@@ -536,7 +577,7 @@ int main(void)
         } else if (strcmp(tok[0], "RHU") == 0 || strcmp(tok[0], "MULRHU") == 0
                    || strcmp(tok[0], "FLOORDIV") == 0 || strcmp(tok[0], "DIVROUND") == 0
                    || strcmp(tok[0], "DIVRS") == 0 || strcmp(tok[0], "CLAMP") == 0
-                   || strcmp(tok[0], "SAT") == 0) {
+                   || strcmp(tok[0], "SAT") == 0 || strcmp(tok[0], "RHUW") == 0 || strcmp(tok[0], "SIN") == 0) {
             req_prim(tok[0], tok, ntok);
         } else if (strcmp(tok[0], "CRC") == 0) {
             req_crc(tok, ntok);
