@@ -87,7 +87,7 @@ from host_tools import effects, metrics
 from host_tools import runlog as rl
 from host_tools.compensate import compensate, fit_config_from_logs, prepare
 from host_tools.fit import fit_logs
-from host_tools.model import BiasModel
+from host_tools.model import BiasModel, jsonable
 from host_tools.regressors import AuxConfig, generator_values, regressor_matrix
 
 G_MIN = 0.02                 # minimum CV gain (fraction of held-out residual variance)
@@ -925,22 +925,6 @@ def _config_like(train, cfg, alt):
 # report files
 # ---------------------------------------------------------------------------------------------
 
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items() if not str(k).startswith("_")}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if math.isfinite(obj) else None
-    return obj
-
-
 def _fmt(x, prec=4):
     return "n/a" if x is None else f"{x:.{prec}g}"
 
@@ -960,7 +944,7 @@ def write_report(report, model, out_dir, train, hold, plots=True) -> None:
         entry["figures"] = figs
     model.to_json(os.path.join(out_dir, "model.json"))
     report["model"] = "model.json"
-    doc = _jsonable(report)
+    doc = jsonable(report, skip_private=True)
     with open(os.path.join(out_dir, "diagnose.json"), "w", encoding="utf-8") as fh:
         json.dump(doc, fh, indent=1, allow_nan=False)
         fh.write("\n")

@@ -50,6 +50,7 @@ import numba as nb
 import numpy as np
 from numpy.polynomial import legendre as _leg
 
+from host_tools.model import jsonable
 from firmware_ref.terms import K_AUX, N_TERMS, PAPER_TERMS, POLY_INDEX, TERM_NAMES, TERM_POWERS, parse_terms
 
 __all__ = [
@@ -599,7 +600,7 @@ class FitResult:
 
     def to_dict(self) -> dict:
         """Plain JSON-serializable dict (non-finite floats become None)."""
-        return _jsonable({
+        return jsonable({
             "model": "hdrg-17-term", "coef": self.coef, "terms": self.terms,
             "term_names": [TERM_NAMES[k] for k in range(N_TERMS)], "requested": self.requested,
             "dropped": self.dropped, "collinear": {f"k{k}": [int(j) for j in v] for k, v in self.collinear.items()},
@@ -608,22 +609,6 @@ class FitResult:
             "cv": self.cv, "rcond": self.rcond, "extra": self.extra,
             "stderr_note": "assumes white residuals; optimistic for autocorrelated data",
         })
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return [_jsonable(v) for v in x.tolist()]
-    if isinstance(x, (bool, np.bool_)):
-        return bool(x)
-    if isinstance(x, (int, np.integer)):
-        return int(x)
-    if isinstance(x, (float, np.floating)):
-        return float(x) if math.isfinite(x) else None
-    return x
 
 
 def _result(sol, requested, n, sum_w, u_range, v_range, rcond, cv=None):

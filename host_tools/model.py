@@ -135,7 +135,7 @@ class BiasModel:
             "terms": list(self.terms),
             "term_names": [TERM_NAMES[k] for k in self.terms],
             "coef_dph": [float(c) for c in self.coef],
-            "fit": _jsonable(self.fit),
+            "fit": jsonable(self.fit),
         }
 
     def to_json(self, path) -> None:
@@ -206,14 +206,16 @@ def _check_coef(coef, terms, source) -> np.ndarray:
     return arr
 
 
-def _jsonable(obj):
-    """numpy -> plain Python, non-finite floats -> None (strict JSON)."""
+def jsonable(obj, skip_private: bool = False):
+    """numpy -> plain Python, non-finite floats -> None (strict JSON); with ``skip_private``, dict
+    keys starting with '_' are left out.  The one converter of every JSON the host tools write."""
     if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
+        return {str(k): jsonable(v, skip_private) for k, v in obj.items()
+                if not (skip_private and str(k).startswith("_"))}
     if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
+        return [jsonable(v, skip_private) for v in obj]
     if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
+        return jsonable(obj.tolist(), skip_private)
     if isinstance(obj, (np.bool_, bool)):
         return bool(obj)
     if isinstance(obj, (np.integer, int)):
