@@ -8,7 +8,6 @@ quantized and run through the fixed-point path with the same before/after number
 golden-vs-fixed bound)."""
 import dataclasses
 import math
-import time
 import warnings
 
 import numpy as np
@@ -17,7 +16,7 @@ import pytest
 from firmware_ref import arith
 from firmware_ref import formats as F
 from firmware_ref import inputs
-from firmware_ref.aux import aux_columns, sin_q30
+from firmware_ref.aux import sin_q30
 from firmware_ref.compensate import compensate_log, log_words, run_reference
 from firmware_ref.kernel import _rhu_wide, _sin_q30, run_words
 from firmware_ref.table import FIELD_INDEX, Table, TableError, encode_aux
@@ -26,7 +25,7 @@ from host_tools import compensate as hc
 from host_tools import runlog as rl
 from host_tools.diagnose import STAT_KEYS, _stats_one, diagnose
 from host_tools.fit import fit_logs
-from host_tools.quantize import QuantizeError, aux_channel_fracs, quantize, read_table
+from host_tools.quantize import QuantizeError, aux_channel_fracs, dequantized_log, quantize, read_table
 from host_tools.regressors import aux_regressor
 from test_diagnose import CASES, world
 
@@ -34,35 +33,18 @@ GOAL_DPH = 0.002
 COEF = [3e3, -2e3, 1e3, -5e2, 7e2, -3e2, 1e2, 5e2, -4e2, 3e2, -2e2, 1e2, -9e1, 8e1, -7e1, 6e1, -5e1]
 
 
-def dequantized(log, model):
-    """The log with every column the fixed path reads replaced by the value of its word (proxy,
-    rate, and the channels of the aux generator): the golden fed with these is the reference for
-    |fixed - golden| (FORMATS.md)."""
-    cfg = model.config
-    w = log_words(log, cfg)
-    cols = {cfg.proxy.column: inputs.from_words(w["p"], inputs.proxy_frac(cfg.proxy.kind)),
-            "rate_dph": inputs.from_words(w["r"], F.RATE_FRAC)}
-    if w["f"] is not None:
-        cols["freq_hz"] = inputs.from_words(w["f"], F.FREQ_FRAC)
-    if w["t"] is not None:
-        cols["temp_c"] = inputs.from_words(w["t"], F.TEMP_FRAC)
-    for c, (col, fr) in enumerate(zip(aux_columns(cfg.aux), aux_channel_fracs(cfg.aux))):
-        cols[col] = inputs.from_words(w["aux"][:, c], fr)
-    return log.with_columns(**cols)
-
-
 def fixed_vs_golden(log, model, table=None):
     """(fixed log, golden log on the dequantized inputs, flags, quantized)."""
     q = quantize(model)
     fixed, flags = compensate_log(log, model, table=q.table if table is None else table, return_flags=True)
-    gold = hc.compensate(dequantized(log, model), model)
+    gold = hc.compensate(dequantized_log(log, model), model)
     return fixed, gold, flags, q
 
 
 def check_close(log, model, what):
     fixed, gold, flags, q = fixed_vs_golden(log, model)
     np.testing.assert_array_equal(fixed["valid"], gold["valid"])
-    prep = hc.prepare(dequantized(log, model), model)
+    prep = hc.prepare(dequantized_log(log, model), model)
     np.testing.assert_array_equal(flags & 31, prep.flags)
     v = gold["valid"] > 0
     err = fixed.rate_dph - gold.rate_dph
@@ -389,7 +371,7 @@ def test_acceptance_effect_found_exported_quantized_and_run_in_fixed_point(tmp_p
         assert table == read_table(outdir / "hdrg_table.memh") == q.table and header_words == q.table.to_words()
         fixed = hc.compensate(hold, model, impl="fixed", table=table)
         np.testing.assert_array_equal(fixed.rate_dph, compensate_log(hold, model).rate_dph)
-        gold = hc.compensate(dequantized(hold, model), model)
+        gold = hc.compensate(dequantized_log(hold, model), model)
         flt = hc.compensate(hold, model)
         rows[name] = {"float": _stats_one(*_run(flt, hold)), "golden_deq": _stats_one(*_run(gold, hold)),
                       "fixed": _stats_one(*_run(fixed, hold)), "bound": q.report["bound_dph"]["out"],
@@ -429,7 +411,7 @@ def test_aux_table_uploads_to_the_virtual_device():
     run_words with the F and T words (its aux words read 0)."""
     from host_tools import device as D
     from host_tools import serial_link as SL
-    from test_serial import PtyDevice
+    from test_serial import PtyDevice, stream_around_upload
 
     from host_tools.reversal import ReversalConfig
     log = _sim_log(seed=5, duration=1200.0)
@@ -439,22 +421,8 @@ def test_aux_table_uploads_to_the_virtual_device():
                                            "tau_s": 30.0, "weight": 0.5}], "pair")).table
     assert aux.aux_gen == 1 and len(aux.to_bytes()) <= SL.MAX_PAYLOAD
     assert SL.validate_table_payload(aux.to_bytes())[1] == SL.R_OK
-    got = []
-
-    def keep(fr):
-        if fr.type == SL.T_SAMPLE:
-            got.append(SL.unpack_sample(fr.payload))
-
     with PtyDevice(log, base, speed=400.0) as pd:
-        link = SL.HostLink(pd.port)
-        deadline = time.monotonic() + 20
-        while len(got) < 50 and time.monotonic() < deadline:
-            for fr in link.poll():
-                keep(fr)
-        res = SL.upload(link, aux, on_frame=keep)
-        while len(got) < 300 and time.monotonic() < deadline:
-            for fr in link.poll():
-                keep(fr)
+        _, res, got = stream_around_upload(pd, aux, before=50, total=300)
         assert pd.dev.table.crc == aux.crc
     k = res.apply_sample
     dr = D.DeviceRun.from_log(log)

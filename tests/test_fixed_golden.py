@@ -4,26 +4,17 @@ import numpy as np
 import pytest
 
 from firmware_ref import formats as F
-from firmware_ref import inputs
-from firmware_ref.compensate import compensate_log, log_words
+from firmware_ref.compensate import compensate_log
 from host_tools import compensate as comp
 from host_tools import runlog as rl
 from host_tools.cli import main as cli_main
 from host_tools.fit import fit
 from host_tools.model import BiasModel
-from host_tools.quantize import quantize
+from host_tools.quantize import dequantized_log, quantize
 from host_tools.reversal import ReversalConfig
 from host_tools.sim import simulate
 
 GOAL_DPH = 0.002
-
-
-def dequantized(log, model):
-    """The log with its proxy and rate columns replaced by the values of their words."""
-    w = log_words(log, model.config)
-    kind = model.config.proxy.kind
-    return log.with_columns(**{model.config.proxy.column: inputs.from_words(w["p"], inputs.proxy_frac(kind))},
-                            rate_dph=inputs.from_words(w["r"], F.RATE_FRAC))
 
 
 def fitted(log, **kw):
@@ -39,10 +30,10 @@ def test_fixed_vs_golden_paper_scenarios(scenario, combiner):
     log = simulate(scenario, seed=0)
     model = fitted(log, reversal=None if combiner is None else ReversalConfig(combiner))
     q = quantize(model)
-    gold = comp.compensate(dequantized(log, model), model)
+    gold = comp.compensate(dequantized_log(log, model), model)
     fixed, flags = compensate_log(log, model, table=q.table, return_flags=True)
     np.testing.assert_array_equal(fixed["valid"], gold["valid"])
-    prep = comp.prepare(dequantized(log, model), model)
+    prep = comp.prepare(dequantized_log(log, model), model)
     np.testing.assert_array_equal(flags & 31, prep.flags)
     v = gold["valid"] > 0
     err = fixed.rate_dph - gold.rate_dph
@@ -73,7 +64,7 @@ def test_cli_compensate_fixed(tmp_path, capsys):
     np.testing.assert_array_equal(fx["valid"], fl["valid"])
     run = rl.read(tmp_path / "run.csv")
     np.testing.assert_array_equal(fx.rate_dph, compensate_log(run, model).rate_dph)  # the words, exactly
-    gold = comp.compensate(dequantized(run, model), model)
+    gold = comp.compensate(dequantized_log(run, model), model)
     assert np.max(np.abs(fx.rate_dph - gold.rate_dph)) < GOAL_DPH
     # with a table file: the same words
     from host_tools.quantize import configure_cli, run_cli

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import dataclasses
 import json
 import os
 import random
@@ -389,24 +388,32 @@ def test_corruption_at_the_end_truncated_last_frame(run, tmp_path):
 
 # -- upload ------------------------------------------------------------------------------------------------
 
-def test_upload_round_trip_applies_from_the_next_sample(run):
-    log, t1, t2 = run["log"], run["table"], run["table2"]
+def stream_around_upload(pd, table, before, total, timeout_s=20.0):
+    """Capture sample frames from the device ``pd`` (a PtyDevice), upload ``table`` after ``before``
+    samples and keep capturing up to ``total`` samples (bounded by ``timeout_s``).
+    Returns (link, upload result, list of unpacked sample tuples)."""
     got = []
 
     def keep(fr):
         if fr.type == SL.T_SAMPLE:
             got.append(SL.unpack_sample(fr.payload))
 
+    link = SL.HostLink(pd.port)
+    deadline = time.monotonic() + timeout_s
+    while len(got) < before and time.monotonic() < deadline:
+        for fr in link.poll():
+            keep(fr)
+    res = SL.upload(link, table, on_frame=keep)
+    while len(got) < total and time.monotonic() < deadline:
+        for fr in link.poll():
+            keep(fr)
+    return link, res, got
+
+
+def test_upload_round_trip_applies_from_the_next_sample(run):
+    log, t1, t2 = run["log"], run["table"], run["table2"]
     with PtyDevice(log, t1, speed=400.0) as pd:
-        link = SL.HostLink(pd.port)
-        deadline = time.monotonic() + 20
-        while len(got) < 100 and time.monotonic() < deadline:
-            for fr in link.poll():
-                keep(fr)
-        res = SL.upload(link, t2, on_frame=keep)
-        while len(got) < 400 and time.monotonic() < deadline:
-            for fr in link.poll():
-                keep(fr)
+        link, res, got = stream_around_upload(pd, t2, before=100, total=400)
         assert pd.dev.table.crc == t2.crc != t1.crc
         assert SL.DeviceInfo.unpack(
             link.request(SL.T_GET_INFO, b"", lambda f, s: f.type == SL.T_INFO).payload).table_crc == t2.crc
