@@ -2,13 +2,19 @@
 
 Each subcommand lives in the module of its stage; that module defines ``configure_cli(parser)``
 (adds its arguments) and ``run_cli(args) -> int`` (exit code).  Errors that the user can fix
-(bad input files, refused models) are printed as one line ``hdrg <cmd>: error: ...`` with exit
-code 2; nothing else is caught.
+(bad input files, refused models: every ValueError subclass of the project) and every OSError
+(missing, unreadable or directory paths, a full disk) are printed as one line
+``hdrg <cmd>: error: ...`` with exit code 2 and no traceback; ``hdrg --debug CMD ...`` shows the
+traceback instead.  Ctrl-C exits with 130; a closed stdout (``hdrg ... | head``) exits quietly
+with 141 (128 + SIGPIPE), as Unix tools do.  Warnings go to stderr as ``hdrg <cmd>: warning: ...``.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import os
+import signal
 import sys
 import warnings
 
@@ -43,26 +49,43 @@ def _available():
     return out
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return version("hdrg")
+    except PackageNotFoundError:  # pragma: no cover - run from a source tree without install
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="hdrg",
         description="Temperature-drift compensation toolchain for mode-reversal MEMS gyroscopes "
                     "(Chen et al., Micromachines 2022, 13, 1557).")
+    parser.add_argument("--version", action="version", version=f"hdrg {_version()}")
+    parser.add_argument("--debug", action="store_true", help="show the Python traceback of an error")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name, (module, helptext) in _available().items():
         mod = importlib.import_module(module)
         if not hasattr(mod, "configure_cli"):
             continue
-        p = sub.add_parser(name, help=helptext, description=(mod.__doc__ or helptext).strip().split("\n\n")[0])
+        p = sub.add_parser(name, help=helptext, description=helptext[0].upper() + helptext[1:] + ".")
         mod.configure_cli(p)
+        p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                       help="show the Python traceback of an error")
         p.set_defaults(_module=module)
     return parser
 
 
-def main(argv=None) -> int:
-    from host_tools.runlog import RunLogError
+def _describe(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
+        name = exc.filename if exc.filename2 is None else f"{exc.filename} -> {exc.filename2}"
+        return f"{name}: {exc.strerror}"
+    return str(exc) or type(exc).__name__
 
+
+def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     mod = importlib.import_module(args._module)
@@ -70,9 +93,21 @@ def main(argv=None) -> int:
     warnings.showwarning = lambda message, category, *a, **k: print(
         f"hdrg {args.command}: warning: {message}", file=sys.stderr)
     try:
-        return int(mod.run_cli(args) or 0)
-    except (RunLogError, ValueError, FileNotFoundError) as exc:
-        print(f"hdrg {args.command}: error: {exc}", file=sys.stderr)
+        rc = int(mod.run_cli(args) or 0)
+        sys.stdout.flush()      # a closed pipe shows here, not at interpreter exit
+        return rc
+    except BrokenPipeError:
+        # the reader of stdout went away (`hdrg ... | head`): quiet exit, as Unix tools do
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 128 + signal.SIGPIPE
+    except KeyboardInterrupt:
+        print(f"hdrg {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except (ValueError, OSError, LookupError) as exc:
+        if args.debug:
+            raise
+        print(f"hdrg {args.command}: error: {_describe(exc)}", file=sys.stderr)
         return 2
 
 

@@ -33,7 +33,8 @@ Exact semantics (the fixed-point reference copies them):
 
 The compensated run log keeps every other column and the metadata, and adds the metadata
 ``compensated: yes``, ``compensation_model``, ``compensation_impl``, ``compensation_terms``,
-``compensation_valid``.  A log that is already compensated is refused.
+``compensation_valid``, and the ``flags`` column with ``compensation_flags`` (its non-zero counts;
+host_tools.flags, docs/RUN_LOG.md).  A log that is already compensated is refused.
 
 The log's sample rate (``RunLog.sample_rate_hz``) must match the model's ``rate.fs`` within 1 %
 (the rate scaling uses the nominal fs).
@@ -46,6 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from host_tools import runlog as rl
+from host_tools.flags import add_flags
 from host_tools.model import BiasModel, ModelConfig
 from host_tools.proxy import ProxyConfig, parse_range
 from host_tools.rate import RateConfig, parse_rate_range
@@ -156,7 +158,7 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
     check_impl(impl)
     if impl == "fixed":
         from firmware_ref.compensate import compensate_log
-        return compensate_log(log, model, table=table)
+        return add_flags(*compensate_log(log, model, table=table, return_flags=True))
     if table is not None:
         raise ValueError("a coefficient table is only used with --impl fixed")
     if str(log.metadata.get("compensated", "")).strip().lower() == "yes" or "bias_dph" in log:
@@ -165,7 +167,7 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
     prep = prepare(log, model)
     bias = model.evaluate(prep.u, prep.v, prep.z)
     out = log.with_columns(rate_dph=_hold(prep.y - bias, prep.valid), bias_dph=_hold(bias, prep.valid),
-                           valid=prep.valid.astype(np.float64))
+                           valid=prep.valid.astype(np.float64), flags=prep.flags)
     nvalid = int(np.count_nonzero(prep.valid))
     out.metadata.update({
         "compensated": "yes",
@@ -174,7 +176,7 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
         "compensation_terms": ",".join(f"k{k}" for k in model.terms),
         "compensation_valid": f"{nvalid} of {len(prep)} samples",
     })
-    return out
+    return add_flags(out, prep.flags)
 
 
 def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: str = "diff", n: int = 8,
@@ -248,10 +250,17 @@ def configure_cli(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--table", metavar="TABLE",
                         help="with --impl fixed: coefficient table (table.json from hdrg quantize, .bin or "
                              ".memh) instead of quantizing the model on the fly")
+    parser.add_argument("--strict", action="store_true",
+                        help="refuse (exit 2, nothing written) when the model is extrapolated (> 1 %% of the "
+                             "samples proxy/rate clamped) or any sample saturates, instead of warning")
 
 
 def run_cli(args) -> int:
+    from host_tools import flags
+    from host_tools.atomic import refuse_overwrite
+
     check_impl(args.impl)
+    refuse_overwrite(args.output, [args.run, args.model, getattr(args, "table", None)])
     model = BiasModel.from_json(args.model)
     table = None
     if getattr(args, "table", None):
@@ -261,7 +270,7 @@ def run_cli(args) -> int:
         table = read_table(args.table)
     log = rl.read(args.run)
     out = compensate(log, model, impl=args.impl, table=table)
+    flags.report(out, strict=args.strict)
     rl.write(out, args.output)
-    nvalid = int(np.count_nonzero(out["valid"]))
-    print(f"{args.output}: {len(out)} samples, {nvalid} valid ({100.0 * nvalid / len(out):.1f} %)")
+    print(f"{args.output}: {flags.summary(out)}")
     return 0

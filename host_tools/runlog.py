@@ -14,7 +14,10 @@ Bad input (each case is tested in tests/test_runlog.py):
 * errors (:class:`RunLogError`, message ``FILE:LINE: problem``): empty file, no header, no data
   rows, missing required column, duplicated column name, a row with too many or too few cells
   (except the last line, below), text in a numeric cell, NaN or inf, a blank line inside the data,
-  non-increasing or duplicated ``t_s``, a ``mode`` code that is not 0, 1, 2 or 3;
+  non-increasing or duplicated ``t_s``, a ``mode`` code that is not 0, 1, 2 or 3, a ``freq_hz``
+  that is not positive, metadata that contradicts the data (``reversal: on`` without a ``mode``
+  column or with every sample in mode 0, ``reversal: off`` with modes 1/2/3, a
+  ``sample_rate_hz`` more than 2 % away from 1 / the median ``t_s`` step);
 * warnings (:class:`RunLogWarning`, and the same text in ``RunLog.notes``) with a documented
   repair:
 
@@ -25,6 +28,12 @@ Bad input (each case is tested in tests/test_runlog.py):
     kept; the log is split into contiguous *segments* at the gaps (``RunLog.segments``, start
     indices), so that causal estimators restart at each segment instead of differencing across a
     gap. The warning gives the count, the nominal step and the largest gap with its line.
+  - **unfinished capture** (metadata ``capture: in progress``, written by `hdrg capture` until it
+    closes the file): the rows are kept; the warning says the capture was interrupted.
+
+Writers (:func:`write`, CSV and NPZ) are atomic (host_tools.atomic): the file appears complete
+or not at all.  The format, with the project's extensions (compensated columns ``bias_dph``,
+``valid``, ``flags``, the metadata keys hdrg writes), is docs/RUN_LOG.md.
 """
 from __future__ import annotations
 
@@ -38,11 +47,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from host_tools.atomic import atomic_open
+
 FORMAT_VERSION = 1
 MODES = (0, 1, 2, 3)
 MODE_FTR, MODE_1, MODE_2, MODE_EXCHANGE = MODES
 GAP_FACTOR = 1.5
 PROXY_COLUMNS = {"freq": "freq_hz", "temp": "temp_c"}
+INT_COLUMNS = ("mode", "flags")   # integer columns (flags: compensated logs, docs/RUN_LOG.md)
+FS_META_TOLERANCE = 0.02          # metadata sample_rate_hz vs 1 / median t_s step
+CAPTURE_KEY, CAPTURE_OPEN, CAPTURE_DONE = "capture", "in progress", "complete"
 
 
 class RunLogError(ValueError):
@@ -80,9 +94,10 @@ class RunLog:
         cols = {}
         for name, values in self.columns.items():
             arr = np.asarray(values)
-            cols[name] = arr.astype(np.int64) if name == "mode" else arr.astype(np.float64)
+            cols[name] = arr.astype(np.int64) if name in INT_COLUMNS else arr.astype(np.float64)
         if "mode" not in cols and "t_s" in cols:
             cols["mode"] = np.zeros(len(cols["t_s"]), np.int64)
+            self._mode_given = False
         self.columns = cols
         _validate(self)
         if self.segments is None:
@@ -109,6 +124,11 @@ class RunLog:
     @property
     def mode(self) -> np.ndarray:
         return self.columns["mode"]
+
+    @property
+    def has_mode_column(self) -> bool:
+        """False when the file had no ``mode`` column (the reader filled in 0)."""
+        return getattr(self, "_mode_given", True)
 
     @property
     def reversal(self) -> bool:
@@ -216,6 +236,49 @@ def _validate(log: RunLog) -> None:
     if bad.any():
         row = int(np.argmax(bad))
         raise RunLogError(src, where(row), f"{rowtxt(row)}unknown mode code {mode[row]} (known: 0 FTR, 1, 2, 3 exchange)")
+    if "freq_hz" in cols:
+        bad = cols["freq_hz"] <= 0
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise RunLogError(src, where(row), f"{rowtxt(row)}freq_hz {float(cols['freq_hz'][row])!r} is not a frequency "
+                                               f"(the drive-mode frequency must be > 0 Hz)")
+
+
+def _metadata_flag(value) -> bool | None:
+    v = str(value).strip().lower()
+    return True if v in ("on", "yes", "true", "1") else False if v in ("off", "no", "false", "0") else None
+
+
+def check_metadata(log: RunLog, header_line: int | None = None) -> None:
+    """Refuse metadata that contradicts the data (RunLogError; see the module doc) and warn on an
+    unfinished capture.  Called by the readers (not for logs built in memory)."""
+    src = log.source
+    rev = _metadata_flag(log.metadata.get("reversal", ""))
+    if rev is True and not log.reversal:
+        why = ("there is no 'mode' column" if not log.has_mode_column else "every sample is mode 0 (FTR)")
+        raise RunLogError(src, header_line, f"metadata 'reversal: {log.metadata['reversal']}' but {why}: a "
+                                            f"renamed or missing mode column would be fitted as FTR; fix the "
+                                            f"column name or the metadata")
+    if rev is False and log.reversal:
+        row = int(np.argmax(log.mode != MODE_FTR))
+        raise RunLogError(src, log.line_of(row), f"metadata 'reversal: {log.metadata['reversal']}' but row {row} "
+                                                 f"has mode {log.mode[row]}: fix the metadata or the mode column")
+    m = re.match(r"\s*([0-9.eE+-]+)", log.metadata.get("sample_rate_hz", ""))
+    if m and len(log) > 2:
+        try:
+            meta = float(m.group(1))
+        except ValueError:
+            meta = float("nan")
+        data = 1.0 / log.nominal_step_s
+        if not (meta > 0 and math.isfinite(meta)) or abs(meta / data - 1.0) > FS_META_TOLERANCE:
+            raise RunLogError(src, None, f"metadata 'sample_rate_hz: {log.metadata['sample_rate_hz']}' does not "
+                                         f"match t_s (median step {log.nominal_step_s:.6g} s = {data:.6g} Hz); "
+                                         f"fix or remove the metadata line")
+    if str(log.metadata.get(CAPTURE_KEY, "")).strip().lower() == CAPTURE_OPEN:
+        msg = (f"{src}: unfinished capture (metadata '{CAPTURE_KEY}: {CAPTURE_OPEN}'): the recording was "
+               f"interrupted or is still running; the {len(log)} rows written so far are used")
+        log.notes.append(msg)
+        warnings.warn(msg, RunLogWarning, stacklevel=3)
 
 
 def _find_segments(log: RunLog, report: bool) -> np.ndarray:
@@ -333,11 +396,11 @@ def parse_csv_text(text: str, source: str = "<text>") -> RunLog:
     columns = {}
     for k, name in enumerate(names):
         col = table[:, k]
-        if name == "mode":
+        if name in INT_COLUMNS:
             bad = (col != np.round(col)) | ~np.isfinite(col)
             if bad.any():
                 row = int(np.argmax(bad))
-                raise RunLogError(source, first_data_line + row, f"mode {data[row].split(',')[k]!r} is not an integer code")
+                raise RunLogError(source, first_data_line + row, f"{name} {data[row].split(',')[k]!r} is not an integer")
             col = col.astype(np.int64)
         columns[name] = col
     if "rate_dps" in columns and "rate_dph" not in columns:
@@ -347,8 +410,10 @@ def parse_csv_text(text: str, source: str = "<text>") -> RunLog:
     log.columns = {k: v for k, v in columns.items()}
     if "mode" not in log.columns:
         log.columns["mode"] = np.zeros(len(table), np.int64)
+        log._mode_given = False
     log.metadata, log.source, log.notes, log.first_data_line = metadata, source, notes, first_data_line
     _validate(log)
+    check_metadata(log, header_line)
     log.segments = _find_segments(log, report=True)
     return log
 
@@ -385,7 +450,7 @@ def write_csv(log: RunLog, path, extra_metadata: dict | None = None) -> None:
     meta.update(extra_metadata or {})
     names = list(log.columns)
     formatted = [_fmt_column(n, log.columns[n]) for n in names]
-    with open(os.fspath(path), "w", encoding="utf-8", newline="\n") as fh:
+    with atomic_open(path, "w", encoding="utf-8", newline="\n") as fh:
         for key, value in meta.items():
             fh.write(f"# {value}\n" if key.startswith("#") else f"# {key}: {value}\n")
         fh.write(",".join(names) + "\n")
@@ -399,7 +464,7 @@ def write_npz(log: RunLog, path) -> None:
     header = json.dumps({"format": "hdrg-runlog", "version": FORMAT_VERSION, "columns": list(log.columns),
                          "metadata": log.metadata, "notes": log.notes})
     arrays = {f"col_{i}": v for i, v in enumerate(log.columns.values())}
-    with open(os.fspath(path), "wb") as fh:
+    with atomic_open(path, "wb") as fh:
         np.savez(fh, header=np.array(header), **arrays)
 
 
@@ -416,6 +481,7 @@ def read_npz(path) -> RunLog:
             raise
         raise RunLogError(source, None, f"unreadable NPZ run log: {exc}") from None
     log = RunLog(cols, header.get("metadata", {}), source, header.get("notes", []))
+    check_metadata(log)
     return log
 
 

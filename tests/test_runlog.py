@@ -133,8 +133,10 @@ finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 
 
 @settings(max_examples=40, deadline=None)
-@given(data=st.lists(st.tuples(finite, finite, st.sampled_from([0, 1, 2, 3])), min_size=1, max_size=30),
-       meta=st.dictionaries(st.from_regex(r"[a-z_]{1,8}", fullmatch=True), st.from_regex(r"[a-z0-9 .]{0,12}", fullmatch=True), max_size=4))
+@given(data=st.lists(st.tuples(finite, finite.filter(lambda f: f > 0), st.sampled_from([0, 1, 2, 3])),
+                     min_size=1, max_size=30),
+       meta=st.dictionaries(st.from_regex(r"[a-z_]{1,8}", fullmatch=True).filter(
+           lambda k: k not in ("reversal", "capture")), st.from_regex(r"[a-z0-9 .]{0,12}", fullmatch=True), max_size=4))
 def test_csv_and_npz_round_trip_lossless(tmp_path_factory, data, meta):
     d = tmp_path_factory.mktemp("rt")
     t = np.cumsum(np.full(len(data), 0.5))

@@ -1,0 +1,112 @@
+"""Atomic outputs: every file hdrg writes appears complete or not at all.
+
+A writer writes to a temporary file in the destination's directory (``.NAME.XXXX.tmp``, same
+file system, so the final :func:`os.replace` is atomic), flushes and fsyncs it, and renames it
+over the destination only when the write succeeded.  An interrupted or failed write (Ctrl-C,
+SIGTERM, a full disk, an exception) removes the temporary file and leaves any previous
+destination untouched.  (A SIGKILL can leave a ``.*.tmp`` file behind; never the destination
+half-written.)
+
+* :func:`atomic_open` ``(path, mode="w", **open_kwargs)``: a context manager yielding the file
+  object of the temporary file;
+* :func:`atomic_path` ``(path)``: a context manager yielding the temporary path (same suffix as
+  ``path``, for writers that take a path, e.g. matplotlib's savefig);
+* :func:`refuse_overwrite` ``(outputs, inputs)``: ValueError when an output resolves to one of
+  the inputs (``-o`` equal to an input would destroy it).
+
+The run-log capture (host_tools.serial_link) keeps its incremental fsync'ed file instead and
+marks an unfinished capture in its metadata (docs/RUN_LOG.md).
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+
+
+def _tmp_in_dir(path: str) -> tuple[int, str]:
+    path = os.fspath(path)
+    if os.path.isdir(path):
+        raise IsADirectoryError(f"{path}: is a directory, not a file to write")
+    directory = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(directory):
+        raise FileNotFoundError(f"{path}: the directory {directory} does not exist")
+    base = os.path.basename(path)
+    suffix = os.path.splitext(base)[1]
+    return tempfile.mkstemp(prefix=f".{base}.", suffix=".tmp" + suffix, dir=directory)
+
+
+def _finish(tmp: str, path: str) -> None:
+    try:
+        mode = os.stat(path).st_mode & 0o7777 if os.path.exists(path) else 0o666 & ~_umask()
+        os.chmod(tmp, mode)
+    except OSError:  # pragma: no cover - permissions are a nicety
+        pass
+    os.replace(tmp, path)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def atomic_path(path):
+    """Yield a temporary path next to ``path``; on success fsync it and rename it to ``path``."""
+    path = os.fspath(path)
+    fd, tmp = _tmp_in_dir(path)
+    os.close(fd)
+    try:
+        yield tmp
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        _finish(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+@contextlib.contextmanager
+def atomic_open(path, mode: str = "w", **kwargs):
+    """``open(path, mode, **kwargs)`` on a temporary file next to ``path``, renamed to ``path``
+    after a successful write (flushed and fsync'ed first); removed on any exception."""
+    if not any(c in mode for c in "wx"):
+        raise ValueError(f"atomic_open writes a whole file: mode must be 'w' or 'wb', not {mode!r}")
+    path = os.fspath(path)
+    fd, tmp = _tmp_in_dir(path)
+    try:
+        with os.fdopen(fd, mode.replace("x", "w"), **kwargs) as fh:
+            yield fh
+            fh.flush()
+            os.fsync(fh.fileno())
+        _finish(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def same_file(a, b) -> bool:
+    """True when paths ``a`` and ``b`` name the same file (samefile when both exist, else the
+    resolved real paths)."""
+    a, b = os.fspath(a), os.fspath(b)
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.realpath(a) == os.path.realpath(b)
+
+
+def refuse_overwrite(outputs, inputs) -> None:
+    """ValueError when any output path resolves to one of the input paths (None entries are
+    ignored); the message names both."""
+    outs = [outputs] if isinstance(outputs, (str, os.PathLike)) else list(outputs)
+    ins = [inputs] if isinstance(inputs, (str, os.PathLike)) else list(inputs)
+    for out in outs:
+        if out is None:
+            continue
+        for src in ins:
+            if src is not None and same_file(out, src):
+                raise ValueError(f"output {os.fspath(out)} is the input {os.fspath(src)}: refusing to overwrite "
+                                 f"an input (choose another output file)")
