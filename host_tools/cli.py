@@ -15,6 +15,7 @@ import contextlib
 import importlib
 import os
 import signal
+import threading
 import sys
 import warnings
 
@@ -78,6 +79,14 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that cleanups run."""
+
+
+def _terminate(signum, frame):
+    raise _Terminated()
+
+
 def _describe(exc: BaseException) -> str:
     if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
         name = exc.filename if exc.filename2 is None else f"{exc.filename} -> {exc.filename2}"
@@ -89,11 +98,24 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     mod = importlib.import_module(args._module)
-    warnings.simplefilter("default")
-    warnings.showwarning = lambda message, category, *a, **k: print(
-        f"hdrg {args.command}: warning: {message}", file=sys.stderr)
+    main_thread = threading.current_thread() is threading.main_thread()
+    if main_thread:
+        # SIGTERM unwinds like Ctrl-C, so atomic writers remove their temporary files
+        old_term = signal.signal(signal.SIGTERM, _terminate)
     try:
-        rc = int(mod.run_cli(args) or 0)
+        return _run(args, mod)
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, old_term)
+
+
+def _run(args, mod) -> int:
+    try:
+        with warnings.catch_warnings():     # restores the warning machinery after the command
+            warnings.simplefilter("default")
+            warnings.showwarning = lambda message, category, *a, **k: print(
+                f"hdrg {args.command}: warning: {message}", file=sys.stderr)
+            rc = int(mod.run_cli(args) or 0)
         sys.stdout.flush()      # a closed pipe shows here, not at interpreter exit
         return rc
     except BrokenPipeError:
@@ -104,6 +126,9 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"hdrg {args.command}: interrupted", file=sys.stderr)
         return 130
+    except _Terminated:
+        print(f"hdrg {args.command}: terminated", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except (ValueError, OSError, LookupError) as exc:
         if args.debug:
             raise

@@ -1,4 +1,4 @@
-"""`hdrg demo`: the whole job on embedded defaults, end to end, in a few seconds.
+"""`hdrg demo`: the whole job on embedded defaults, end to end, in about half a minute to 1.5 min.
 
 simulate (two mode-reversal chamber runs at 4 degC/min, different seeds) -> fit the
 17-coefficient model on one -> compensate the other (held out) -> metrics and report (tables and
@@ -17,6 +17,8 @@ from host_tools.compensate import compensate, fit_config_from_logs
 
 
 def configure_cli(parser) -> None:
+    parser.epilog = ("Takes about 0.5 to 1.5 min (measured: 83 s on a 2-core machine shared with other "
+                     "work; less when idle): two 6-h simulations, a fit, a report with figures and a closed-loop diagnosis.")
     parser.add_argument("--out", default="hdrg-demo", help="output directory (default: ./hdrg-demo)")
     parser.add_argument("--duration", type=float, default=6 * 3600.0, help="length of each simulated run [s]")
 

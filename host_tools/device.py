@@ -11,7 +11,9 @@ start, every ``info_period_s`` seconds, on GET_INFO and when the run ends, and a
 uploads:
 
 * TABLE: checked exactly as the host checks it (serial_link.validate_table_payload: format,
-  CRC-32, field ranges, the quantizer's interval checks); ACK (detail = the table's CRC-32 word,
+  CRC-32, field ranges, the quantizer's interval checks) and against the run's mode (a table
+  whose combiner does not match - FTR table on a mode-reversal run or back - is refused with
+  R_TABLE_MODE, as offline `hdrg compensate` refuses that pairing); ACK (detail = the table's CRC-32 word,
   sample = counter of the first sample computed with it) or NACK with the reason code and text.
   An accepted table applies from the next sample not yet sent, which the pipeline processes as a
   restart (its state is reset as at power-on, the OUT/BIAS hold restarts at 0): the run from that
@@ -351,6 +353,10 @@ class VirtualDevice:
                 self._send_control(SL.T_TABLE, self._table_bytes)
             elif fr.type == SL.T_TABLE:
                 table, code, text = SL.validate_table_payload(fr.payload)
+                if table is not None:
+                    text = SL.table_mode_problem(table, bool(np.any(self.run.mode != 0)))
+                    if text is not None:
+                        table, code = None, SL.R_TABLE_MODE
                 if table is None:
                     self.stats.uploads_refused += 1
                     self._reply(SL.T_NACK, fr, code, text=text)
@@ -451,6 +457,9 @@ def make_device(scenario: str = "paper-mr-cycle-4dpm", seed: int = 0, duration_s
     log = sim.simulate(scenario, seed=seed, duration_s=duration_s, sample_rate_hz=sample_rate_hz)
     if table is None:
         table = identity_table(log)
+    problem = SL.table_mode_problem(table, log.reversal)
+    if problem is not None:
+        raise ValueError(f"--table: {problem} (scenario {scenario})")
     if link is None:
         master, slave, name = open_pty()
         link = FdLink(master, keep=(slave,), name=name)

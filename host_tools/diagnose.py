@@ -85,6 +85,7 @@ import numpy as np
 from firmware_ref.terms import K_AUX, TERM_NAMES
 from host_tools import effects, metrics
 from host_tools import runlog as rl
+from host_tools.atomic import atomic_open, atomic_path
 from host_tools.compensate import compensate, fit_config_from_logs, prepare
 from host_tools.fit import fit_logs
 from host_tools.model import BiasModel, jsonable
@@ -945,10 +946,10 @@ def write_report(report, model, out_dir, train, hold, plots=True) -> None:
     model.to_json(os.path.join(out_dir, "model.json"))
     report["model"] = "model.json"
     doc = jsonable(report, skip_private=True)
-    with open(os.path.join(out_dir, "diagnose.json"), "w", encoding="utf-8") as fh:
+    with atomic_open(os.path.join(out_dir, "diagnose.json"), "w", encoding="utf-8") as fh:
         json.dump(doc, fh, indent=1, allow_nan=False)
         fh.write("\n")
-    with open(os.path.join(out_dir, "diagnose.md"), "w", encoding="utf-8") as fh:
+    with atomic_open(os.path.join(out_dir, "diagnose.md"), "w", encoding="utf-8") as fh:
         fh.write(markdown(doc, model))
 
 
@@ -1038,7 +1039,8 @@ def _plots(k, plot_info, train, evals, out_dir) -> list:
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
     files.append(f"iter{k}_candidate.png")
-    fig.savefig(os.path.join(out_dir, files[-1]), dpi=90)
+    with atomic_path(os.path.join(out_dir, files[-1])) as tmp:
+        fig.savefig(tmp, dpi=90, format="png")
     plt.close(fig)
     # Allan and spectrum before/after (evaluation runs)
     fig1, ax1 = plt.subplots(figsize=(6, 4.5))
@@ -1065,7 +1067,8 @@ def _plots(k, plot_info, train, evals, out_dir) -> list:
     for fig, name in ((fig1, "allan"), (fig2, "spectrum")):
         fig.tight_layout()
         files.append(f"iter{k}_{name}.png")
-        fig.savefig(os.path.join(out_dir, files[-1]), dpi=90)
+        with atomic_path(os.path.join(out_dir, files[-1])) as tmp:
+            fig.savefig(tmp, dpi=90, format="png")
         plt.close(fig)
     return files
 
@@ -1093,8 +1096,14 @@ def configure_cli(parser: argparse.ArgumentParser) -> None:
 
 
 def run_cli(args) -> int:
+    from host_tools.atomic import refuse_overwrite
+    from host_tools.checks import check_fit_inputs
+
+    refuse_overwrite([args.json] + [os.path.join(args.out, f) for f in ("model.json", "diagnose.json", "diagnose.md")],
+                     list(args.runs) + list(args.holdout))
     train = [rl.read(p) for p in args.runs]
     hold = [rl.read(p) for p in args.holdout]
+    check_fit_inputs(train + hold, args.proxy)
     if args.max_iter < 0 or args.surrogates < 0:
         raise ValueError("--max-iter and --surrogates must be >= 0")
     report, model = diagnose(train, hold, proxy=args.proxy, rate_estimator=args.rate_estimator,
@@ -1105,7 +1114,7 @@ def run_cli(args) -> int:
                              seed=args.seed, out_dir=args.out, plots=not args.no_plots)
     if args.json:
         with open(os.path.join(args.out, "diagnose.json"), encoding="utf-8") as src, \
-                open(args.json, "w", encoding="utf-8") as dst:
+                atomic_open(args.json, "w", encoding="utf-8") as dst:
             dst.write(src.read())
     on = "held-out" if hold else "training"
     base = report["baseline"][report["evaluated_on"]]

@@ -163,19 +163,23 @@ def export(table: Table, outdir, formats=FORMATS, name: str = DEFAULT_NAME, info
     bad = [f for f in formats if f not in FORMATS]
     if bad:
         raise ValueError(f"unknown export format(s) {', '.join(bad)}; choose from {', '.join(FORMATS)}")
+    from host_tools.atomic import atomic_open
+
     outdir = Path(outdir)
+    if outdir.exists() and not outdir.is_dir():
+        raise NotADirectoryError(f"{outdir}: exists and is not a directory (-o names the directory to write into)")
     outdir.mkdir(parents=True, exist_ok=True)
     paths = {}
     for fmt in formats:
         path = outdir / (name + EXTENSIONS[fmt])
-        if fmt == "c":
-            path.write_text(c_header(table, name, info), encoding="utf-8")
-        elif fmt == "json":
-            with open(path, "w", encoding="utf-8") as fh:
+        with atomic_open(path, "w", encoding="utf-8") as fh:
+            if fmt == "c":
+                fh.write(c_header(table, name, info))
+            elif fmt == "json":
                 json.dump(json_dict(table, info), fh, indent=2)
                 fh.write("\n")
-        else:
-            path.write_text(table.to_memh(), encoding="utf-8")
+            else:
+                fh.write(table.to_memh())
         paths[fmt] = path
     return paths
 
@@ -193,6 +197,10 @@ def configure_cli(parser: argparse.ArgumentParser) -> None:
 
 
 def run_cli(args) -> int:
+    from host_tools.atomic import refuse_overwrite
+
+    formats_ = FORMATS if args.format == "all" else (args.format,)
+    refuse_overwrite([os.path.join(args.output, args.name + EXTENSIONS[f]) for f in formats_], args.table)
     table, info = load(args.table)
     formats = FORMATS if args.format == "all" else (args.format,)
     paths = export(table, args.output, formats, args.name, info)

@@ -51,6 +51,7 @@ import numpy as np
 from numpy.polynomial import legendre as _leg
 
 from host_tools.model import jsonable
+from host_tools.reversal import DEFAULT_COMBINER
 from firmware_ref.terms import K_AUX, N_TERMS, PAPER_TERMS, POLY_INDEX, TERM_NAMES, TERM_POWERS, parse_terms
 
 __all__ = [
@@ -905,7 +906,7 @@ def add_model_options(parser, what: str = "the model") -> None:
     parser.add_argument("--terms", default="all",
                         help=f"terms of {what}: all (the paper's 16 terms) | auto (cross-validated selection) "
                              f"| k0,k1,... | groups const,temp,rate,cross")
-    parser.add_argument("--combiner", choices=("pair", "trend"), default="trend",
+    parser.add_argument("--combiner", choices=("pair", "trend"), default=DEFAULT_COMBINER,
                         help="mode-reversal combiner (mode-reversal logs only): pair (the paper) or trend (ours, default)")
     parser.add_argument("--settle", type=float, default=0.0, help="settling time excluded after each exchange [s]")
     parser.add_argument("--proxy-range", default=None, help="declared proxy range LO,HI in proxy units (default: training range +10%%)")
@@ -919,20 +920,41 @@ def configure_cli(parser) -> None:
     parser.add_argument("--drop-unidentifiable", action="store_true",
                         help="drop terms the data cannot identify (and report them) instead of refusing")
     parser.add_argument("--cv-blocks", type=int, default=8, help="time blocks for 'auto' on a single run")
+    parser.add_argument("--force", action="store_true",
+                        help=f"fit even with fewer than {MIN_SAMPLES_PER_TERM} valid samples per coefficient")
+
+
+MIN_SAMPLES_PER_TERM = 10   # `hdrg fit` refuses fewer valid samples per coefficient unless --force
 
 
 def run_cli(args) -> int:
     from host_tools import runlog
     from host_tools.compensate import fit_config_from_logs
 
+    from host_tools.atomic import refuse_overwrite
+    from host_tools.checks import check_fit_inputs
+
+    refuse_overwrite(args.output, args.runs)
     logs = [runlog.read(p) for p in args.runs]
+    check_fit_inputs(logs, args.proxy)
     reversal = ({"combiner": args.combiner, "settle_s": args.settle}
                 if any(log.reversal for log in logs) else None)
     cfg = fit_config_from_logs(logs, proxy_kind=args.proxy, rate_estimator=args.rate_estimator,
                                n=args.rate_n, shift=args.rate_shift, proxy_range=args.proxy_range,
                                rate_range=args.rate_range, reversal=reversal)
-    model, res = fit_logs(logs, cfg, args.terms, drop_unidentifiable=args.drop_unidentifiable,
-                          cv_blocks=args.cv_blocks)
+    try:
+        model, res = fit_logs(logs, cfg, args.terms, drop_unidentifiable=args.drop_unidentifiable,
+                              cv_blocks=args.cv_blocks)
+    except UnidentifiableError as exc:
+        raise ValueError(str(exc).replace("drop_unidentifiable=True", "--drop-unidentifiable (or --terms auto / "
+                                          "--terms k0,k1,...)")) from None
+    if res.dof <= 0 or not np.all(np.isfinite(res.stderr)):
+        raise ValueError(f"{res.n} valid samples for {len(res.terms)} coefficients: no degrees of freedom left, "
+                         f"the error bars are undefined; record more data or fit fewer terms (--terms)")
+    if res.n < MIN_SAMPLES_PER_TERM * len(res.terms) and not args.force:
+        raise ValueError(f"{res.n} valid samples for {len(res.terms)} coefficients (fewer than "
+                         f"{MIN_SAMPLES_PER_TERM} per coefficient): the fit would follow the noise; record more "
+                         f"data, fit fewer terms (--terms), or pass --force")
     model.to_json(args.output)
     print(f"{args.output}: {len(res.terms)} terms {['k%d' % k for k in res.terms]}, n={res.n}, "
           f"rms={res.rms:.4g} deg/h, cond={res.cond:.3g}")

@@ -59,7 +59,8 @@ For a raw mode-reversal log the Allan figures are those of the combined output: 
 it is (c + W_other)/2 with W_other constant, so its short-tau noise is about half the raw loop's
 and the stretches are at most one dwell (120 s in the paper's timing) long.
 
-CLI: ``hdrg metrics RUN... [--tau 1,10,100] [--combiner pair|trend] [--json [FILE]]``.  Prints one
+CLI: ``hdrg metrics RUN... [--tau 1,10,100] [--combiner pair|trend] [--json [FILE]]`` (default
+combiner host_tools.reversal.DEFAULT_COMBINER, the one of `hdrg fit`).  Prints one
 row per run per tau, then the Allan figures per run, then the repeatability when there are >= 2
 runs.  ``--json`` (or ``--json -``) prints the JSON on stdout *instead of* the table; ``--json
 FILE`` writes it to FILE and still prints the table (FILE may not end in .csv/.npz, so a run log
@@ -297,12 +298,13 @@ def _is_compensated(log: RunLog) -> bool:
     return str(log.metadata.get("compensated", "")).strip().lower() in ("yes", "true", "1")
 
 
-def output_of(log: RunLog, combiner: str = "pair", max_stale_s: float | None = None,
+def output_of(log: RunLog, combiner: str | None = None, max_stale_s: float | None = None,
               settle_s: float = 0.0):
     """The measured output of a run log: ``(kind, out_dph, valid, notes)``.
 
     ``kind`` is ``"ftr"``, ``"reversal"`` or ``"compensated"``; ``valid`` excludes mode-3
-    samples always.  See the module doc for which column/combination each kind uses.
+    samples always.  See the module doc for which column/combination each kind uses.  ``combiner``
+    None: host_tools.reversal.DEFAULT_COMBINER (the one of `hdrg fit`).
     """
     notes = []
     not_exchange = log.mode != MODE_EXCHANGE
@@ -315,11 +317,16 @@ def output_of(log: RunLog, combiner: str = "pair", max_stale_s: float | None = N
             row = int(np.argmax(bad))
             raise RunLogError(log.source, log.line_of(row),
                               f"column 'valid' must be 0 or 1, row {row} holds {vcol[row]!r}")
+        if "flags" in log.columns:
+            from host_tools.flags import counts, format_counts, problems
+            notes.append(f"flags: {format_counts(counts(log['flags']))}")
+            notes.extend(problems(log))
         return "compensated", log.rate_dph.copy(), (vcol == 1) & not_exchange, notes
     if not log.reversal:
         return "ftr", log.rate_dph.copy(), np.ones(len(log), bool), notes
     from host_tools import reversal
 
+    combiner = reversal.DEFAULT_COMBINER if combiner is None else combiner
     comb = reversal.combine(log, combiner=combiner, max_stale_s=max_stale_s, settle_s=settle_s)
     notes.append(f"mode-reversal log: output = reversal.combine(combiner={combiner!r}); its Allan "
                  f"figures are those of the combined output (within a window out = (c + W_other)/2, "
@@ -340,7 +347,7 @@ def load(path) -> RunLog:
         raise RunLogError(source, None, f"not a readable run log ({exc})") from None
 
 
-def run_metrics(log, taus=DEFAULT_TAUS, combiner: str = "pair", max_stale_s: float | None = None,
+def run_metrics(log, taus=DEFAULT_TAUS, combiner: str | None = None, max_stale_s: float | None = None,
                 settle_s: float = 0.0) -> dict:
     """All figures of merit of one run log (a :class:`RunLog` or a path).
 
@@ -367,8 +374,10 @@ def run_metrics(log, taus=DEFAULT_TAUS, combiner: str = "pair", max_stale_s: flo
         if row["supported"] and row["fill_median"] is not None and row["fill_median"] < 0.9:
             notes.append(f"tau {row['tau_s']:g} s: bins are only {row['fill_median']:.0%} filled (median); "
                          f"each is the mean of less than {row['tau_s']:g} s of data")
-    if kind == "compensated" and combiner != "pair":
+    if kind == "compensated" and combiner is not None:
         notes.append("combiner ignored: the log is a compensated output")
+    if kind == "reversal" and combiner is None:
+        from host_tools.reversal import DEFAULT_COMBINER as combiner
     res = {"source": log.source, "kind": kind, "combiner": combiner if kind == "reversal" else None,
            "n": len(log), "duration_s": duration, "segments": nseg, **res, "notes": notes}
     return res
@@ -489,14 +498,21 @@ def configure_cli(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs", nargs="+", metavar="RUN", help="run logs (CSV or NPZ), raw or compensated")
     parser.add_argument("--tau", type=_parse_taus, default=DEFAULT_TAUS, metavar="LIST",
                         help="averaging times in s, comma-separated (default 1,10,100)")
-    parser.add_argument("--combiner", choices=("pair", "trend"), default="pair",
-                        help="mode-reversal combiner for raw mode-reversal logs (default pair, the paper's)")
+    from host_tools import reversal
+
+    parser.add_argument("--combiner", choices=reversal.COMBINERS, default=None,
+                        help=f"mode-reversal combiner for raw mode-reversal logs (default {reversal.DEFAULT_COMBINER}, "
+                             f"as hdrg fit)")
     parser.add_argument("--json", nargs="?", const="-", default=None, metavar="FILE",
                         help="JSON output: '--json' or '--json -' prints it instead of the table; "
                              "'--json FILE' writes FILE and prints the table")
 
 
 def run_cli(args) -> int:
+    from host_tools.atomic import atomic_open, refuse_overwrite
+
+    if args.json not in (None, "-"):
+        refuse_overwrite(args.json, args.runs)
     if args.json not in (None, "-") and args.json.lower().endswith((".csv", ".npz")):
         raise ValueError(f"--json {args.json}: refusing to write JSON over a run-log name (.csv/.npz); "
                          f"put --json after the RUN paths or use --json -")
@@ -506,7 +522,7 @@ def run_cli(args) -> int:
         sys.stdout.write(to_json(runs, rep) + "\n")
         return 0
     if args.json is not None:
-        with open(args.json, "w", encoding="utf-8") as fh:
+        with atomic_open(args.json, "w", encoding="utf-8") as fh:
             fh.write(to_json(runs, rep) + "\n")
     sys.stdout.write(format_table(runs, rep))
     return 0

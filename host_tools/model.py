@@ -139,7 +139,8 @@ class BiasModel:
         }
 
     def to_json(self, path) -> None:
-        with open(os.fspath(path), "w", encoding="utf-8") as fh:
+        from host_tools.atomic import atomic_open
+        with atomic_open(path, "w", encoding="utf-8") as fh:
             json.dump(self.to_dict(), fh, indent=2, allow_nan=False)
             fh.write("\n")
 

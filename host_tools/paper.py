@@ -185,6 +185,7 @@ def run_cli(args) -> int:
     res = run_all()
     print(format_results(res))
     if args.json:
-        with open(args.json, "w") as fh:
+        from host_tools.atomic import atomic_open
+        with atomic_open(args.json, "w") as fh:
             json.dump(res, fh, indent=1, default=float)
     return 0

@@ -115,7 +115,8 @@ class Quantized:
         }
 
     def to_json(self, path) -> None:
-        with open(os.fspath(path), "w", encoding="utf-8") as fh:
+        from host_tools.atomic import atomic_open
+        with atomic_open(path, "w", encoding="utf-8") as fh:
             json.dump(self.to_dict(), fh, indent=2)
             fh.write("\n")
 
@@ -672,22 +673,24 @@ def configure_cli(parser: argparse.ArgumentParser) -> None:
 
 
 def run_cli(args) -> int:
+    from host_tools.atomic import atomic_open, refuse_overwrite
     from host_tools.model import BiasModel
 
+    refuse_overwrite([args.output, args.memh, args.header, args.bin], args.model)
     model = BiasModel.from_json(args.model)
     q = quantize(model, exchange_s=args.exchange_s, dwell_s=args.dwell_s, power_on_s=args.power_on_s,
                  max_error_dph=args.max_error)
     q.to_json(args.output)
     t = q.table
     if args.memh:
-        with open(args.memh, "w", encoding="utf-8") as fh:
+        with atomic_open(args.memh, "w", encoding="utf-8") as fh:
             fh.write(t.to_memh())
     if args.header:
         from host_tools.export import c_header
-        with open(args.header, "w", encoding="utf-8") as fh:
+        with atomic_open(args.header, "w", encoding="utf-8") as fh:
             fh.write(c_header(t, info=q.to_dict()))
     if args.bin:
-        with open(args.bin, "wb") as fh:
+        with atomic_open(args.bin, "wb") as fh:
             fh.write(t.to_bytes())
     b, m = q.report["bound_dph"], q.report["measured_dph"]
     print(f"{args.output}: {len(t.to_words())} words, CRC-32 0x{t.crc:08x}; exponents rows "

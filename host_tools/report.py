@@ -5,7 +5,10 @@ mean, at 1 s and 100 s averaging) of the uncompensated output (the FTR output, o
 mode-reversal combined output under the model's combiner), of the flight-stack baseline (cubic in
 a temperature sensor, clamped: host_tools.baseline) fitted on the same training runs, and of the
 17-coefficient model; PNG figures: time series before/after (paper Figs. 6, 8, 9), bias vs proxy
-loops (Fig. 7: the hysteresis that the rate terms remove), Allan deviation before/after.
+loops (Fig. 7: the hysteresis that the rate terms remove), Allan deviation before/after (invalid
+samples bridged by linear interpolation, host_tools.diagnose._allan_bridged, so a mode-reversal
+run reaches taus beyond one dwell).  Extrapolation/saturation of the model (host_tools.flags) is
+listed in the notes.
 Writes DIR/report.md, DIR/report.json and DIR/*.png.
 """
 from __future__ import annotations
@@ -16,7 +19,9 @@ import os
 import numpy as np
 
 from host_tools import metrics, runlog
+from host_tools.atomic import atomic_open, atomic_path
 from host_tools.compensate import compensate, prepare
+from host_tools.flags import problems as flag_problems
 from host_tools.model import BiasModel
 
 REPORT_TAUS = (1.0, 100.0)
@@ -45,6 +50,7 @@ def evaluate(log, model: BiasModel, impl: str = "float") -> dict:
         "bias": out["bias_dph"],
         "stats_before": _stats(pr.y, log.t_s, pr.valid),
         "stats_after": _stats(out.rate_dph, log.t_s, after_valid),
+        "problems": flag_problems(out),   # extrapolation / saturation (host_tools.flags)
     }
 
 
@@ -79,7 +85,8 @@ def _plot(results, baseline_results, out_dir, proxy_unit):
         ax.legend(markerscale=20, fontsize=8, loc="upper right")
     fig.tight_layout()
     files.append(os.path.join(out_dir, "timeseries.png"))
-    fig.savefig(files[-1], dpi=90)
+    with atomic_path(files[-1]) as tmp:
+        fig.savefig(tmp, dpi=90, format="png")
     plt.close(fig)
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
@@ -94,23 +101,30 @@ def _plot(results, baseline_results, out_dir, proxy_unit):
     axes[0].legend(markerscale=20, fontsize=7)
     fig.tight_layout()
     files.append(os.path.join(out_dir, "loops.png"))
-    fig.savefig(files[-1], dpi=90)
+    with atomic_path(files[-1]) as tmp:
+        fig.savefig(tmp, dpi=90, format="png")
     plt.close(fig)
+
+    from host_tools.diagnose import _allan_bridged
 
     fig, ax = plt.subplots(figsize=(6, 4.5))
     for r in results:
         name = os.path.basename(r["source"])
         for key, style in (("before", "--"), ("after", "-")):
-            a = metrics.allan(r[key], r["t_s"], r[f"{key}_valid"])
+            # invalid samples (mode exchanges, warm-up) bridged as in hdrg diagnose: the valid
+            # stretches of a mode-reversal run are one dwell long, which would end the curve there
+            a = _allan_bridged(r[key], r["t_s"], r[f"{key}_valid"])
             if a.get("tau_s"):
                 ax.loglog(a["tau_s"], a["adev_dph"], style, label=f"{name} {key}")
     ax.set_xlabel("averaging time [s]")
     ax.set_ylabel("Allan deviation [deg/h]")
+    ax.set_title("invalid samples (exchanges, warm-up) bridged by linear interpolation", fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     fig.tight_layout()
     files.append(os.path.join(out_dir, "allan.png"))
-    fig.savefig(files[-1], dpi=90)
+    with atomic_path(files[-1]) as tmp:
+        fig.savefig(tmp, dpi=90, format="png")
     plt.close(fig)
     return files
 
@@ -120,6 +134,8 @@ def report(logs, model: BiasModel, out_dir, train_logs=None, plots: bool = True)
     write report.md, report.json and figures to ``out_dir``.  Returns the JSON dict."""
     from host_tools.baseline import fit_baseline
 
+    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
+        raise NotADirectoryError(f"{out_dir}: exists and is not a directory (--out names the directory to write into)")
     os.makedirs(out_dir, exist_ok=True)
     results = [evaluate(log, model) for log in logs]
     baseline = None
@@ -132,6 +148,7 @@ def report(logs, model: BiasModel, out_dir, train_logs=None, plots: bool = True)
     else:
         notes.append("baseline not fitted: no training runs given (--train) or found in the model")
     base_results = [evaluate(log, baseline) if baseline is not None else None for log in logs]
+    notes += [f"{os.path.basename(r['source'])}: {p}" for r in results for p in r["problems"]]
     rows = []
     for r, b in zip(results, base_results):
         name = os.path.basename(r["source"])
@@ -145,9 +162,9 @@ def report(logs, model: BiasModel, out_dir, train_logs=None, plots: bool = True)
     unit = "Hz" if model.config.proxy.kind == "freq" else "degC"
     if plots:
         doc["figures"] = [os.path.basename(f) for f in _plot(results, base_results, out_dir, unit)]
-    with open(os.path.join(out_dir, "report.json"), "w") as fh:
+    with atomic_open(os.path.join(out_dir, "report.json"), "w") as fh:
         json.dump(doc, fh, indent=1, default=float)
-    with open(os.path.join(out_dir, "report.md"), "w") as fh:
+    with atomic_open(os.path.join(out_dir, "report.md"), "w") as fh:
         fh.write("# Compensation report\n\nFigures of merit in deg/h (host_tools.metrics): stability = 1 sigma, "
                  "variation = peak-to-peak, of non-overlapping 1-s and 100-s averages of valid samples.\n\n")
         fh.write(_table(rows))
@@ -167,7 +184,14 @@ def configure_cli(parser) -> None:
     parser.add_argument("--no-plots", action="store_true", help="tables only")
 
 
+REPORT_FILES = ("report.md", "report.json", "timeseries.png", "loops.png", "allan.png")
+
+
 def run_cli(args) -> int:
+    from host_tools.atomic import refuse_overwrite
+
+    refuse_overwrite([os.path.join(args.out, f) for f in REPORT_FILES], list(args.runs) + [args.model]
+                     + list(args.train or []))
     model = BiasModel.from_json(args.model)
     train = args.train
     if train is None:

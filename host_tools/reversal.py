@@ -52,6 +52,7 @@ import numpy as np
 
 COMBINERS = ("pair", "trend")
 DEFAULT_MAX_STALE_S = 300.0
+DEFAULT_COMBINER = "trend"  # the combiner of the CLI (hdrg fit / diagnose / metrics) unless --combiner says otherwise
 
 
 @dataclass

@@ -82,7 +82,8 @@ R_TABLE_FORMAT = 4       # table: not whole words, bad magic / layout version / 
 R_TABLE_CRC = 5          # table: its own CRC-32 word does not match
 R_TABLE_RANGE = 6        # table: a field outside its legal range, or the quantizer's interval checks fail
 R_UNSUPPORTED = 7        # the device lacks the capability (e.g. upload)
-REASONS = {R_OK: "ok", R_UNKNOWN_TYPE: "unknown frame type", R_BAD_LENGTH: "bad payload length",
+R_TABLE_MODE = 8         # table: its combiner does not match the device's mode (FTR table, reversal run or back)
+REASONS = {R_TABLE_MODE: "table combiner does not match the device's mode", R_OK: "ok", R_UNKNOWN_TYPE: "unknown frame type", R_BAD_LENGTH: "bad payload length",
            R_VERSION: "unsupported protocol version", R_TABLE_FORMAT: "table format", R_TABLE_CRC: "table CRC-32",
            R_TABLE_RANGE: "table range", R_UNSUPPORTED: "not supported by the device"}
 
@@ -119,6 +120,23 @@ class ProtocolError(ValueError):
 
 class ProtocolVersionError(ProtocolError):
     """The device speaks a protocol major this host does not read."""
+
+
+class CaptureOutputError(ValueError):
+    """The capture's output file cannot be written (missing directory, a directory, no permission)."""
+
+
+def check_output_path(path) -> None:
+    """CaptureOutputError unless ``path`` names a file that can be created: its directory exists
+    and is writable, and ``path`` is not a directory."""
+    path = os.fspath(path)
+    directory = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path):
+        raise CaptureOutputError(f"{path}: is a directory (-o names the run-log file to write)")
+    if not os.path.isdir(directory):
+        raise CaptureOutputError(f"{path}: the directory {directory} does not exist")
+    if not os.access(directory, os.W_OK):
+        raise CaptureOutputError(f"{path}: the directory {directory} is not writable")
 
 
 class UploadError(ValueError):
@@ -379,6 +397,21 @@ def table_problems(table) -> list:
     return probs
 
 
+def table_mode_problem(table, reversal: bool):
+    """Why ``table`` cannot run on a device whose run uses mode reversal (``reversal``) or FTR, or
+    None: the combiner of an FTR table is 0 ('ftr'), of a mode-reversal table 1/2 (pair/trend)."""
+    from firmware_ref.formats import COMBINERS
+
+    name = COMBINERS[table.combiner] if 0 <= table.combiner < len(COMBINERS) else str(table.combiner)
+    if reversal and table.combiner == 0:
+        return (f"the table is for force-to-rebalance (combiner {name}) but the device runs mode reversal; "
+                f"quantize a model fitted on mode-reversal runs")
+    if not reversal and table.combiner != 0:
+        return (f"the table is for mode reversal (combiner {name}) but the device runs force-to-rebalance; "
+                f"quantize a model fitted on FTR runs")
+    return None
+
+
 def validate_table_payload(payload: bytes):
     """The device's check of an uploaded TABLE payload: ``(table, R_OK, "")`` or
     ``(None, code, message)`` with code R_TABLE_FORMAT, R_TABLE_CRC or R_TABLE_RANGE."""
@@ -609,12 +642,16 @@ class RunLogWriter:
     """Writes a run log (shared/formats/run-log.md) row by row: metadata and header with the first
     rows, then appended rows; flushed (and fsync'ed) every ``flush_every`` rows, every
     ``flush_interval_s`` seconds and at :meth:`close`, always at a line boundary, so the file is a
-    valid run log at every flush."""
+    valid run log at every flush.  Its first metadata line is ``# capture: in progress`` until
+    :meth:`close` rewrites it in place (same length) to ``# capture: complete``: a file left by a
+    killed capture says so, and the run-log reader warns about it (docs/RUN_LOG.md)."""
 
     def __init__(self, path, metadata: dict, columns=CAPTURE_COLUMNS, flush_every: int = 256,
                  flush_interval_s: float = 1.0):
         self.path = os.fspath(path)
-        self.metadata = dict(metadata)
+        from host_tools.runlog import CAPTURE_KEY, CAPTURE_OPEN
+
+        self.metadata = {CAPTURE_KEY: CAPTURE_OPEN, **{k: v for k, v in metadata.items() if k != CAPTURE_KEY}}
         self.columns = tuple(columns)
         self.flush_every = max(1, int(flush_every))
         self.flush_interval_s = flush_interval_s
@@ -651,8 +688,25 @@ class RunLogWriter:
     def close(self) -> None:
         if self._fh.closed:
             return
-        self.flush()
-        self._fh.close()
+        try:
+            self.flush()
+            if self._header_written:
+                self._mark_complete()
+        finally:
+            self._fh.close()
+
+    def _mark_complete(self) -> None:
+        from host_tools.runlog import CAPTURE_DONE, CAPTURE_KEY, CAPTURE_OPEN
+
+        old = f"# {CAPTURE_KEY}: {CAPTURE_OPEN}"
+        new = f"# {CAPTURE_KEY}: {CAPTURE_DONE}".ljust(len(old))   # same length: rewritten in place
+        self._fh.seek(0)
+        self._fh.write(new)
+        self._fh.flush()
+        try:
+            os.fsync(self._fh.fileno())
+        except OSError:  # pragma: no cover - e.g. a pipe
+            pass
 
 
 @dataclass
@@ -745,6 +799,7 @@ def capture(port, path, duration_s: float | None = None, idle_timeout_s: float |
     :class:`CaptureResult`; ProtocolVersionError for a device of another protocol major."""
     import serial
 
+    check_output_path(path)
     own = isinstance(port, (str, os.PathLike))
     if own:
         port = open_port(os.fspath(port))
@@ -774,7 +829,10 @@ def capture(port, path, duration_s: float | None = None, idle_timeout_s: float |
                 "capture_started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                 "table_crc": f"0x{info.table_crc:08x}", "boot_id": f"0x{info.boot_id:08x}"}
         meta.update(extra_metadata or {})
-        writer = RunLogWriter(path, meta, flush_every=flush_every, flush_interval_s=flush_interval_s)
+        try:
+            writer = RunLogWriter(path, meta, flush_every=flush_every, flush_interval_s=flush_interval_s)
+        except OSError as exc:   # the output, not the port: never reported as "port error"
+            raise CaptureOutputError(f"cannot write the run log {os.fspath(path)}: {exc.strerror or exc}") from None
         fmt = _SampleFormatter(info)
         res.written = True
 
@@ -947,6 +1005,7 @@ class _Progress:
 def run_capture_cli(args) -> int:
     import serial
 
+    check_output_path(args.output)
     try:
         port = open_port(args.port, args.baud)
     except serial.SerialException as exc:

@@ -159,6 +159,23 @@ def _pair_by_hand(mode, rate):
     return out, valid
 
 
+def test_default_combiner_is_the_fit_default():
+    """issue 13 item 9: metrics' default combiner is the one hdrg fit uses (reversal.DEFAULT_COMBINER)."""
+    from host_tools import reversal
+    from host_tools.cli import build_parser
+
+    log = _mr_log(0.0)[0]
+    r = metrics.run_metrics(log, taus=(1, 10))
+    assert r["combiner"] == reversal.DEFAULT_COMBINER
+    parser = build_parser()
+    fit_args = parser.parse_args(["fit", "a.csv", "-o", "m.json"])
+    met_args = parser.parse_args(["metrics", "a.csv"])
+    assert fit_args.combiner == reversal.DEFAULT_COMBINER
+    assert met_args.combiner is None  # resolved to reversal.DEFAULT_COMBINER in run_metrics
+    same = metrics.run_metrics(log, taus=(1, 10), combiner=fit_args.combiner)
+    assert same["per_tau"] == r["per_tau"]
+
+
 def test_reversal_log_uses_pair_combiner():
     pytest.importorskip("host_tools.reversal")
     from host_tools import reversal
@@ -168,7 +185,7 @@ def test_reversal_log_uses_pair_combiner():
     comb = reversal.combine(log, combiner="pair")
     assert np.array_equal(comb.valid, exp_valid)
     assert np.allclose(comb.out_dph[exp_valid], exp_out[exp_valid], rtol=0, atol=1e-9)
-    r = metrics.run_metrics(log, taus=(1, 10))
+    r = metrics.run_metrics(log, taus=(1, 10), combiner="pair")
     assert r["kind"] == "reversal" and r["combiner"] == "pair"
     ref = metrics.bias_metrics(exp_out, log.t_s, exp_valid, taus=(1, 10))
     for got, exp in zip(r["per_tau"], ref["per_tau"]):
