@@ -1104,6 +1104,10 @@ def run_cli(args) -> int:
     train = [rl.read(p) for p in args.runs]
     hold = [rl.read(p) for p in args.holdout]
     check_fit_inputs(train + hold, args.proxy)
+    import sys
+    print(f"hdrg diagnose: {len(train)} training run(s), {len(hold)} held-out; fitting and tracing the residual "
+          f"(up to {args.max_iter} iteration(s), {args.surrogates} surrogates each; this takes a while) ...",
+          file=sys.stderr, flush=True)
     if args.max_iter < 0 or args.surrogates < 0:
         raise ValueError("--max-iter and --surrogates must be >= 0")
     report, model = diagnose(train, hold, proxy=args.proxy, rate_estimator=args.rate_estimator,

@@ -150,3 +150,70 @@ def test_csv_and_npz_round_trip_lossless(tmp_path_factory, data, meta):
             np.testing.assert_array_equal(back[k], log[k])
             assert back[k].dtype == log[k].dtype
         assert {k: v.strip() for k, v in back.metadata.items()} == {k: v.strip() for k, v in meta.items()}
+
+
+# -- issue 13: metadata that contradicts the data, non-physical frequency, flags column ---------------------
+
+def _csv(tmp_path, text, name="x.csv"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_reversal_metadata_must_match_the_modes(tmp_path):
+    body = "t_s,rate_dph,temp_c,mode\n0,1,20,{m0}\n1,1,20,{m1}\n2,1,20,0\n"
+    with pytest.raises(RunLogError, match=r"x.csv:2: metadata 'reversal: on' but every sample is mode 0"):
+        runlog.read(_csv(tmp_path, "# reversal: on\n" + body.format(m0=0, m1=0)))
+    with pytest.raises(RunLogError, match=r"x.csv:4: metadata 'reversal: off' but row 1 has mode 1"):
+        runlog.read(_csv(tmp_path, "# reversal: off\n" + body.format(m0=0, m1=1)))
+    with pytest.raises(RunLogError, match="no 'mode' column"):
+        runlog.read(_csv(tmp_path, "# reversal: yes\nt_s,rate_dph,temp_c\n0,1,20\n1,1,20\n"))
+    assert runlog.read(_csv(tmp_path, "# reversal: on\n" + body.format(m0=3, m1=1))).reversal
+    assert len(runlog.read(_csv(tmp_path, "# reversal: maybe\n" + body.format(m0=0, m1=0)))) == 3
+
+
+def test_sample_rate_metadata_must_match_t_s(tmp_path):
+    rows = "".join(f"{i * 0.5},1,20\n" for i in range(10))
+    assert runlog.read(_csv(tmp_path, "# sample_rate_hz: 2.02\nt_s,rate_dph,temp_c\n" + rows)).sample_rate_hz == 2.02
+    with pytest.raises(RunLogError, match=r"sample_rate_hz: 1'.*0.5 s = 2 Hz"):
+        runlog.read(_csv(tmp_path, "# sample_rate_hz: 1\nt_s,rate_dph,temp_c\n" + rows))
+    log = runlog.RunLog.from_arrays({"sample_rate_hz": "5"}, t_s=np.arange(10.0), rate_dph=np.ones(10),
+                                    temp_c=np.ones(10))
+    runlog.write(log, tmp_path / "x.npz")
+    with pytest.raises(RunLogError, match="does not match t_s"):
+        runlog.read(tmp_path / "x.npz")
+
+
+def test_frequency_must_be_positive(tmp_path):
+    with pytest.raises(RunLogError, match=r"x.csv:3: freq_hz -6000.0 is not a frequency"):
+        runlog.read(_csv(tmp_path, "t_s,rate_dph,freq_hz\n0,1,6000\n1,1,-6000\n"))
+    with pytest.raises(RunLogError, match=r"row 0: freq_hz 0.0"):
+        runlog.RunLog.from_arrays(t_s=[0.0], rate_dph=[0.0], freq_hz=[0.0])
+
+
+def test_flags_column_is_integer(tmp_path):
+    log = runlog.RunLog.from_arrays(t_s=np.arange(3.0), rate_dph=np.ones(3), temp_c=np.ones(3),
+                                    flags=np.array([0, 129, 3]))
+    assert log["flags"].dtype == np.int64
+    for name in ("f.csv", "f.npz"):
+        runlog.write(log, tmp_path / name)
+        back = runlog.read(tmp_path / name)
+        assert back["flags"].dtype == np.int64 and back["flags"].tolist() == [0, 129, 3]
+    assert "\n1.0,1.0,1.0,129,0\n" in (tmp_path / "f.csv").read_text()
+    with pytest.raises(RunLogError, match=r"x.csv:3: flags '1.5' is not an integer"):
+        runlog.read(_csv(tmp_path, "t_s,rate_dph,temp_c,flags\n0,1,20,0\n1,1,20,1.5\n"))
+
+
+def test_writers_are_atomic(tmp_path, monkeypatch):
+    """A failing write leaves the old file and no temporary file (host_tools.atomic)."""
+    log = runlog.RunLog.from_arrays(t_s=np.arange(3.0), rate_dph=np.ones(3), temp_c=np.ones(3))
+    for name in ("a.csv", "a.npz"):
+        dest = tmp_path / name
+        dest.write_bytes(b"old")
+        monkeypatch.setattr(runlog.np, "savez", lambda *a, **k: (_ for _ in ()).throw(OSError(28, "No space left")))
+        monkeypatch.setattr(runlog, "_fmt_column", lambda *a: (_ for _ in ()).throw(OSError(28, "No space left")))
+        with pytest.raises(OSError, match="No space left"):
+            runlog.write(log, dest)
+        monkeypatch.undo()
+        assert dest.read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "a.npz"]

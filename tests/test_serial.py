@@ -311,7 +311,8 @@ def test_unplugged_mid_run_keeps_the_log_so_far(run, tmp_path):
     def unplug(r):
         if r.samples >= 300 and "rows" not in seen:
             time.sleep(0.05)
-            seen["rows"] = len(runlog.read(path))    # a valid run log at a flush boundary, mid-capture
+            with pytest.warns(runlog.RunLogWarning, match="unfinished capture"):
+                seen["rows"] = len(runlog.read(path))    # a valid run log at a flush boundary, mid-capture
             pd.dev.unplug()
 
     with PtyDevice(log, table) as pd:
@@ -319,7 +320,7 @@ def test_unplugged_mid_run_keeps_the_log_so_far(run, tmp_path):
     assert res.reason.startswith("port error")
     assert 0 < seen["rows"] <= res.samples < len(log)
     cap = runlog.read(path)
-    assert len(cap) == res.samples
+    assert len(cap) == res.samples and cap.metadata["capture"] == "complete"   # closed by capture()
     off = compensate_log(log, run["model"], table=table)
     assert np.array_equal(cap["comp_rate_dph"], off.rate_dph[:len(cap)])
     assert np.array_equal(cap.t_s, log.t_s[:len(cap)])
@@ -606,3 +607,31 @@ def test_cli_device_on_pty_capture_and_ctrl_c(tmp_path):
             proc.communicate(timeout=5)
     assert proc.returncode == 0, err
     assert "sent" in out and "samples" in out
+
+
+def test_device_refuses_a_table_of_the_other_mode(run, tmp_path, capsys):
+    """issue 13 item 8: an FTR table on a mode-reversal run is refused with NACK R_TABLE_MODE and a
+    reason (offline `hdrg compensate` refuses the same pairing); the CLI says so in one line."""
+    from host_tools import cli
+
+    ftr_log = sim.simulate("static", seed=1, duration_s=600)
+    ftr_table = D.identity_table(ftr_log)
+    assert ftr_table.combiner == 0
+    with PtyDevice(run["log"], run["table"], speed=200.0) as pd:
+        link = SL.HostLink(pd.port)
+        ftype, reply = _raw_table_request(link, ftr_table.to_bytes())
+        assert ftype == SL.T_NACK and reply.code == SL.R_TABLE_MODE
+        assert "force-to-rebalance" in reply.text and "mode reversal" in reply.text
+        assert pd.dev.table.crc == run["table"].crc and pd.dev.stats.uploads_refused == 1
+        with pytest.raises(SL.UploadError, match="force-to-rebalance"):
+            SL.upload(link, ftr_table, timeout_s=3.0)
+        # the matching table is still accepted
+        assert SL.upload(link, run["table2"], timeout_s=3.0).crc == run["table2"].crc
+    # a device started with a table of the other mode: refused before it runs
+    path = tmp_path / "ftr.json"
+    from host_tools.quantize import quantize as q
+    cfg = fit_config_from_logs([ftr_log])
+    q(BiasModel(cfg, (), np.zeros(17), source="ftr"), n_random=16).to_json(path)
+    rc = cli.main(["device", "--port", "loop://", "--table", str(path), "--scenario", SCENARIO, "--duration", "60"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "force-to-rebalance" in err and "Traceback" not in err
