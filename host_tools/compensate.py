@@ -167,7 +167,7 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
     prep = prepare(log, model)
     bias = model.evaluate(prep.u, prep.v, prep.z)
     out = log.with_columns(rate_dph=_hold(prep.y - bias, prep.valid), bias_dph=_hold(bias, prep.valid),
-                           valid=prep.valid.astype(np.float64), flags=prep.flags)
+                           valid=prep.valid.astype(np.float64))
     nvalid = int(np.count_nonzero(prep.valid))
     out.metadata.update({
         "compensated": "yes",
