@@ -17,7 +17,8 @@ Bad input (each case is tested in tests/test_runlog.py):
   non-increasing or duplicated ``t_s``, a ``mode`` code that is not 0, 1, 2 or 3, a ``freq_hz``
   that is not positive, metadata that contradicts the data (``reversal: on`` without a ``mode``
   column or with every sample in mode 0, ``reversal: off`` with modes 1/2/3, a
-  ``sample_rate_hz`` more than 2 % away from 1 / the median ``t_s`` step);
+  ``sample_rate_hz`` more than 2 % away from 1 / the median ``t_s`` step) - these last checks are
+  made by the readers (:func:`check_metadata`), not for logs built in memory;
 * warnings (:class:`RunLogWarning`, and the same text in ``RunLog.notes``) with a documented
   repair:
 
@@ -236,12 +237,6 @@ def _validate(log: RunLog) -> None:
     if bad.any():
         row = int(np.argmax(bad))
         raise RunLogError(src, where(row), f"{rowtxt(row)}unknown mode code {mode[row]} (known: 0 FTR, 1, 2, 3 exchange)")
-    if "freq_hz" in cols:
-        bad = cols["freq_hz"] <= 0
-        if bad.any():
-            row = int(np.argmax(bad))
-            raise RunLogError(src, where(row), f"{rowtxt(row)}freq_hz {float(cols['freq_hz'][row])!r} is not a frequency "
-                                               f"(the drive-mode frequency must be > 0 Hz)")
 
 
 def _metadata_flag(value) -> bool | None:
@@ -250,9 +245,18 @@ def _metadata_flag(value) -> bool | None:
 
 
 def check_metadata(log: RunLog, header_line: int | None = None) -> None:
-    """Refuse metadata that contradicts the data (RunLogError; see the module doc) and warn on an
-    unfinished capture.  Called by the readers (not for logs built in memory)."""
+    """Refuse a non-positive ``freq_hz`` and metadata that contradicts the data (RunLogError; see
+    the module doc) and warn on an unfinished capture.  Called by the readers (files), not for
+    logs built in memory (tests and tools may use synthetic columns there)."""
     src = log.source
+    if "freq_hz" in log.columns:
+        bad = log.columns["freq_hz"] <= 0
+        if bad.any():
+            row = int(np.argmax(bad))
+            line = log.line_of(row)
+            raise RunLogError(src, line, f"{'' if line is not None else f'row {row}: '}freq_hz "
+                                         f"{float(log.columns['freq_hz'][row])!r} is not a frequency "
+                                         f"(the drive-mode frequency must be > 0 Hz)")
     rev = _metadata_flag(log.metadata.get("reversal", ""))
     if rev is True and not log.reversal:
         why = ("there is no 'mode' column" if not log.has_mode_column else "every sample is mode 0 (FTR)")

@@ -187,8 +187,10 @@ def test_sample_rate_metadata_must_match_t_s(tmp_path):
 def test_frequency_must_be_positive(tmp_path):
     with pytest.raises(RunLogError, match=r"x.csv:3: freq_hz -6000.0 is not a frequency"):
         runlog.read(_csv(tmp_path, "t_s,rate_dph,freq_hz\n0,1,6000\n1,1,-6000\n"))
-    with pytest.raises(RunLogError, match=r"row 0: freq_hz 0.0"):
-        runlog.RunLog.from_arrays(t_s=[0.0], rate_dph=[0.0], freq_hz=[0.0])
+    log = runlog.RunLog.from_arrays(t_s=[0.0, 1.0], rate_dph=[0.0, 0.0], freq_hz=[0.0, 1.0])  # in memory: allowed
+    runlog.write(log, tmp_path / "z.npz")
+    with pytest.raises(RunLogError, match=r"z.npz: row 0: freq_hz 0.0 is not a frequency"):
+        runlog.read(tmp_path / "z.npz")
 
 
 def test_flags_column_is_integer(tmp_path):
