@@ -440,3 +440,19 @@ def test_cli_bad_tau():
     with pytest.raises(SystemExit) as exc:
         main(["metrics", "x.csv", "--tau", "1,-3"])
     assert exc.value.code == 2
+
+
+def test_compensated_log_flags_reach_the_notes():
+    """issue 13: metrics of a compensated log repeats its flag counts and the extrapolation warning."""
+    n = 200
+    flags = np.zeros(n, np.int64)
+    flags[:50] = 1                       # proxy_clamped on 25 % of the samples
+    flags[60] = 4                        # warm-up
+    log = RunLog.from_arrays({"compensated": "yes"}, t_s=np.arange(float(n)), rate_dph=np.zeros(n),
+                             temp_c=np.zeros(n), bias_dph=np.zeros(n), valid=(flags != 4).astype(float),
+                             flags=flags)
+    notes = metrics.run_metrics(log, taus=(1,))["notes"]
+    assert "flags: proxy_clamped 50, warmup 1" in notes
+    assert any("extrapolation: 50 of 200 samples (25.0 %) proxy_clamped" in s for s in notes)
+    clean = metrics.run_metrics(log.with_columns(flags=np.zeros(n, np.int64)), taus=(1,))["notes"]
+    assert "flags: none" in clean and not any("extrapolation" in s for s in clean)
