@@ -448,7 +448,8 @@ def test_compensated_log_flags_reach_the_notes():
     flags = np.zeros(n, np.int64)
     flags[:50] = 1                       # proxy_clamped on 25 % of the samples
     flags[60] = 4                        # warm-up
-    log = RunLog.from_arrays({"compensated": "yes"}, t_s=np.arange(float(n)), rate_dph=np.zeros(n),
+    log = RunLog.from_arrays({"compensated": "yes"}, t_s=np.arange(float(n)),
+                             rate_dph=np.random.default_rng(0).normal(size=n),
                              temp_c=np.zeros(n), bias_dph=np.zeros(n), valid=(flags != 4).astype(float),
                              flags=flags)
     notes = metrics.run_metrics(log, taus=(1,))["notes"]
