@@ -5,7 +5,8 @@ file system, so the final :func:`os.replace` is atomic), flushes and fsyncs it, 
 over the destination only when the write succeeded.  An interrupted or failed write (Ctrl-C,
 SIGTERM, a full disk, an exception) removes the temporary file and leaves any previous
 destination untouched.  (A SIGKILL can leave a ``.*.tmp`` file behind; never the destination
-half-written.)
+half-written.)  A symlink destination keeps the link and replaces its target; an existing
+non-regular file (a terminal, ``/dev/stdout``, a FIFO) is written in place.
 
 * :func:`atomic_open` ``(path, mode="w", **open_kwargs)``: a context manager yielding the file
   object of the temporary file;
@@ -24,8 +25,12 @@ import os
 import tempfile
 
 
+def _special(path: str) -> bool:
+    """True for an existing non-regular file (a terminal, /dev/stdout, a FIFO): written in place."""
+    return os.path.exists(path) and not os.path.isfile(path) and not os.path.isdir(path)
+
+
 def _tmp_in_dir(path: str) -> tuple[int, str]:
-    path = os.fspath(path)
     if os.path.isdir(path):
         raise IsADirectoryError(f"{path}: is a directory, not a file to write")
     directory = os.path.dirname(os.path.abspath(path))
@@ -54,7 +59,10 @@ def _umask() -> int:
 @contextlib.contextmanager
 def atomic_path(path):
     """Yield a temporary path next to ``path``; on success fsync it and rename it to ``path``."""
-    path = os.fspath(path)
+    path = os.path.realpath(os.fspath(path))    # a symlink: its target is replaced, the link kept
+    if _special(path):
+        yield path
+        return
     fd, tmp = _tmp_in_dir(path)
     os.close(fd)
     try:
@@ -74,7 +82,11 @@ def atomic_open(path, mode: str = "w", **kwargs):
     after a successful write (flushed and fsync'ed first); removed on any exception."""
     if not any(c in mode for c in "wx"):
         raise ValueError(f"atomic_open writes a whole file: mode must be 'w' or 'wb', not {mode!r}")
-    path = os.fspath(path)
+    path = os.path.realpath(os.fspath(path))    # a symlink: its target is replaced, the link kept
+    if _special(path):
+        with open(path, mode.replace("x", "w"), **kwargs) as fh:
+            yield fh
+        return
     fd, tmp = _tmp_in_dir(path)
     try:
         with os.fdopen(fd, mode.replace("x", "w"), **kwargs) as fh:

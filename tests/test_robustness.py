@@ -394,3 +394,21 @@ def test_report_allan_bridges_mode_reversal(runs, tmp_path, monkeypatch):
     report.report([log], model, tmp_path / "rep")
     assert seen and min(seen) >= 100.0
     assert (tmp_path / "rep" / "allan.png").stat().st_size > 0
+
+
+def test_atomic_writes_keep_symlinks_and_special_files(tmp_path):
+    from host_tools.atomic import atomic_open
+
+    target = tmp_path / "real.txt"
+    target.write_text("old")
+    link = tmp_path / "link.txt"
+    link.symlink_to(target)
+    with atomic_open(link, "w") as fh:
+        fh.write("new")
+    assert link.is_symlink() and target.read_text() == "new"
+    with atomic_open(os.devnull, "w") as fh:        # a character device: written in place, not replaced
+        fh.write("x")
+    assert not Path(os.devnull).is_file()
+    with pytest.raises(IsADirectoryError):
+        with atomic_open(tmp_path, "w"):
+            pass
