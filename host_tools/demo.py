@@ -17,8 +17,8 @@ from host_tools.compensate import compensate, fit_config_from_logs
 
 
 def configure_cli(parser) -> None:
-    parser.epilog = ("Takes about 0.5 to 1.5 min (measured: 83 s on a 2-core machine shared with other "
-                     "work; less when idle): two 6-h simulations, a fit, a report with figures and a closed-loop diagnosis.")
+    parser.epilog = ("Takes about 0.5 to 1.5 min (measured: 66 s and 83 s on a 2-core machine shared "
+                     "with other work): two 6-h simulations, a fit, a report with figures and a closed-loop diagnosis.")
     parser.add_argument("--out", default="hdrg-demo", help="output directory (default: ./hdrg-demo)")
     parser.add_argument("--duration", type=float, default=6 * 3600.0, help="length of each simulated run [s]")
 
@@ -49,7 +49,10 @@ def run_cli(args) -> int:
         out = compensate(test, model)
         out_path = os.path.join(args.out, "run-seed2-compensated.csv")
         runlog.write(out, out_path)
-        print(f"   {out_path}")
+        from host_tools.flags import problems, summary
+        print(f"   {out_path}: {summary(out)}")
+        for p in problems(out):
+            print(f"   warning: {p}")
         print("4. report: before / flight-stack baseline / 17-term model, on the held-out run")
         doc = report([test], model, os.path.join(args.out, "report"), train_logs=[train])
         print(_table(doc["rows"]))
