@@ -31,9 +31,9 @@ COMMANDS = {
     "report": ("host_tools.report", "before/after tables and figures of a model on run logs"),
     "paper": ("host_tools.paper", "reproduce every experiment of Chen et al. 2022 on the simulator"),
     "vectors": ("host_tools.vectors", "deterministic test vectors: generate, verify, check an external implementation"),
-    "capture": ("host_tools.serial_link", "record a run log from the gyroscope's controller over a serial port"),
-    "upload": ("host_tools.serial_link", "load a coefficient table into the controller (ack, read back, compare)"),
-    "device": ("host_tools.device", "virtual gyroscope controller on a pseudo-terminal or a pyserial URL"),
+    "capture": ("host_tools.link.cli", "record a run log from the gyroscope's controller over a serial port"),
+    "upload": ("host_tools.link.cli", "load a coefficient table into the controller (ack, read back, compare)"),
+    "device": ("host_tools.link.device", "virtual gyroscope controller on a pseudo-terminal or a pyserial URL"),
     "demo": ("host_tools.demo", "simulate -> fit -> compensate -> report on embedded defaults"),
 }
 

@@ -9,8 +9,8 @@ import time
 
 import pytest
 
-from host_tools import device as D
-from host_tools import serial_link as SL
+from host_tools.link import device as D
+from host_tools import link as SL
 
 N_FRAMES = 50_000
 

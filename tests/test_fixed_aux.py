@@ -409,8 +409,8 @@ def test_aux_table_uploads_to_the_virtual_device():
     """An aux table (a lagged board-temperature term and a decay) passes the serial link's table
     checks and uploads (ACK); from the applied sample on the device computes it bit for bit as
     run_words with the F and T words (its aux words read 0)."""
-    from host_tools import device as D
-    from host_tools import serial_link as SL
+    from host_tools.link import device as D
+    from host_tools import link as SL
     from test_serial import PtyDevice, stream_around_upload
 
     from host_tools.reversal import ReversalConfig

@@ -192,7 +192,7 @@ def test_sigterm_during_compensate_leaves_no_output(runs, tmp_path):
 
 
 def test_unfinished_capture_is_marked_and_warned(tmp_path):
-    from host_tools.serial_link import RunLogWriter
+    from host_tools.link.capture import RunLogWriter
 
     path = tmp_path / "cap.csv"
     w = RunLogWriter(path, {"sample_rate_hz": "1"}, columns=("t_s", "rate_dph", "temp_c"), flush_every=2)
@@ -333,8 +333,8 @@ def test_capture_into_missing_directory(capsys, tmp_path):
 
 
 def test_table_mode_problem():
-    from host_tools.device import identity_table
-    from host_tools.serial_link import table_mode_problem
+    from host_tools.link.device import identity_table
+    from host_tools.link.codec import table_mode_problem
 
     ftr = identity_table(sim.simulate("static", seed=0, duration_s=600))
     mr = identity_table(sim.simulate("paper-mr-cycle-4dpm", seed=0, duration_s=1200))

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import dataclasses
 import json
 import os
 import random
@@ -28,9 +29,9 @@ from firmware_ref import inputs
 from firmware_ref import table as T
 from firmware_ref.compensate import compensate_log
 from firmware_ref.kernel import run_words
-from host_tools import device as D
+from host_tools.link import device as D
 from host_tools import runlog
-from host_tools import serial_link as SL
+from host_tools import link as SL
 from host_tools import sim
 from host_tools.compensate import fit_config_from_logs
 from host_tools.model import BiasModel
@@ -479,6 +480,42 @@ def test_device_refuses_bad_crc_and_out_of_range_tables(run):
         assert reply is not None and reply.code == SL.R_VERSION and "2.0" in reply.text
 
 
+def test_table_payload_reason_follows_the_first_failing_check_of_table(run):
+    """The device's TABLE check is firmware_ref.table.Table's own reader: its message, and a reason
+    code for the check that failed first (format before CRC-32 before field ranges), also when
+    several are broken at once."""
+    t2 = run["table2"]
+    good = t2.to_words()
+    bad_crc = list(good)
+    bad_crc[-1] ^= 1
+    bad_field = list(good)
+    bad_field[T.FIELD_INDEX["combiner"]] = 7
+    bad_field[-1] = T.crc32_words(bad_field[:-1])
+    bad_field_and_crc = list(bad_field)
+    bad_field_and_crc[-1] ^= 1
+    bad_magic_and_crc = [0xDEADBEEF] + bad_crc[1:]
+    bad_nparams = list(good)
+    bad_nparams[T.FIELD_INDEX["aux_nparams"]] = 3
+    bad_nparams[-1] = T.crc32_words(bad_nparams[:-1])
+    # a legal table (Table checks pass) whose k0 = (2^31 - 1) * 2^0 deg/h exceeds the OUT word
+    big = dataclasses.replace(t2, mant=(F.INT32_SYM,) + (0,) * 16, e_row=(0, 0, 0, 0), e_7=0, e_acc=0)
+    pack = lambda w: struct.pack(f"<{len(w)}I", *w)
+    cases = [(t2.to_bytes(), SL.R_OK, ""),
+             (b"", SL.R_TABLE_FORMAT, "not a table"),
+             (t2.to_bytes()[:-1], SL.R_TABLE_FORMAT, "not a whole number of 32-bit words"),
+             (pack(good[:10]), SL.R_TABLE_FORMAT, "10 words"),
+             (pack(bad_crc), SL.R_TABLE_CRC, "CRC-32 mismatch"),
+             (pack(bad_field), SL.R_TABLE_RANGE, "combiner 7"),
+             (pack(bad_field_and_crc), SL.R_TABLE_CRC, "CRC-32 mismatch"),
+             (pack(bad_magic_and_crc), SL.R_TABLE_FORMAT, "bad magic"),
+             (pack(bad_nparams), SL.R_TABLE_FORMAT, "aux_nparams"),
+             (big.to_bytes(), SL.R_TABLE_RANGE, "exceeds the output word")]
+    for data, code, text in cases:
+        table, got, msg = SL.validate_table_payload(data)
+        assert got == code and text in msg and (table is None) == (code != SL.R_OK), (code, got, msg)
+    assert SL.table_problems(t2) == [] and SL.table_problems(big)
+
+
 def test_host_refuses_bad_tables_before_sending(run, tmp_path):
     log, t1, t2 = run["log"], run["table"], run["table2"]
     overflow = copy.copy(t2)                # a table object that skipped validation (Table() validates)
@@ -579,7 +616,7 @@ def test_device_on_loop_url_and_capture_from_loop_url(run, tmp_path):
 
 def test_cli_device_on_pty_capture_and_ctrl_c(tmp_path):
     code = ("import argparse, sys\n"
-            "from host_tools import device\n"
+            "from host_tools.link import device\n"
             "p = argparse.ArgumentParser(prog='hdrg device'); device.configure_cli(p)\n"
             "sys.exit(device.run_cli(p.parse_args(sys.argv[1:])))\n")
     proc = subprocess.Popen([sys.executable, "-c", code, "--pty", "--scenario", "static", "--duration", "600",

@@ -5,16 +5,17 @@ The simulator (host_tools.sim) plays the sensor: its run log is converted to inp
 the fixed-point firmware reference (firmware_ref.kernel.run_words, bit-identical to the
 per-sample Python reference firmware_ref.compensate.Pipeline), which gives the compensated word
 OUT, the bias word BIAS, the valid bit, the status flags and the sequencer state of every sample.
-The device streams one SAMPLE frame per sample (host_tools.serial_link, docs/PROTOCOL.md), in
-real time or ``speed`` times faster (0: as fast as the link takes them), sends an INFO frame at
+The device streams one SAMPLE frame per sample (host_tools.link.frame and host_tools.link.codec,
+docs/PROTOCOL.md), in real time or ``speed`` times faster (0: as fast as the link takes them), sends an INFO frame at
 start, every ``info_period_s`` seconds, on GET_INFO and when the run ends, and accepts table
 uploads:
 
-* TABLE: checked exactly as the host checks it (serial_link.validate_table_payload: format,
-  CRC-32, field ranges, the quantizer's interval checks) and against the run's mode (a table
-  whose combiner does not match - FTR table on a mode-reversal run or back - is refused with
-  R_TABLE_MODE, as offline `hdrg compensate` refuses that pairing); ACK (detail = the table's CRC-32 word,
-  sample = counter of the first sample computed with it) or NACK with the reason code and text.
+* TABLE: checked by firmware_ref.table.Table's own reader and constructor, as the host checks it
+  (host_tools.link.codec.validate_table_payload: format, CRC-32, field ranges, interval bounds,
+  the output word) and against the run's mode (a table whose combiner does not match - FTR
+  table on a mode-reversal run or back - is refused with R_TABLE_MODE, as offline
+  `hdrg compensate` refuses that pairing); ACK (detail = the table's CRC-32 word, sample =
+  counter of the first sample computed with it) or NACK with the reason code and text.
   An accepted table applies from the next sample not yet sent, which the pipeline processes as a
   restart (its state is reset as at power-on, the OUT/BIAS hold restarts at 0): the run from that
   sample on equals ``run_words(new_table, words[k:])``.
@@ -36,133 +37,20 @@ wait is bounded, so :meth:`VirtualDevice.stop` always returns.
 from __future__ import annotations
 
 import argparse
-import errno
 import os
-import select
 import sys
 import threading
 import time
-import tty
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from firmware_ref import formats as F
 from firmware_ref import inputs
-from host_tools import serial_link as SL
-
-
-class LinkClosed(Exception):
-    """The other end went away (pty closed) or the link was closed."""
-
-
-# -- links ------------------------------------------------------------------------------------------
-
-class FdLink:
-    """A file-descriptor link (the master side of a pty): non-blocking, select-based, every wait
-    bounded.  ``keep`` fds (the pty's slave) are held open so a host may close and reopen the
-    port, and closed with the link."""
-
-    def __init__(self, fd: int, keep=(), name: str = ""):
-        self.fd = fd
-        self.keep = tuple(keep)
-        self.name = name
-        os.set_blocking(fd, False)
-        self._closed = False
-
-    def read(self, timeout: float) -> bytes:
-        if self._closed:
-            raise LinkClosed("link closed")
-        r, _, _ = select.select([self.fd], [], [], max(0.0, timeout))
-        if not r:
-            return b""
-        try:
-            data = os.read(self.fd, 65536)
-        except BlockingIOError:
-            return b""
-        except OSError as exc:
-            if exc.errno == errno.EIO:
-                raise LinkClosed("the other end closed the pty") from None
-            raise
-        if not data:
-            raise LinkClosed("end of file")
-        return data
-
-    def write(self, data: bytes, stop: threading.Event, deadline: float | None = None) -> int:
-        """Write ``data``; returns the bytes written: all of it, or fewer when ``stop`` is set, or 0
-        when nothing could be written before ``deadline`` (once started, a frame is completed)."""
-        view = memoryview(data)
-        done = 0
-        while done < len(data):
-            if stop.is_set():
-                return done
-            wait = 0.05 if deadline is None or done else min(0.05, max(0.0, deadline - time.monotonic()))
-            _, w, _ = select.select([], [self.fd], [], wait)
-            if not w:
-                if deadline is not None and done == 0 and time.monotonic() >= deadline:
-                    return 0
-                continue
-            try:
-                done += os.write(self.fd, view[done:])
-            except BlockingIOError:
-                continue
-            except OSError as exc:
-                if exc.errno == errno.EIO:
-                    raise LinkClosed("the other end closed the pty") from None
-                raise
-        return done
-
-    def close(self) -> None:
-        if self._closed:
-            return
-        self._closed = True
-        for fd in (self.fd,) + self.keep:
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-
-
-class PortLink:
-    """A pyserial port (``serial.serial_for_url``: loop://, a real port, a pty path) as a link."""
-
-    def __init__(self, port):
-        self.port = port
-        self.name = getattr(port, "port", "") or ""
-
-    def read(self, timeout: float) -> bytes:
-        try:
-            n = self.port.in_waiting
-            if n:
-                return self.port.read(n)
-            if timeout > 0:
-                time.sleep(min(timeout, 0.01))
-            return b""
-        except Exception as exc:  # serial.SerialException, OSError
-            raise LinkClosed(str(exc)) from None
-
-    def write(self, data: bytes, stop: threading.Event, deadline: float | None = None) -> int:
-        try:
-            return self.port.write(data) or len(data)
-        except Exception as exc:
-            if type(exc).__name__ == "SerialTimeoutException":
-                return 0
-            raise LinkClosed(str(exc)) from None
-
-    def close(self) -> None:
-        try:
-            self.port.close()
-        except Exception:  # pragma: no cover
-            pass
-
-
-def open_pty():
-    """A raw pseudo-terminal pair: ``(master_fd, slave_fd, slave_name)``.  Both ends are raw (no
-    echo, no line editing, 8-bit clean) before anything is written."""
-    master, slave = os.openpty()
-    tty.setraw(slave)
-    tty.setraw(master)
-    return master, slave, os.ttyname(slave)
+from host_tools.link import codec as C
+from host_tools.link import frame as FR
+from host_tools.link.host import HostLink, open_port
+from host_tools.link.transport import FdLink, LinkClosed, PortLink, open_pty
 
 
 # -- the simulated sensor ------------------------------------------------------------------------------
@@ -257,7 +145,7 @@ class VirtualDevice:
     vanish).  ``switches``: (first sample, table) of every table in force; ``error``: an exception
     that ended the thread (None if it ended normally)."""
 
-    CAPS = SL.CAP_SAMPLES | SL.CAP_TABLE_UPLOAD | SL.CAP_TABLE_READ | SL.CAP_VIRTUAL
+    CAPS = C.CAP_SAMPLES | C.CAP_TABLE_UPLOAD | C.CAP_TABLE_READ | C.CAP_VIRTUAL
 
     def __init__(self, link, run: DeviceRun, table, speed: float = 1.0, name: str = "hdrg-virtual",
                  info_period_s: float = 1.0, batch: int = 64, boot_id: int | None = None):
@@ -272,7 +160,7 @@ class VirtualDevice:
         self.boot_id = int.from_bytes(os.urandom(4), "little") if boot_id is None else boot_id & 0xFFFFFFFF
         self.fs_q16 = int(round(run.fs_hz * 65536))
         self.stats = DeviceStats()
-        self.decoder = SL.Decoder()
+        self.decoder = FR.Decoder()
         self.switches = []
         self.error = None
         self.closed_reason = ""
@@ -300,7 +188,7 @@ class VirtualDevice:
 
     # -- frames -----------------------------------------------------------------------------------
     def _frame(self, ftype: int, payload: bytes) -> bytes:
-        fr = SL.encode_frame(ftype, self._tx_seq, payload)
+        fr = FR.encode_frame(ftype, self._tx_seq, payload)
         self._tx_seq = (self._tx_seq + 1) & 0xFFFF
         return fr
 
@@ -308,9 +196,9 @@ class VirtualDevice:
         n = self.link.write(data, self._stop, deadline)
         return n == len(data)
 
-    def info(self) -> SL.DeviceInfo:
-        status = SL.ST_RUN_ENDED if self.i >= self.run.n else SL.ST_STREAMING
-        return SL.DeviceInfo(capabilities=self.CAPS, fs_q16=self.fs_q16, table_crc=self._table.crc,
+    def info(self) -> C.DeviceInfo:
+        status = C.ST_RUN_ENDED if self.i >= self.run.n else C.ST_STREAMING
+        return C.DeviceInfo(capabilities=self.CAPS, fs_q16=self.fs_q16, table_crc=self._table.crc,
                              status=status, boot_id=self.boot_id, counter=self.i, name=self.name)
 
     def _send_control(self, ftype: int, payload: bytes) -> None:
@@ -323,11 +211,11 @@ class VirtualDevice:
         i, off = self.i, self._res_start
         freq, rate, temp, mode = (a[i:j].tolist() for a in self._in)
         out, bias, state, flags, valid = (a[i - off:j - off].tolist() for a in self._res)
-        pack, enc = SL.SAMPLE.pack, SL.encode_frame
+        pack, enc = C.SAMPLE.pack, FR.encode_frame
         parts = []
         seq = self._tx_seq
         for k in range(j - i):
-            parts.append(enc(SL.T_SAMPLE, seq, pack((i + k) & 0xFFFFFFFF, freq[k], rate[k], temp[k], out[k], bias[k],
+            parts.append(enc(FR.T_SAMPLE, seq, pack((i + k) & 0xFFFFFFFF, freq[k], rate[k], temp[k], out[k], bias[k],
                                                     state[k], mode[k], flags[k], valid[k])))
             seq = (seq + 1) & 0xFFFF
         self._tx_seq = seq
@@ -342,40 +230,40 @@ class VirtualDevice:
     # -- requests ---------------------------------------------------------------------------------------
     def _handle(self, data: bytes) -> None:
         for fr in self.decoder.feed(data):
-            if fr.type in (SL.T_SAMPLE, SL.T_INFO, SL.T_ACK, SL.T_NACK):
+            if fr.type in (FR.T_SAMPLE, FR.T_INFO, FR.T_ACK, FR.T_NACK):
                 continue                        # our own frames echoed (loop://): not requests
             self.stats.requests += 1
-            if fr.major != SL.PROTO_MAJOR:
-                self._reply(SL.T_NACK, fr, SL.R_VERSION, text=SL.version_message(fr.major, fr.minor))
-            elif fr.type == SL.T_GET_INFO:
-                self._send_control(SL.T_INFO, self.info().pack())
-            elif fr.type == SL.T_READ_TABLE:
-                self._send_control(SL.T_TABLE, self._table_bytes)
-            elif fr.type == SL.T_TABLE:
-                table, code, text = SL.validate_table_payload(fr.payload)
+            if fr.major != FR.PROTO_MAJOR:
+                self._reply(FR.T_NACK, fr, C.R_VERSION, text=FR.version_message(fr.major, fr.minor))
+            elif fr.type == FR.T_GET_INFO:
+                self._send_control(FR.T_INFO, self.info().pack())
+            elif fr.type == FR.T_READ_TABLE:
+                self._send_control(FR.T_TABLE, self._table_bytes)
+            elif fr.type == FR.T_TABLE:
+                table, code, text = C.validate_table_payload(fr.payload)
                 if table is not None:
-                    text = SL.table_mode_problem(table, bool(np.any(self.run.mode != 0)))
+                    text = C.table_mode_problem(table, bool(np.any(self.run.mode != 0)))
                     if text is not None:
-                        table, code = None, SL.R_TABLE_MODE
+                        table, code = None, C.R_TABLE_MODE
                 if table is None:
                     self.stats.uploads_refused += 1
-                    self._reply(SL.T_NACK, fr, code, text=text)
+                    self._reply(FR.T_NACK, fr, code, text=text)
                 else:
                     with self._lock:
                         self._set_table(table, self.i)
                     self.stats.uploads_accepted += 1
-                    self._reply(SL.T_ACK, fr, SL.R_OK, detail=table.crc, sample=self.i)
+                    self._reply(FR.T_ACK, fr, C.R_OK, detail=table.crc, sample=self.i)
             else:
-                self._reply(SL.T_NACK, fr, SL.R_UNKNOWN_TYPE, text=f"frame type 0x{fr.type:02x} not handled")
+                self._reply(FR.T_NACK, fr, C.R_UNKNOWN_TYPE, text=f"frame type 0x{fr.type:02x} not handled")
 
     def _reply(self, ftype, fr, code, detail=0, sample=0, text=""):
-        self._send_control(ftype, SL.Reply(fr.type, code, fr.seq, detail, sample, text).pack())
+        self._send_control(ftype, C.Reply(fr.type, code, fr.seq, detail, sample, text).pack())
 
     # -- the loop ----------------------------------------------------------------------------------------
     def _loop(self) -> None:
         n = self.run.n
         period = 1.0 / (self.run.fs_hz * self.speed) if self.speed > 0 else 0.0
-        self._send_control(SL.T_INFO, self.info().pack())
+        self._send_control(FR.T_INFO, self.info().pack())
         last_info = time.monotonic()
         next_due = time.monotonic()
         while not self._stop.is_set():
@@ -392,7 +280,7 @@ class VirtualDevice:
                 self._handle(data)
             now = time.monotonic()
             if now - last_info >= self.info_period_s:
-                self._send_control(SL.T_INFO, self.info().pack())
+                self._send_control(FR.T_INFO, self.info().pack())
                 last_info = now
             if self.i < n:
                 if self.speed == 0:
@@ -402,7 +290,7 @@ class VirtualDevice:
                     self._send_samples(self.i + k, deadline=now + max(period, 0.001))
                     next_due += k * period
                 if self.i >= n:
-                    self._send_control(SL.T_INFO, self.info().pack())
+                    self._send_control(FR.T_INFO, self.info().pack())
             if self.i >= n:
                 self.ended = True
 
@@ -457,7 +345,7 @@ def make_device(scenario: str = "paper-mr-cycle-4dpm", seed: int = 0, duration_s
     log = sim.simulate(scenario, seed=seed, duration_s=duration_s, sample_rate_hz=sample_rate_hz)
     if table is None:
         table = identity_table(log)
-    problem = SL.table_mode_problem(table, log.reversal)
+    problem = C.table_mode_problem(table, log.reversal)
     if problem is not None:
         raise ValueError(f"--table: {problem} (scenario {scenario})")
     if link is None:
@@ -474,29 +362,29 @@ def link_benchmark(n_frames: int = 20000, batch: int = 64) -> dict:
     (decoding and sequence checks included; setup excluded).  Returns frames, seconds,
     frames_per_s, bytes_per_s, crc_errors, seq_gaps."""
     dev, name, _ = make_device("static", duration_s=float(n_frames), speed=0.0, batch=batch)
-    port = SL.open_port(name)
+    port = open_port(name)
     try:
-        link = SL.HostLink(port)
+        link = HostLink(port)
         got = 0
         dev.start()
         t0 = time.perf_counter()
         deadline = time.monotonic() + 120.0
         while got < n_frames and time.monotonic() < deadline:
-            got += sum(1 for fr in link.poll() if fr.type == SL.T_SAMPLE)
+            got += sum(1 for fr in link.poll() if fr.type == FR.T_SAMPLE)
         dt = time.perf_counter() - t0
     finally:
         dev.unplug()
         port.close()
-    frame = SL.OVERHEAD + SL.SAMPLE.size
+    frame = FR.OVERHEAD + C.SAMPLE.size
     return {"frames": got, "seconds": dt, "frames_per_s": got / dt, "bytes_per_s": got * frame / dt,
             "crc_errors": link.decoder.stats.crc_errors, "seq_gaps": link.stats.seq_gaps}
 
 
 def decode_benchmark(n_frames: int = 50000) -> dict:
     """Decoder throughput on an in-memory stream of SAMPLE frames: frames/s."""
-    stream = b"".join(SL.encode_frame(SL.T_SAMPLE, i, SL.pack_sample(i, 1 << 30, -5, 20 << 16, 7, 3, 2, 1, 0, 1))
+    stream = b"".join(FR.encode_frame(FR.T_SAMPLE, i, C.pack_sample(i, 1 << 30, -5, 20 << 16, 7, 3, 2, 1, 0, 1))
                       for i in range(n_frames))
-    dec = SL.Decoder()
+    dec = FR.Decoder()
     t0 = time.perf_counter()
     got = 0
     for k in range(0, len(stream), 4096):
@@ -543,7 +431,7 @@ def run_cli(args) -> int:
     speed = "as fast as the link takes" if args.speed == 0 else f"{args.speed:g}x real time"
     print(f"hdrg device: virtual gyroscope on {name or args.port}", flush=True)
     print(f"  {dev.name}: {len(log)} samples at {dev.run.fs_hz:g} Hz, {speed}; table CRC-32 0x{dev.table.crc:08x}; "
-          f"protocol {SL.PROTO_MAJOR}.{SL.PROTO_MINOR}; Ctrl-C stops", flush=True)
+          f"protocol {FR.PROTO_MAJOR}.{FR.PROTO_MINOR}; Ctrl-C stops", flush=True)
     dev.start()
     try:
         while dev.alive and not (args.exit_at_end and dev.ended):

@@ -1,0 +1,345 @@
+"""Run-log capture over the serial link (`hdrg capture`, docs/PROTOCOL.md): :func:`capture` reads
+the device's SAMPLE and INFO frames through a :class:`~host_tools.link.host.HostLink` and writes
+them with :class:`RunLogWriter` (incremental, fsync'ed, ``# capture: in progress`` until closed)
+as a run log of CAPTURE_COLUMNS (shared/formats/run-log.md).
+"""
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+
+from host_tools.link.codec import ST_RUN_ENDED, DeviceInfo, unpack_sample
+from host_tools.link.frame import T_GET_INFO, T_INFO, T_SAMPLE, ProtocolError, ProtocolVersionError
+from host_tools.link.host import HostLink, open_port
+from host_tools.runlog import CAPTURE_DONE, CAPTURE_KEY, CAPTURE_OPEN
+
+
+class CaptureOutputError(ValueError):
+    """The capture's output file cannot be written (missing directory, a directory, no permission)."""
+
+
+def check_output_path(path) -> None:
+    """CaptureOutputError unless ``path`` names a file that can be created: its directory exists
+    and is writable, and ``path`` is not a directory."""
+    path = os.fspath(path)
+    directory = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path):
+        raise CaptureOutputError(f"{path}: is a directory (-o names the run-log file to write)")
+    if not os.path.isdir(directory):
+        raise CaptureOutputError(f"{path}: the directory {directory} does not exist")
+    if not os.access(directory, os.W_OK):
+        raise CaptureOutputError(f"{path}: the directory {directory} is not writable")
+
+
+CAPTURE_COLUMNS = ("t_s", "freq_hz", "rate_dph", "mode", "temp_c", "comp_rate_dph", "comp_bias_dph", "comp_valid",
+                   "status", "state", "seq")
+
+
+class RunLogWriter:
+    """Writes a run log (shared/formats/run-log.md) row by row: metadata and header with the first
+    rows, then appended rows; flushed (and fsync'ed) every ``flush_every`` rows, every
+    ``flush_interval_s`` seconds and at :meth:`close`, always at a line boundary, so the file is a
+    valid run log at every flush.  Its first metadata line is ``# capture: in progress`` until
+    :meth:`close` rewrites it in place (same length) to ``# capture: complete``: a file left by a
+    killed capture says so, and the run-log reader warns about it (docs/RUN_LOG.md)."""
+
+    def __init__(self, path, metadata: dict, columns=CAPTURE_COLUMNS, flush_every: int = 256,
+                 flush_interval_s: float = 1.0):
+        self.path = os.fspath(path)
+        self.metadata = {CAPTURE_KEY: CAPTURE_OPEN, **{k: v for k, v in metadata.items() if k != CAPTURE_KEY}}
+        self.columns = tuple(columns)
+        self.flush_every = max(1, int(flush_every))
+        self.flush_interval_s = flush_interval_s
+        self.rows = 0
+        self._pending = []
+        self._fh = open(self.path, "w", encoding="utf-8", newline="\n")
+        self._header_written = False
+        self._last_flush = time.monotonic()
+
+    def append(self, line: str) -> None:
+        self._pending.append(line)
+        if len(self._pending) >= self.flush_every or time.monotonic() - self._last_flush >= self.flush_interval_s:
+            self.flush()
+
+    def flush(self) -> None:
+        if not self._pending:
+            return
+        parts = []
+        if not self._header_written:
+            parts += [f"# {k}: {v}\n" for k, v in self.metadata.items()]
+            parts.append(",".join(self.columns) + "\n")
+            self._header_written = True
+        parts += self._pending
+        self._fh.write("".join(parts))
+        self._fh.flush()
+        try:
+            os.fsync(self._fh.fileno())
+        except OSError:  # pragma: no cover - e.g. a pipe
+            pass
+        self.rows += len(self._pending)
+        self._pending = []
+        self._last_flush = time.monotonic()
+
+    def close(self) -> None:
+        if self._fh.closed:
+            return
+        try:
+            self.flush()
+            if self._header_written:
+                self._mark_complete()
+        finally:
+            self._fh.close()
+
+    def _mark_complete(self) -> None:
+        old = f"# {CAPTURE_KEY}: {CAPTURE_OPEN}"
+        new = f"# {CAPTURE_KEY}: {CAPTURE_DONE}".ljust(len(old))   # same length: rewritten in place
+        self._fh.seek(0)
+        self._fh.write(new)
+        self._fh.flush()
+        try:
+            os.fsync(self._fh.fileno())
+        except OSError:  # pragma: no cover - e.g. a pipe
+            pass
+
+
+@dataclass
+class CaptureResult:
+    """What a capture did: rows written, the link counters, why it ended, the device's INFO."""
+
+    path: str
+    samples: int = 0
+    frames: int = 0
+    crc_errors: int = 0
+    header_errors: int = 0
+    resyncs: int = 0
+    garbage_bytes: int = 0
+    truncated: int = 0
+    seq_gaps: int = 0
+    gap_events: int = 0
+    duplicates: int = 0
+    bad_payload: int = 0
+    out_of_order: int = 0
+    unknown_type: int = 0
+    dropped_no_info: int = 0
+    table_changes: int = 0
+    first_t_s: float | None = None
+    last_t_s: float | None = None
+    elapsed_s: float = 0.0
+    reason: str = ""
+    info: DeviceInfo | None = None
+    written: bool = False
+
+    def progress_line(self) -> str:
+        rate = self.frames / self.elapsed_s if self.elapsed_s > 0 else 0.0
+        t = "" if self.last_t_s is None else f"t={self.last_t_s:.6g} s  "
+        return (f"{self.samples} samples  {t}{rate:.0f} frames/s  CRC errors {self.crc_errors + self.header_errors}  "
+                f"resyncs {self.resyncs}  seq gaps {self.seq_gaps}")
+
+    def summary(self) -> str:
+        lines = [f"capture ended: {self.reason}"]
+        if self.written:
+            span = "" if self.first_t_s is None else f", t = {self.first_t_s:.6g} .. {self.last_t_s:.6g} s"
+            lines.append(f"  {self.path}: {self.samples} samples{span}")
+        else:
+            lines.append(f"  {self.path}: not written (no sample could be converted)")
+        lines.append(f"  frames {self.frames} in {self.elapsed_s:.1f} s; CRC errors {self.crc_errors} (frame) + "
+                     f"{self.header_errors} (header); resyncs {self.resyncs} ({self.garbage_bytes} bytes discarded); "
+                     f"sequence gaps {self.seq_gaps} frame(s) in {self.gap_events} place(s)")
+        extra = [(n, getattr(self, n)) for n in ("truncated", "duplicates", "bad_payload", "out_of_order",
+                                                   "unknown_type", "dropped_no_info", "table_changes")
+                 if getattr(self, n)]
+        if extra:
+            lines.append("  " + ", ".join(f"{n.replace('_', ' ')} {v}" for n, v in extra))
+        return "\n".join(lines)
+
+
+class _SampleFormatter:
+    """SAMPLE tuple + seq -> one CSV line of CAPTURE_COLUMNS (dequantized with the INFO's formats;
+    floats in shortest round-trip form, so the words are recoverable exactly)."""
+
+    def __init__(self, info: DeviceInfo):
+        self.fs = info.fs_hz
+        self.lf = 2.0 ** -info.freq_frac
+        self.lr = 2.0 ** -info.rate_frac
+        self.lt = 2.0 ** -info.temp_frac
+        self.lo = 2.0 ** -info.out_frac
+        self._high = 0
+        self._last32 = None
+
+    def counter(self, c32: int) -> int:
+        """Unwrap the uint32 counter (a step back of more than 2^31 is a wrap)."""
+        if self._last32 is not None and c32 < self._last32 and self._last32 - c32 > (1 << 31):
+            self._high += 1 << 32
+        self._last32 = c32
+        return self._high + c32
+
+    def line(self, counter: int, s: tuple, seq: int) -> tuple:
+        t = counter / self.fs
+        return t, (f"{t!r},{s[1] * self.lf!r},{s[2] * self.lr!r},{s[7]},{s[3] * self.lt!r},"
+                   f"{s[4] * self.lo!r},{s[5] * self.lo!r},{s[9]},{s[8]},{s[6]},{seq}\n")
+
+
+def capture(port, path, duration_s: float | None = None, idle_timeout_s: float | None = 10.0,
+            max_samples: int | None = None, flush_every: int = 256, flush_interval_s: float = 1.0,
+            progress=None, extra_metadata: dict | None = None, stop=None) -> CaptureResult:
+    """Record the device's SAMPLE frames on ``port`` (an open port or a URL/path) into the run log
+    ``path`` (CSV: CAPTURE_COLUMNS, see docs/PROTOCOL.md) until ``duration_s`` of device time
+    [s from the first sample], ``max_samples``, no frame for ``idle_timeout_s`` [s wall time; None:
+    wait forever], the device reports the end of its run or restarts, ``stop()`` returns True,
+    Ctrl-C, or a port error (disconnect).  The file is written incrementally (see RunLogWriter)
+    and only once an INFO frame gave the sample rate and formats; samples before it are kept in
+    memory (up to 100000).  ``progress(result)`` is called after every read.  Returns the
+    :class:`CaptureResult`; ProtocolVersionError for a device of another protocol major."""
+    import serial
+
+    check_output_path(path)
+    own = isinstance(port, (str, os.PathLike))
+    if own:
+        port = open_port(os.fspath(port))
+    link = HostLink(port)
+    res = CaptureResult(path=os.fspath(path))
+    writer = None
+    fmt = None
+    pending = []
+    last_counter = None
+    first_counter = None
+    t0 = time.monotonic()
+    last_info_request = -1e9
+
+    def sync_stats():
+        d, s = link.decoder.stats, link.stats
+        res.frames, res.crc_errors, res.header_errors = d.frames, d.crc_errors, d.header_errors
+        res.resyncs, res.garbage_bytes, res.truncated = d.resyncs, d.garbage_bytes, d.truncated
+        res.seq_gaps, res.gap_events, res.duplicates = s.seq_gaps, s.gap_events, s.duplicates
+        res.unknown_type = s.unknown_type
+        res.elapsed_s = time.monotonic() - t0
+
+    def start_writer(info: DeviceInfo):
+        nonlocal writer, fmt
+        meta = {"device": info.name or "unknown", "sample_rate_hz": f"{info.fs_hz:g}",
+                "source": "hdrg capture", "protocol": f"{info.major}.{info.minor}",
+                "capture_port": getattr(port, "port", None) or getattr(port, "name", "?"),
+                "capture_started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                "table_crc": f"0x{info.table_crc:08x}", "boot_id": f"0x{info.boot_id:08x}"}
+        meta.update(extra_metadata or {})
+        try:
+            writer = RunLogWriter(path, meta, flush_every=flush_every, flush_interval_s=flush_interval_s)
+        except OSError as exc:   # the output, not the port: never reported as "port error"
+            raise CaptureOutputError(f"cannot write the run log {os.fspath(path)}: {exc.strerror or exc}") from None
+        fmt = _SampleFormatter(info)
+        res.written = True
+
+    def take(s: tuple, seq: int) -> bool:
+        """Write one sample; False when the capture should end."""
+        nonlocal last_counter, first_counter
+        c = fmt.counter(s[0])
+        if last_counter is not None and c <= last_counter:
+            res.out_of_order += 1
+            return True
+        if first_counter is None:
+            first_counter = c
+        if duration_s is not None and (c - first_counter) / fmt.fs >= duration_s:
+            res.reason = f"duration {duration_s:g} s reached"
+            return False
+        t, line = fmt.line(c, s, seq)
+        writer.append(line)
+        last_counter = c
+        res.samples += 1
+        if res.first_t_s is None:
+            res.first_t_s = t
+        res.last_t_s = t
+        if max_samples is not None and res.samples >= max_samples:
+            res.reason = f"{max_samples} samples recorded"
+            return False
+        return True
+
+    def handle(frames) -> bool:
+        """Process device frames; False when the data says the capture ends."""
+        nonlocal pending
+        for fr in frames:
+            if fr.type == T_SAMPLE:
+                try:
+                    s = unpack_sample(fr.payload)
+                except ProtocolError:
+                    res.bad_payload += 1
+                    continue
+                if fmt is None:
+                    if len(pending) < 100_000:
+                        pending.append((s, fr.seq))
+                    else:
+                        res.dropped_no_info += 1
+                    continue
+                if not take(s, fr.seq):
+                    return False
+            elif fr.type == T_INFO:
+                try:
+                    info = DeviceInfo.unpack(fr.payload)
+                except ProtocolVersionError:
+                    raise
+                except ProtocolError:
+                    res.bad_payload += 1
+                    continue
+                if res.info is None:
+                    res.info = info
+                    start_writer(info)
+                    queued, pending = pending, []
+                    for s, seq in queued:
+                        if not take(s, seq):
+                            return False
+                elif info.boot_id != res.info.boot_id or info.fs_q16 != res.info.fs_q16:
+                    res.reason = ("the device restarted (boot id or sample rate changed): this run log ends "
+                                  "here; start a new capture for the new run")
+                    return False
+                else:
+                    if info.table_crc != res.info.table_crc:
+                        res.table_changes += 1
+                    res.info = info
+                if info.status & ST_RUN_ENDED:          # sent after the run's last sample
+                    res.reason = "the device reports the end of its run"
+                    return False
+        return True
+
+    data_ended = False
+    try:
+        while True:
+            if res.info is None and time.monotonic() - last_info_request > 1.0:
+                last_info_request = time.monotonic()
+                try:
+                    link.send(T_GET_INFO)
+                except serial.SerialTimeoutException:
+                    pass        # a read-only link: the device's periodic INFO will do
+            if not handle(link.poll()):
+                data_ended = True
+                break
+            sync_stats()
+            if progress is not None:
+                progress(res)
+            if stop is not None and stop():
+                res.reason = "stopped"
+                break
+            if idle_timeout_s is not None and time.monotonic() - link.last_rx > idle_timeout_s:
+                res.reason = f"no frame from the device for {idle_timeout_s:g} s"
+                break
+    except KeyboardInterrupt:
+        res.reason = "interrupted (Ctrl-C)"
+    except serial.SerialException as exc:
+        res.reason = f"port error (device disconnected?): {exc}"
+    except OSError as exc:
+        res.reason = f"port error (device disconnected?): {exc}"
+    finally:
+        try:
+            rest = link.finish()
+            if not data_ended:
+                handle(rest)        # frames a cut frame at the end had hidden
+        finally:
+            sync_stats()
+            res.dropped_no_info += len(pending)
+            if writer is not None:
+                writer.close()
+            if own:
+                try:
+                    port.close()
+                except Exception:  # pragma: no cover
+                    pass
+    return res
