@@ -128,6 +128,9 @@ def identity_table(log):
 
 @dataclass
 class DeviceStats:
+    """Counters of the virtual device: samples and frames sent, SAMPLE frames dropped (link not
+    ready at speed > 0), requests received, table uploads accepted and refused (NACK)."""
+
     samples_sent: int = 0
     frames_sent: int = 0
     frames_dropped: int = 0

@@ -184,6 +184,7 @@ class Decoder:
 
 
 def version_message(major: int, minor: int) -> str:
+    """Why this host cannot talk to a sender of protocol ``major``.``minor`` (another major)."""
     if major > PROTO_MAJOR:
         return (f"the device speaks serial protocol {major}.{minor}; this hdrg reads protocol {PROTO_MAJOR}.x "
                 f"(any minor): update hdrg")

@@ -173,8 +173,8 @@ class UploadResult:
 
 
 def upload(link: HostLink, table, timeout_s: float = 2.0, retries: int = 3, on_frame=None) -> UploadResult:
-    """Upload ``table`` (firmware_ref.table.Table): refuse it before sending if it fails the
-    quantizer's checks (:func:`table_problems`), check the device's version and capabilities
+    """Upload ``table`` (firmware_ref.table.Table): refuse it before sending if it fails its own
+    checks or the output-word bound (codec.table_problems), check the device's version and capabilities
     (INFO), send TABLE until ACK/NACK (``retries`` attempts of ``timeout_s``), then READ_TABLE and
     compare the bytes.  Raises UploadError (NACK with its reason, no answer, read-back differs),
     T.TableError (pre-check), ProtocolError."""
