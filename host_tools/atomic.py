@@ -15,7 +15,7 @@ non-regular file (a terminal, ``/dev/stdout``, a FIFO) is written in place.
 * :func:`refuse_overwrite` ``(outputs, inputs)``: ValueError when an output resolves to one of
   the inputs (``-o`` equal to an input would destroy it).
 
-The run-log capture (host_tools.serial_link) keeps its incremental fsync'ed file instead and
+The run-log capture (host_tools.link.capture) keeps its incremental fsync'ed file instead and
 marks an unfinished capture in its metadata (docs/RUN_LOG.md).
 """
 from __future__ import annotations
