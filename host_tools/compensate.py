@@ -70,6 +70,9 @@ FLAG_STALE = 16
 FLAG_NAMES = {FLAG_PROXY_CLAMPED: "proxy_clamped", FLAG_RATE_CLAMPED: "rate_clamped",
               FLAG_WARMUP: "warmup", FLAG_EXCHANGE: "exchange", FLAG_STALE: "stale"}
 FS_TOLERANCE = 0.01  # relative mismatch allowed between the log's sample rate and the model's fs
+# Defaults of a new mode-reversal model (the one place: fit_config_from_logs fills what is not given).
+DEFAULT_ORDER = "combine_first"  # interim: diagnose.py and the fixed-point flows do not take regress_first yet
+DEFAULT_COMBINER = "pair"
 IMPLS = ("float", "fixed")
 
 
@@ -229,7 +232,8 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
     * rate span: ``rate_range`` [proxy units/s], else RateConfig.from_data (``rate_percentile``
       of |dp/dt| past warm-up on non-exchange samples, times 1 + ``rate_margin``);
     * reversal: None for FTR logs (giving one is an error); for mode-reversal logs ``reversal``
-      (ReversalConfig or dict) or the default ReversalConfig();
+      (a ReversalConfig, used as is; or a dict, whose missing "combiner" / "order" are
+      DEFAULT_COMBINER / DEFAULT_ORDER) or ReversalConfig(DEFAULT_COMBINER, order=DEFAULT_ORDER);
     * aux: ``aux`` (AuxConfig or dict) or AuxConfig() ('none').
     """
     logs = list(logs)
@@ -256,8 +260,8 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
             raise ValueError("reversal settings given but the training logs are FTR (all mode 0)")
         rev = None
     else:
-        rev = ReversalConfig() if reversal is None else (
-            reversal if isinstance(reversal, ReversalConfig) else ReversalConfig.from_dict(dict(reversal)))
+        rev = reversal if isinstance(reversal, ReversalConfig) else ReversalConfig.from_dict(
+            {"combiner": DEFAULT_COMBINER, "order": DEFAULT_ORDER, **dict(reversal or {})})
     aux_cfg = AuxConfig() if aux is None else (aux if isinstance(aux, AuxConfig) else AuxConfig.from_dict(dict(aux)))
     keep = [np.asarray(log.mode) != rl.MODE_EXCHANGE for log in logs]
     ps = [log[column] for log in logs]
