@@ -311,6 +311,19 @@ def node_temperatures(dev: ForeignDevice, t_s: np.ndarray, chamber_c: np.ndarray
     return temps
 
 
+def damping_bias(dev: ForeignDevice, rate_c_per_min: float, duration_s: float | None = None) -> np.ndarray:
+    """B_D [deg/h] of a run at ``rate_c_per_min`` at every 1-s sample, before the power-on change
+    (the run multiplies it by 1 + d_scale and adds d_offset): e.g. to size the effect of a
+    damping change, ``d_scale * std(B_D)``."""
+    prof = chamber_profile(dev, rate_c_per_min)
+    n = int(math.floor(prof[-1, 0] if duration_s is None else duration_s)) + 1
+    t = np.arange(n, dtype=np.float64)
+    temps = node_temperatures(dev, t, np.interp(t, prof[:, 0], prof[:, 1]))
+    y = (temps[dev.damping_node] - T_REF_C) / T_SCALE_C
+    c = dev.damping
+    return c["c0"] + c["c1"] * y + c["c2"] * y ** 2 + c["c3"] * y ** 3
+
+
 def _since_exchange_end(t_s: np.ndarray, mode: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(seconds since the last exchange ended, +1/-1 = the mode entered) at every sample; inf/0
     before the first exchange end; in mode 3 the time since the exchange started in the first array."""
@@ -407,7 +420,7 @@ def simulate_foreign(device, rate_c_per_min: float, reversal: bool, power_on: in
     if thermal:
         yd = (temps[dev.damping_node] - T_REF_C) / T_SCALE_C
         c = dev.damping
-        b_d = c["c0"] + c["c1"] * yd + c["c2"] * yd ** 2 + c["c3"] * yd ** 3
+        b_d = c["c0"] + c["c1"] * yd + c["c2"] * yd ** 2 + c["c3"] * yd ** 3     # as damping_bias()
         d_scale, d_off = dev.damping_change(power_on)
         b_d = (1.0 + d_scale) * b_d + d_off
         te = temps[dev.common_node]
