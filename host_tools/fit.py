@@ -923,7 +923,7 @@ def design_matrix(u, v, z=None, terms=range(N_TERMS)) -> np.ndarray:
 # -- run-log glue and the `hdrg fit` command ------------------------------------------------------
 
 def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8, significance=1.0,
-             min_gain=0.02):
+             min_gain=0.02, blocks=None):
     """Fit a :class:`host_tools.model.BiasModel` with ``config`` (a ModelConfig) to RunLogs.
 
     Each log goes through the golden pipeline (:func:`host_tools.compensate.prepare`): only its
@@ -933,7 +933,9 @@ def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8
     ``cv_blocks`` contiguous time blocks for the cross-validation.  A regress_first config fits
     two banks: target c = s * rate on the used samples, bank 1 on mode-1 samples, bank 2 on
     mode-2 samples, one term set (see :func:`fit_accumulators`).  ``terms`` None ->
-    host_tools.compensate.DEFAULT_TERMS.  Returns (model, FitResult)."""
+    host_tools.compensate.DEFAULT_TERMS.  ``blocks`` True: cut a single run into ``cv_blocks``
+    time blocks whatever the terms (so fixed terms get a cross-validated rms too); None: only for
+    'auto'.  Returns (model, FitResult)."""
     from host_tools.compensate import DEFAULT_TERMS, prepare
     from host_tools.model import BiasModel
 
@@ -946,7 +948,7 @@ def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8
         if not pr.used.any():
             raise ValueError(f"{log.source}: no valid sample to fit (all exchange, warm-up or before the first pair)")
         masks = [pr.used & (pr.mode == 1), pr.used & (pr.mode == 2)] if two else [pr.used]
-        if auto and len(logs) == 1:
+        if (auto if blocks is None else blocks) and len(logs) == 1:
             groups = block_groups(len(pr.y), cv_blocks)
             per = [accumulate_groups(pr.u, pr.v, pr.z, pr.y, w, groups) for w in masks]
             for g in per[0]:
