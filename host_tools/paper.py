@@ -41,7 +41,7 @@ def _fit(logs, combiner=None, terms="all", order="combine_first"):
     from host_tools.fit import fit_logs
 
     rev = {"combiner": combiner, "order": order} if combiner else None
-    cfg = fit_config_from_logs(logs, reversal=rev)
+    cfg = fit_config_from_logs(logs, rate_estimator="diff", n=8, shift=4, reversal=rev)
     return fit_logs(logs, cfg, terms)[0]
 
 
