@@ -1,0 +1,188 @@
+"""`hdrg bench loop`: the closed loop (host_tools.diagnose) on random FOREIGN devices
+(host_tools.sim_foreign) with undeclared effects: detection, false discovery, never worse.
+
+Runs ``i = 0 .. N-1`` (``--runs``, default 120), device seed ``S * 100000 + i`` (``--seed`` S):
+
+* every third run (i % 3 == 0) is **clean** (no effect); the others carry ONE undeclared effect,
+  the kinds of host_tools.sim_foreign.EFFECT_KINDS in turn (9 kinds), at a random strength
+  log-uniform in [STRENGTH_LO, STRENGTH_HI] (x the kind's nominal amplitude);
+* run type: mode reversal for i % 2 == 1 or for the MR-only kinds (exchange_transient,
+  imperfect_reversal), else FTR;
+* **train** on one run (4 degC/min, power-on 0, noise seed 0), **hold out** another (2 degC/min,
+  power-on 1: another damping change, noise seed 1): ``diagnose([train], [holdout])`` with its
+  defaults (single training run: CV over time blocks; every step confirmed on the held-out run).
+
+Per run the record holds the verdict, every step (effect, parameters, held-out before/after,
+confirmed), and ``effect_ratio``: the held-out error of the base model (16 terms, fitted on the
+training run) on the run WITH the effect over that on the same run without it (same device,
+power-ons and noise: the foreign simulator draws the noise independently of the effects).
+``effect_ratio >= 2`` means that modelling the true effect perfectly would halve the held-out
+error: the runs where the loop must find it.  Error = std of 100-s averages of the compensated
+output (diagnose.error_stats).
+
+Summary (the targets of issue #11):
+
+* ``detection``: among effect runs with effect_ratio >= 2, the fraction whose CONFIRMED steps
+  name the true family (aux: any aux_* column);
+* ``false_discovery``: among clean runs, the fraction with verdict "effect found"; also split by
+  run type (``mr_control``: clean MR runs) and ``structural_only`` (clean runs whose confirmed
+  steps are all rate_estimator: a better rate estimator for physics the 16 terms do not follow,
+  not an effect);
+* ``worse_confirmed``: confirmed steps whose held-out error went UP (target 0);
+* ``found_without_drop``: "effect found" runs whose final held-out error is not below the base
+  model's (target 0).
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+import warnings
+
+import numpy as np
+
+from host_tools.compensate import fit_config_from_logs
+from host_tools.diagnose import _score, diagnose, error_stats
+from host_tools.fit import fit_logs
+from host_tools.sim_foreign import EFFECTS, EFFECT_KINDS, foreign_device, simulate_foreign
+
+SEED_STRIDE = 100000
+STRENGTH_LO, STRENGTH_HI = 0.5, 3.0
+MATTERS_RATIO = 2.0
+
+
+def plan(n_runs: int, seed: int = 0) -> list:
+    """The runs of the benchmark: dicts {i, device, effect (None: clean), strength, reversal}."""
+    rng = np.random.default_rng([seed, 7])
+    out = []
+    k = 0
+    for i in range(n_runs):
+        strength = float(math.exp(rng.uniform(math.log(STRENGTH_LO), math.log(STRENGTH_HI))))
+        if i % 3 == 0:
+            effect = None
+        else:
+            effect = EFFECT_KINDS[k % len(EFFECT_KINDS)]
+            k += 1
+        reversal = bool(i % 2 == 1 or (effect is not None and EFFECTS[effect].runs == "mr"))
+        out.append({"i": i, "device": seed * SEED_STRIDE + i, "effect": effect,
+                    "strength": strength if effect else 0.0, "reversal": reversal})
+    return out
+
+
+def _named(kind: str, family: str) -> bool:
+    return family == kind or (kind == "aux" and family.startswith("aux_"))
+
+
+def _base_error(train, hold) -> float:
+    rev = train.reversal
+    cfg = fit_config_from_logs([train], reversal={"combiner": "trend", "settle_s": 0.0} if rev else None)
+    model, _ = fit_logs([train], cfg, "all", drop_unidentifiable=True)
+    return _score(error_stats([hold], model))[0]
+
+
+def run_one(spec: dict, duration_s=None, n_surrogates=None) -> dict:
+    """One benchmark run (module doc): the record."""
+    dev = foreign_device(spec["device"])
+    eff, rev, st = spec["effect"], spec["reversal"], spec["strength"]
+    t0 = time.time()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        train = simulate_foreign(dev, 4.0, rev, 0, 0, duration_s=duration_s, effect=eff, strength=st or 1.0)
+        hold = simulate_foreign(dev, 2.0, rev, 1, 1, duration_s=duration_s, effect=eff, strength=st or 1.0)
+        kw = {} if n_surrogates is None else {"n_surrogates": n_surrogates}
+        rep, _ = diagnose([train], [hold], plots=False, **kw)
+        ratio = None
+        if eff is not None:
+            ctrain = simulate_foreign(dev, 4.0, rev, 0, 0, duration_s=duration_s)
+            chold = simulate_foreign(dev, 2.0, rev, 1, 1, duration_s=duration_s)
+            ratio = _score(rep["baseline"]["holdout"])[0] / _base_error(ctrain, chold)
+    steps = [{"effect": it["effect"], "params": it["params"], "confirmed": it["confirmed"],
+              "before": _score(it["before"])[0], "after": _score(it["after"])[0]} for it in rep["iterations"]]
+    return {**spec, "verdict": rep["verdict"], "steps": steps,
+            "base": _score(rep["baseline"]["holdout"])[0], "final": _score(rep["final"])[0],
+            "effect_ratio": ratio, "named": bool(eff and any(s["confirmed"] and _named(eff, s["effect"])
+                                                           for s in steps)),
+            "artifacts": [a["period_s"] for a in (rep["artifacts"] or {}).get("lines", [])],
+            "seconds": round(time.time() - t0, 2)}
+
+
+def _frac(num, den):
+    return {"n": den, "k": num, "rate": (num / den) if den else None}
+
+
+def summarize(records: list) -> dict:
+    """The summary of module doc from the records."""
+    matters = [r for r in records if r["effect"] and r["effect_ratio"] is not None and r["effect_ratio"] >= MATTERS_RATIO]
+    clean = [r for r in records if not r["effect"]]
+    found = [r for r in records if r["verdict"] == "effect found"]
+    confirmed = [s for r in records for s in r["steps"] if s["confirmed"]]
+    struct = [r for r in clean if r["verdict"] == "effect found"
+              and all(s["effect"] == "rate_estimator" for s in r["steps"] if s["confirmed"])]
+    per_kind = {}
+    for kind in EFFECT_KINDS:
+        rs = [r for r in matters if r["effect"] == kind]
+        per_kind[kind] = _frac(sum(r["named"] for r in rs), len(rs))
+    return {"runs": len(records), "effect_runs": sum(1 for r in records if r["effect"]),
+            "detection": _frac(sum(r["named"] for r in matters), len(matters)), "detection_per_kind": per_kind,
+            "false_discovery": _frac(sum(r["verdict"] == "effect found" for r in clean), len(clean)),
+            "false_discovery_ftr": _frac(sum(r["verdict"] == "effect found" for r in clean if not r["reversal"]),
+                                         sum(1 for r in clean if not r["reversal"])),
+            "mr_control": _frac(sum(r["verdict"] == "effect found" for r in clean if r["reversal"]),
+                                sum(1 for r in clean if r["reversal"])),
+            "structural_only": len(struct),
+            "confirmed_steps": len(confirmed),
+            "worse_confirmed": sum(1 for s in confirmed if not s["after"] < s["before"]),
+            "found_without_drop": sum(1 for r in found if not r["final"] < r["base"]),
+            "never_worse": sum(1 for r in records if r["final"] > r["base"] * (1 + 1e-12)) == 0}
+
+
+def run_benchmark(n_runs: int, seed: int = 0, duration_s=None, n_surrogates=None, progress=None) -> dict:
+    records = []
+    for spec in plan(n_runs, seed):
+        rec = run_one(spec, duration_s, n_surrogates)
+        records.append(rec)
+        if progress:
+            progress(f"[{len(records)}/{n_runs}] device {rec['device']} {rec['effect'] or 'clean'} "
+                     f"{'MR' if rec['reversal'] else 'FTR'} x{rec['strength']:.2f}: {rec['verdict']} "
+                     f"{[(s['effect'], s['confirmed']) for s in rec['steps']]} {rec['base']:.3g} -> {rec['final']:.3g}"
+                     f" (ratio {rec['effect_ratio'] if rec['effect_ratio'] is None else round(rec['effect_ratio'], 2)},"
+                     f" {rec['seconds']} s)")
+    return {"config": {"runs": n_runs, "seed": seed, "duration_s": duration_s, "n_surrogates": n_surrogates,
+                       "train": "4 degC/min, power-on 0, noise 0", "holdout": "2 degC/min, power-on 1, noise 1",
+                       "strength": [STRENGTH_LO, STRENGTH_HI], "matters_ratio": MATTERS_RATIO},
+            "summary": summarize(records), "records": records}
+
+
+def configure_cli(parser) -> None:
+    parser.add_argument("--runs", type=int, default=120, help="runs (a third clean; default 120)")
+    parser.add_argument("--seed", type=int, default=0, help="benchmark seed (devices S*100000 + i)")
+    parser.add_argument("--duration", type=float, default=None, help="cut every run to this many seconds")
+    parser.add_argument("--json", default=None, metavar="FILE", help="write records and summary to FILE")
+
+
+def _line(name, f):
+    rate = "n/a" if f["rate"] is None else f"{100 * f['rate']:.1f} %"
+    return f"  {name:<28s} {f['k']:>4d} / {f['n']:<4d} {rate}"
+
+
+def run_cli(args) -> int:
+    if args.runs < 1:
+        raise ValueError("--runs must be >= 1")
+    res = run_benchmark(args.runs, args.seed, args.duration, progress=lambda m: print(m, file=sys.stderr, flush=True))
+    s = res["summary"]
+    print(f"hdrg bench loop: {s['runs']} foreign runs (seed {args.seed}), {s['effect_runs']} with an undeclared effect")
+    print(_line("detection (ratio >= 2)", s["detection"]))
+    for kind, f in s["detection_per_kind"].items():
+        print(_line(f"  {kind}", f))
+    print(_line("false discovery (clean)", s["false_discovery"]))
+    print(_line("  FTR clean", s["false_discovery_ftr"]))
+    print(_line("  MR control", s["mr_control"]))
+    print(f"  clean runs found only a rate estimator: {s['structural_only']}")
+    print(f"  confirmed steps {s['confirmed_steps']}, held-out-worse confirmed {s['worse_confirmed']}, "
+          f"'effect found' without a held-out drop {s['found_without_drop']}, never worse: {s['never_worse']}")
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as fh:
+            json.dump(res, fh, indent=1)
+            fh.write("\n")
+    return 0
