@@ -78,6 +78,7 @@ import argparse
 import json
 import math
 import os
+import sys
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -1136,14 +1137,18 @@ def markdown(doc, model) -> str:
              "", f"**Verdict: {doc['verdict']}**", "",
              "Errors in deg/h on the " + ("held-out" if on == "holdout" else "training") + " runs: stability "
              "(1 sigma) and variation (p-p) of 1-s and 100-s averages of the compensated output.", "",
-             "| step | effect | params | std 1 s | p-p 1 s | std 100 s | p-p 100 s | CV gain | threshold |",
-             "|---|---|---|---:|---:|---:|---:|---:|---:|"]
+             "| step | effect | params | std 1 s | p-p 1 s | std 100 s | p-p 100 s | CV gain | threshold | held-out |",
+             "|---|---|---|---:|---:|---:|---:|---:|---:|---|"]
     first = doc["baseline"][on]
-    lines.append(f"| 0 | (base model) | terms {doc['settings']['terms']} | {_stats_line(first)} | | |")
+    lines.append(f"| 0 | (base model) | terms {doc['settings']['terms']} | {_stats_line(first)} | | | |")
     for k, it in enumerate(doc["iterations"], 1):
         params = ", ".join(f"{a}={_fmt(b) if isinstance(b, float) else b}" for a, b in it["params"].items())
         lines.append(f"| {k} | {it['effect']} | {params} | {_stats_line(it['after'])} | "
-                     f"{_fmt(it['cv_gain'])} | {_fmt(it['threshold'])} |")
+                     f"{_fmt(it['cv_gain'])} | {_fmt(it['threshold'])} | {it['status']} |")
+    lines += ["", f"{doc['verdict_detail']}.  Confirmation: {doc['confirm_rule']}."]
+    for a in (doc.get("artifacts") or {}).get("lines", []):
+        lines += ["", f"Line at {a['period_s']:.4g} s ({a['at']}, {a['amp_dph']:.3g} deg/h): {a['cause']}.  "
+                      f"Structural fix: {a['structural_fix']}."]
     nf = doc["noise_floor"]
     lines += ["", f"Noise floor (white noise of the residual): {_fmt(nf['std_dph'])} deg/h at 1 s, "
                   f"{_fmt(nf['std100_dph'])} deg/h at 100 s.", "",
@@ -1276,7 +1281,8 @@ def run_cli(args) -> int:
                              combiner=args.combiner, settle_s=args.settle, proxy_range=args.proxy_range,
                              rate_range=args.rate_range, max_iter=args.max_iter, n_surrogates=args.surrogates,
                              g_min=args.g_min, cv_blocks=args.cv_blocks, cv_folds=args.cv_folds,
-                             seed=args.seed, out_dir=args.out, plots=not args.no_plots)
+                             seed=args.seed, out_dir=args.out, plots=not args.no_plots,
+                             progress=lambda msg: print(f"hdrg diagnose: {msg}", file=sys.stderr, flush=True))
     if args.json:
         with open(os.path.join(args.out, "diagnose.json"), encoding="utf-8") as src, \
                 open(args.json, "w", encoding="utf-8") as dst:
@@ -1288,7 +1294,10 @@ def run_cli(args) -> int:
     for k, it in enumerate(report["iterations"], 1):
         params = ", ".join(f"{a}={_fmt(b) if isinstance(b, float) else b}" for a, b in it["params"].items())
         print(f"  {k}. {it['effect']} ({params}): {_fmt(it['after']['std_dph'])} / {_fmt(it['after']['std100_dph'])}"
-              f"  [CV gain {it['cv_gain']:.3f} >= {it['threshold']:.3f}]")
+              f"  [CV gain {it['cv_gain']:.3f} >= {it['threshold']:.3f}; {it['status']}]")
+    print(f"  {report['verdict_detail']}")
+    for a in (report.get("artifacts") or {}).get("lines", []):
+        print(f"  line at {a['period_s']:.4g} s ({a['at']}): {a['cause']}; fix: {a['structural_fix']}")
     if report.get("stopped"):
         print(f"  stopped: {report['stopped']['reason']}")
     print(f"written: {os.path.join(args.out, 'diagnose.md')}, diagnose.json, model.json")
