@@ -153,13 +153,20 @@ def summarize(records: list) -> dict:
             "never_worse": sum(1 for r in records if r["final"] > r["base"] * (1 + 1e-12)) == 0}
 
 
-def run_benchmark(n_runs: int, seed: int = 0, duration_s=None, n_surrogates=None, progress=None) -> dict:
+def run_benchmark(n_runs: int, seed: int = 0, duration_s=None, n_surrogates=None, progress=None,
+                  shard=(0, 1), json_path=None) -> dict:
+    """The benchmark (module doc); ``shard`` (k, m): only the runs with i % m == k; with
+    ``json_path`` the result so far is written after every run."""
     records = []
-    for spec in plan(n_runs, seed):
+    specs = [sp for sp in plan(n_runs, seed) if sp["i"] % shard[1] == shard[0]]
+    for spec in specs:
         rec = run_one(spec, duration_s, n_surrogates)
         records.append(rec)
+        if json_path:
+            with open(json_path, "w", encoding="utf-8") as fh:
+                json.dump({"summary": summarize(records), "records": records}, fh, indent=1)
         if progress:
-            progress(f"[{len(records)}/{n_runs}] device {rec['device']} {rec['effect'] or 'clean'} "
+            progress(f"[{len(records)}/{len(specs)}] device {rec['device']} {rec['effect'] or 'clean'} "
                      f"{'MR' if rec['reversal'] else 'FTR'} x{rec['strength']:.2f}: {rec['verdict']} "
                      f"{[(s['effect'], s['confirmed']) for s in rec['steps']]} {rec['base']:.3g} -> {rec['final']:.3g}"
                      f" (ratio {rec['effect_ratio'] if rec['effect_ratio'] is None else round(rec['effect_ratio'], 2)},"
@@ -173,8 +180,14 @@ def run_benchmark(n_runs: int, seed: int = 0, duration_s=None, n_surrogates=None
 def configure_cli(parser) -> None:
     parser.add_argument("--runs", type=int, default=120, help="runs (a third clean; default 120)")
     parser.add_argument("--seed", type=int, default=0, help="benchmark seed (devices S*100000 + i)")
+    parser.add_argument("--shard", default="0/1", metavar="K/M", help="only runs i with i %% M == K (parallel parts)")
+    parser.add_argument("--merge", nargs="+", default=None, metavar="JSON",
+                        help="instead: summarize the records of these --json files together")
     parser.add_argument("--duration", type=float, default=None, help="cut every run to this many seconds")
     parser.add_argument("--json", default=None, metavar="FILE", help="write records and summary to FILE")
+    parser.add_argument("--measured", default=None, metavar="DIR",
+                        help="instead: run the loop on the measured logs (held out by leg and by blocks), "
+                             "figures and measured.json into DIR")
 
 
 def _line(name, f):
@@ -183,11 +196,35 @@ def _line(name, f):
 
 
 def run_cli(args) -> int:
-    if args.runs < 1:
-        raise ValueError("--runs must be >= 1")
-    res = run_benchmark(args.runs, args.seed, args.duration, progress=lambda m: print(m, file=sys.stderr, flush=True))
+    if args.measured:
+        import os
+        res = measured_study(args.measured, progress=lambda m: print(m, file=sys.stderr, flush=True))
+        with open(os.path.join(args.measured, "measured.json"), "w", encoding="utf-8") as fh:
+            json.dump(res, fh, indent=1, default=float)
+            fh.write("\n")
+        for key, r in res.items():
+            b, f = r["base"], r["final"]
+            print(f"{key:24s} {r['verdict']:30s} held-out std 1 s {b['std_dph']:.4g} -> {f['std_dph']:.4g}, "
+                  f"100 s {b['std100_dph'] if b['std100_dph'] is None else round(b['std100_dph'], 3)} -> "
+                  f"{f['std100_dph'] if f['std100_dph'] is None else round(f['std100_dph'], 3)} deg/h; {r['detail']}")
+        return 0
+    if args.merge:
+        records = []
+        for path in args.merge:
+            with open(path, encoding="utf-8") as fh:
+                records += json.load(fh)["records"]
+        res = {"summary": summarize(sorted(records, key=lambda r: r["i"])), "records": records}
+    else:
+        if args.runs < 1:
+            raise ValueError("--runs must be >= 1")
+        k, m = (int(x) for x in args.shard.split("/"))
+        if not 0 <= k < m:
+            raise ValueError(f"--shard K/M needs 0 <= K < M, not {args.shard}")
+        res = run_benchmark(args.runs, args.seed, args.duration, shard=(k, m), json_path=args.json,
+                            progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     s = res["summary"]
     print(f"hdrg bench loop: {s['runs']} foreign runs (seed {args.seed}), {s['effect_runs']} with an undeclared effect")
+    print(_line("  clean runs", {"k": s["runs"] - s["effect_runs"], "n": s["runs"], "rate": None}))
     print(_line("detection (ratio >= 2)", s["detection"]))
     for kind, f in s["detection_per_kind"].items():
         print(_line(f"  {kind}", f))
@@ -205,3 +242,117 @@ def run_cli(args) -> int:
             json.dump(res, fh, indent=1)
             fh.write("\n")
     return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# measured data (`hdrg bench loop --measured DIR`)
+# ---------------------------------------------------------------------------------------------
+
+MEASURED = {"tofupilot-x": "tofupilot-imu-thermal/tofupilot-imu-x.csv",
+            "tofupilot-y": "tofupilot-imu-thermal/tofupilot-imu-y.csv",
+            "psim-x": "psim-tvac-lsm6dsm/psim-tvac-x.csv", "psim-y": "psim-tvac-lsm6dsm/psim-tvac-y.csv"}
+MEASURED_ROOT = "/work/shared/data/measured"
+SPLIT_BLOCKS = 8
+
+
+def splits(log) -> dict:
+    """The held-out splits of one measured log: ``cool->heat`` / ``heat->cool`` (train on the
+    samples where the smoothed temperature falls, hold out those where it rises, and the
+    reverse; only when both legs span >= 20 degC) and ``blocks`` (SPLIT_BLOCKS contiguous time
+    blocks, or the bursts of a bursty log: even ones train, odd ones held out)."""
+    t = np.asarray(log.t_s)
+    temp = np.asarray(log["temp_c"], np.float64)
+    out = {}
+    if len(log.segments) == 1:
+        k = max(1, int(round(60.0 * log.sample_rate_hz)))          # 60-s moving mean
+        sm = np.convolve(temp, np.ones(k) / k, mode="same")
+        rising = np.gradient(sm) > 0
+        legs = {"cool": ~rising, "heat": rising}
+        if all(np.ptp(temp[m]) >= 20.0 for m in legs.values()):
+            out["cool->heat"] = (legs["cool"], legs["heat"])
+            out["heat->cool"] = (legs["heat"], legs["cool"])
+        block = (np.arange(len(t)) * SPLIT_BLOCKS) // len(t)
+    else:
+        block = np.searchsorted(log.segments, np.arange(len(t)), side="right") - 1
+    out["blocks"] = (block % 2 == 0, block % 2 == 1)
+    return out
+
+
+def measured_study(out_dir: str, root: str = MEASURED_ROOT, progress=None) -> dict:
+    """Run the loop on every measured log and split (module doc of diagnose; default options):
+    per case the verdict, the steps and the held-out error (std of 1-s and 100-s averages, deg/h)
+    of the base and final models; figures (held-out Allan deviation and residual vs time, base
+    and final) in ``out_dir``."""
+    import os
+
+    from host_tools import runlog
+    os.makedirs(out_dir, exist_ok=True)
+    results = {}
+    for name, rel in MEASURED.items():
+        path = os.path.join(root, rel)
+        if not os.path.exists(path):
+            continue
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            log = runlog.read(path)
+        for split, (tr, ho) in splits(log).items():
+            key = f"{name} {split}"
+            if progress:
+                progress(f"measured: {key}")
+            train, hold = log.select(tr), log.select(ho)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                rep, model = diagnose([train], [hold], plots=False)
+            base_model = _measured_base(train)
+            fig = _measured_figure(key, hold, base_model, model, out_dir)
+            results[key] = {"verdict": rep["verdict"], "detail": rep["verdict_detail"],
+                            "base": rep["baseline"]["holdout"], "final": rep["final"],
+                            "noise_floor": rep["noise_floor"],
+                            "steps": [{"effect": it["effect"], "params": it["params"], "confirmed": it["confirmed"],
+                                       "cv_gain": it["cv_gain"], "threshold": it["threshold"],
+                                       "before": it["before"], "after": it["after"]} for it in rep["iterations"]],
+                            "stopped": (rep["stopped"] or {}).get("reason"),
+                            "ranking": (rep["stopped"] or {}).get("ranking", [])[:5],
+                            "noise_model": rep["characterization"]["noise_models"][0],
+                            "figure": fig}
+    return results
+
+
+def _measured_base(train):
+    cfg = fit_config_from_logs([train])
+    return fit_logs([train], cfg, "all", drop_unidentifiable=True)[0]
+
+
+def _measured_figure(key, hold, base_model, final_model, out_dir) -> str:
+    import os
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from host_tools import metrics
+    from host_tools.compensate import compensate
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for label, m, style in (("base model (16 terms)", base_model, "--"), ("after the loop", final_model, "-")):
+        out = compensate(hold, m)
+        v = np.asarray(out["valid"]) == 1
+        a = metrics.allan(out.rate_dph, hold.t_s, v)
+        if a["tau_s"]:
+            a1.loglog(a["tau_s"], a["adev_dph"], style, label=label)
+        a2.plot(hold.t_s[v] / 60.0, out.rate_dph[v], style, lw=0.6, label=label)
+    a1.axvline(1.0, color="0.6", lw=0.8)
+    a1.axvline(100.0, color="0.6", lw=0.8)
+    a1.set_xlabel("averaging time tau [s]")
+    a1.set_ylabel("Allan deviation of the held-out output [deg/h]")
+    a1.grid(True, which="both", alpha=0.3)
+    a1.legend(fontsize=8)
+    a2.set_xlabel("time since start [min]")
+    a2.set_ylabel("compensated held-out output [deg/h]")
+    a2.grid(True, alpha=0.3)
+    a2.legend(fontsize=8)
+    fig.suptitle(f"{key}: held-out samples", fontsize=10)
+    fig.tight_layout()
+    name = key.replace(" ", "_").replace(">", "").replace("-", "_") + ".png"
+    fig.savefig(os.path.join(out_dir, name), dpi=90)
+    plt.close(fig)
+    return name
