@@ -449,15 +449,11 @@ def surrogates(nm, log, cfg, count, rng, project=None):
         return z, z
     w = _noise_series(nm, n, count, rng)
     if cfg.reversal is not None:
-        from host_tools.reversal import _combine_kernel
+        from host_tools.reversal import combine_values
         mode = np.asarray(log.mode, np.int64)
-        seg = np.zeros(n, np.bool_)
-        seg[np.asarray(log.segments, np.int64)] = True
-        sgn = np.where(mode == 2, -1.0, 1.0)
-        rc = cfg.reversal
+        ok = np.ones(n, np.bool_)
         for c in range(count):
-            w[:, c] = _combine_kernel(mode, sgn * w[:, c], seg, int(round(rc.settle_s * cfg.rate.fs)),
-                                      int(round(rc.max_stale_s * cfg.rate.fs)), rc.combiner == "trend")[0]
+            w[:, c] = combine_values(mode, w[:, c], ok, log.segments, cfg.reversal, cfg.rate.fs)[0]
     rs = w - project(w) if project is not None else w
     return w, rs
 
@@ -762,7 +758,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator="diff", 
     rev = any(log.reversal for log in train)
     opts = dict(proxy_kind=proxy, rate_estimator=rate_estimator, n=rate_n, shift=rate_shift,
                 proxy_range=proxy_range, rate_range=rate_range,
-                reversal={"combiner": combiner, "settle_s": settle_s} if rev else None)
+                reversal={"combiner": combiner, "settle_s": settle_s, "order": "combine_first"} if rev else None)
     cfg = _config(train, opts)
     say(f"fitting the base model on {len(train)} training run(s)")
     model, _ = fit_logs(train, cfg, terms, drop_unidentifiable=True)
@@ -850,10 +846,21 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator="diff", 
         if max_iter > 0:
             stopped = {"reason": f"max_iter ({max_iter}) reached", "best": None, "threshold": None,
                        "ranking": [], "null_max": []}
+    if rev and max_iter > 0:
+        say("structural candidates: regress-then-reverse (per-mode banks) with each combiner, by CV")
+        entry, alt_model = _order_step(train, hold, evals, cfg, model, cv_blocks, cv_folds)
+        if entry is not None:
+            iterations.append(entry)
+            if entry["confirmed"] is not False:
+                model = alt_model
+                accepted.append(_Accepted(entry["effect"], entry["params"]))
+            say(f"structural: {entry['effect']} {entry['params']}: {entry['status']}")
     final = error_stats(evals, model)
     kept = [e for e in iterations if e["confirmed"] is not False]
-    if kept:
+    if any(e["effect"] not in STRUCTURAL for e in kept):
         verdict = "effect found"
+    elif kept:
+        verdict = "model structure improved"
     elif iterations:
         verdict = "no confirmed effect"
     else:
@@ -869,6 +876,77 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator="diff", 
     for entry in iterations:
         entry.pop("_plot", None)
     return report, model
+
+
+ORDER_ALTERNATIVES = ("none", "pair", "trend")   # regress_first with each combiner
+STRUCTURAL = ("rate_estimator", "reversal_order")  # steps that change the model's structure, not an effect
+
+
+def _fold_logs(train, cv_blocks, cv_folds) -> list:
+    """(training logs, held-out logs) per CV fold for whole-model refits: leave one run out, or
+    with a single run its ``cv_blocks`` contiguous blocks dealt round-robin into ``cv_folds``
+    folds (RunLog.select: the blocks become gap-separated segments)."""
+    if len(train) >= 2:
+        return [([g for j, g in enumerate(train) if j != f], [train[f]]) for f in range(len(train))]
+    log = train[0]
+    block = (np.arange(len(log)) * cv_blocks) // len(log)
+    return [([log.select(block % cv_folds != k)], [log.select(block % cv_folds == k)]) for k in range(cv_folds)]
+
+
+def _order_step(train, hold, evals, cfg, model, cv_blocks, cv_folds):
+    """The structural candidate 'regress-then-reverse' (host_tools.reversal order regress_first:
+    two coefficient banks by mode, the combiner applied to the residual) with each combiner of
+    ORDER_ALTERNATIVES, the current terms and aux generators kept: every fold refits the whole
+    model (current and alternative) on its training part and scores the error (std of 100-s
+    averages, 1-s where undefined) on its held-out part.  The best alternative is a step when it
+    lowers the CV error by >= CONFIRM_MIN_DROP in total and in a strict majority of folds; then it
+    is confirmed on the held-out runs like every step.  Returns (entry, model) or (None, None)."""
+    from host_tools.reversal import ReversalConfig
+    terms = tuple(model.terms)
+    rc = cfg.reversal
+    folds = _fold_logs(train, cv_blocks, cv_folds)
+
+    def cv(c):
+        errs = []
+        for tr, te in folds:
+            try:
+                m, _ = fit_logs(tr, c, terms, drop_unidentifiable=True)
+                errs.append(_score(error_stats(te, m))[0])
+            except ValueError:
+                return None
+        return None if any(e is None for e in errs) else np.array(errs)
+
+    base = cv(cfg)
+    if base is None:
+        return None, None
+    rows = []
+    for comb in ORDER_ALTERNATIVES:
+        alt = replace(cfg, reversal=ReversalConfig(comb, rc.max_stale_s, rc.settle_s, order="regress_first"))
+        e = cv(alt)
+        if e is not None:
+            rows.append({"combiner": comb, "cfg": alt, "gain": float(1.0 - e.sum() / base.sum()),
+                         "folds_improved": int(np.sum(e < base)), "folds": len(folds)})
+    if not rows:
+        return None, None
+    best = max(rows, key=lambda r: r["gain"])
+    if not (best["gain"] >= CONFIRM_MIN_DROP and best["folds_improved"] > len(folds) // 2):
+        return None, None
+    alt_model, _ = fit_logs(train, best["cfg"], terms, drop_unidentifiable=True)
+    before, after = error_stats(evals, model), error_stats(evals, alt_model)
+    confirmed = confirmed_on_holdout(before, after) if hold else None
+    entry = {"effect": "reversal_order", "params": {"order": "regress_first", "combiner": best["combiner"]},
+             "before": _clean(before), "after": _clean(after), "confirmed": confirmed,
+             "train_before": _clean(error_stats(train, model)), "train_after": _clean(error_stats(train, alt_model)),
+             "cv_gain": best["gain"], "threshold": CONFIRM_MIN_DROP, "refined_from": None,
+             "folds_improved": best["folds_improved"], "folds": best["folds"],
+             "ranking": [{"label": f"reversal_order(regress_first, {r['combiner']})", "family": "reversal_order",
+                          "gain": r["gain"], "folds_improved": r["folds_improved"], "folds": r["folds"]}
+                         for r in sorted(rows, key=lambda r: -r["gain"])],
+             "null_max": [], "aux": alt_model.config.aux.to_dict(), "rate": alt_model.config.rate.to_dict(),
+             "before_runs": before["runs"], "after_runs": after["runs"],
+             "status": ("confirmed on held-out" if confirmed else "accepted (no held-out runs)") if confirmed is not False
+             else "not confirmed on held-out: reverted (the model stays the last confirmed one)"}
+    return entry, alt_model
 
 
 def _verdict_detail(iterations, hold) -> str:
