@@ -94,7 +94,7 @@ from host_tools.regressors import AuxConfig, generator_values, regressor_matrix
 G_MIN = 0.02                 # minimum CV gain (fraction of held-out residual variance)
 N_SURROGATES = 39            # surrogate residuals for the null of the scan's best gain
 NULL_QUANTILE = 0.95
-NULL_SD_FLOOR = 0.005        # max-T: smallest std of a candidate's null gains
+NULL_SD_FLOOR = 0.005        # max-T: smallest upper-tail scale of a candidate's null gains
 MAX_ITER = 3
 CV_BLOCKS = 16               # single training run: contiguous blocks ...
 CV_FOLDS = 4                 # ... dealt round-robin into folds
@@ -389,15 +389,20 @@ def noise_model(resid, t_s, valid, fs, reversal=False) -> dict:
     relative errors) by ``AVAR(tau) = A / tau + B + C tau + D tau^2``: white noise (A = sigma^2 /
     fs, sigma the per-sample std), flicker / bias instability (B = 2 ln2 h_-1), rate random walk
     (C = 2 pi^2 h_-2 / 3) and a drift (D, deterministic: dropped).  So the noise is what the
-    short-tau statistics say, extrapolated to long taus by its white, flicker and random-walk
-    laws; a slow effect in the residual (power at long taus only) does not enter it.
+    short-tau statistics say, extrapolated to long taus by its white and flicker laws; a slow
+    effect in the residual (power at long taus only) does not enter it.  The random-walk and
+    drift terms are fitted but NOT kept: at taus <= 64 s a rate random walk cannot be told from
+    the start of a slow effect (on the foreign devices with an undeclared effect the fitted C was
+    50x the true random walk), so keeping it would let the noise swallow the effect.  A real
+    random walk does not repeat from run to run or block to block: the cross-validation and the
+    held-out confirmation are what stand against it.
 
     For a mode-reversal residual (``reversal``) the combined output within a window is half the
     raw output plus a deterministic part of the other window, so the raw noise is twice the
     fitted one: the returned coefficients are for the RAW per-sample output (the surrogates pass
     it through the combiner, :func:`surrogates`).  Returns {white_dph (sigma), flicker_dph
-    (sqrt B: the flat Allan level), rw_dph_per_sqrt_s (sqrt(3 C): the random-walk Allan slope),
-    drift_dropped, taus_s, fs, scale} or None when fewer than 3 taus are available."""
+    (sqrt B: the flat Allan level), rw_dph_per_sqrt_s (0, see above), slow_dropped (the tau /
+    tau^2 terms were non-zero), taus_s, fs, raw_scale} or None when fewer than 3 taus are available."""
     from scipy.optimize import nnls
     a = metrics.allan(resid, t_s, valid, fs)
     taus = np.asarray(a["tau_s"], np.float64)
@@ -406,13 +411,14 @@ def noise_model(resid, t_s, valid, fs, reversal=False) -> dict:
     if keep.sum() < 3:
         return None
     taus, avar = taus[keep], adev[keep] ** 2
-    cols = [1.0 / taus, np.ones_like(taus), taus] + ([taus ** 2] if keep.sum() >= 5 else [])
+    cols = [1.0 / taus, np.ones_like(taus)] + ([taus, taus ** 2] if keep.sum() >= 5 else [])
     M = np.column_stack(cols) / avar[:, None]
     coef = nnls(M, np.ones(len(taus)))[0]
     scale = 2.0 if reversal else 1.0
-    A, B, C = coef[:3] * scale ** 2
+    A, B = coef[:2] * scale ** 2
+    C = 0.0      # the tau and tau^2 terms absorb slow structure (effects): not noise
     return {"white_dph": float(math.sqrt(A * fs)), "flicker_dph": float(math.sqrt(B)),
-            "rw_dph_per_sqrt_s": float(math.sqrt(3.0 * C)), "drift_dropped": bool(len(coef) > 3 and coef[3] > 0),
+            "rw_dph_per_sqrt_s": float(math.sqrt(3.0 * C)), "slow_dropped": bool(len(coef) > 2 and np.any(coef[2:] > 0)),
             "taus_s": taus.tolist(), "fs": float(fs), "raw_scale": scale,
             "_psd": (2.0 * A, B / (2.0 * math.log(2.0)), 3.0 * C / (2.0 * math.pi ** 2))}
 
@@ -1078,12 +1084,12 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
         out["reason"] = "no candidates"
         return out
     # rule (b): the largest gain of the whole scan on each surrogate; its 95 % level
-    # (max-T: every candidate's gain standardized by its own null, so a candidate that fits
-    # noise easily (a wandering channel) does not raise the bar for the others)
+    # (max-T: every candidate's gain standardized by its own null (median, 84th percentile - median),
+    # so a candidate that fits noise easily (a wandering channel) does not raise the bar for the others)
     nulls = np.array([r["_null"] for r in rows]).reshape(len(rows), nsur)
-    if nsur:
-        mu = nulls.mean(axis=1)
-        sd = np.maximum(nulls.std(axis=1), NULL_SD_FLOOR)
+    if nsur:     # robust location / upper-tail scale: a wild negative tail must not inflate the bar
+        mu = np.median(nulls, axis=1)
+        sd = np.maximum(np.quantile(nulls, 0.8413, axis=1) - mu, NULL_SD_FLOOR)
         null_max = ((nulls - mu[:, None]) / sd[:, None]).max(axis=0)
         t_level = float(np.quantile(null_max, NULL_QUANTILE))
     else:

@@ -313,20 +313,24 @@ def test_confirmed_steps_lower_the_held_out_error(results):
     assert rep["iterations"][0]["confirmed"] is True and rep["verdict"] == "effect found"
 
 
-def test_noise_model_recovers_white_and_random_walk_and_ignores_a_slow_effect():
-    from host_tools.diagnose import noise_model
+def test_noise_model_recovers_white_and_flicker_and_ignores_a_slow_effect():
+    from host_tools.diagnose import _noise_series, noise_model
     rng = np.random.default_rng(5)
     n = 40000
     t = np.arange(n, dtype=float)
-    noise = 0.5 * rng.standard_normal(n) + np.cumsum(rng.standard_normal(n)) * 0.004
+    ref = {"_psd": (2 * 0.25, 0.05 ** 2 / (2 * np.log(2)), 0.0), "fs": 1.0}     # white 0.5, flicker 0.05
+    noise = _noise_series(ref, n, 1, rng)[:, 0]
     nm = noise_model(noise, t, np.ones(n, bool), 1.0)
     assert nm["white_dph"] == pytest.approx(0.5, rel=0.1)
-    assert nm["rw_dph_per_sqrt_s"] == pytest.approx(0.004, rel=0.6)
+    assert nm["flicker_dph"] == pytest.approx(0.05, rel=0.5)
     # a slow effect 10x the white noise (period 8000 s) hardly moves the model
     slow = noise + 5.0 * np.sin(2 * np.pi * t / 8000.0)
     nm2 = noise_model(slow, t, np.ones(n, bool), 1.0)
     assert nm2["white_dph"] == pytest.approx(0.5, rel=0.1)
-    assert nm2["flicker_dph"] < 0.2 and nm2["rw_dph_per_sqrt_s"] < 0.02
+    assert nm2["flicker_dph"] < 0.1 and nm2["rw_dph_per_sqrt_s"] == 0.0
+    # the surrogate of that noise model stays at the noise level at long averaging times
+    sur = _noise_series(nm2, n, 1, rng)[:, 0]
+    assert np.std(sur.reshape(-1, 1000).mean(axis=1)) < 0.2 < np.std(slow.reshape(-1, 1000).mean(axis=1))
 
 
 def test_combiner_lines_are_the_reversal_cycle_and_its_chamber_sidebands():
