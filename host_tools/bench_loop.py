@@ -339,7 +339,9 @@ def _measured_figure(key, hold, base_model, final_model, out_dir) -> str:
         a = metrics.allan(out.rate_dph, hold.t_s, v)
         if a["tau_s"]:
             a1.loglog(a["tau_s"], a["adev_dph"], style, label=label)
-        a2.plot(hold.t_s[v] / 60.0, out.rate_dph[v], style, lw=0.6, label=label)
+        tt, yy = hold.t_s[v] / 60.0, np.asarray(out.rate_dph)[v]
+        brk = np.flatnonzero(np.diff(tt) > 5.0 / 60.0) + 1         # no line across gaps (> 5 s)
+        a2.plot(np.insert(tt, brk, np.nan), np.insert(yy, brk, np.nan), style, lw=0.6, label=label)
     a1.axvline(1.0, color="0.6", lw=0.8)
     a1.axvline(100.0, color="0.6", lw=0.8)
     a1.set_xlabel("averaging time tau [s]")
