@@ -100,7 +100,9 @@ CV_BLOCKS = 16               # single training run: contiguous blocks ...
 CV_FOLDS = 4                 # ... dealt round-robin into folds
 BAND_RATIO = 2 ** 0.25       # spectrum continuum: median over 1/4-octave bands
 LINE_ALPHA = 0.01            # spectrum lines: false-alarm level over all bins (Bonferroni)
-MAX_LINES = 3                # periodic candidates: at most this many lines
+MAX_LINES = 3                # periodic candidates: at most this many lines ...
+PERIOD_GRID_MIN_S = 120.0    # ... plus a grid of periods from this, ratio 2^(1/4), up to a third of the run
+PERIOD_GRID_RATIO = 2 ** 0.25
 RATE_ALTERNATIVES_S = (16.0, 64.0)   # rate_estimator candidates: lsq windows [s] ...
 RATE_IIR_TAUS_S = (8.0, 32.0, 128.0, 512.0)   # ... and iir time constants 2^shift / fs [s]
 REPORT_TAUS = (1.0, 100.0)
@@ -1025,6 +1027,14 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
     nfold = len(groups)
     majority = nfold // 2 + 1
     cands = effects.library(train, cfg, periods=periods, families=families)
+    for c in cands:
+        if c.family == "periodic":
+            c.extra["line"] = True
+    if families is None or "periodic" in families:      # a period grid too: a line may hide under slow residual
+        dur = max(float(log.t_s[-1] - log.t_s[0]) for log in train)
+        grid = PERIOD_GRID_MIN_S * PERIOD_GRID_RATIO ** np.arange(64)
+        cands += [effects.periodic(float(p)) for p in grid[grid <= dur / 3.0]
+                  if not artifact_of(float(p), clines) and all(abs(p / q - 1.0) > 0.05 for q in periods)]
     # drop candidates equal to an accepted generator
     have = [json.dumps(t, sort_keys=True) for t in gen_terms]
     cands = [c for c in cands if not any(json.dumps(t, sort_keys=True) in have for t in c.terms)
@@ -1051,7 +1061,7 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
             for period in _pooled_periods(sl):
                 pnull[j] = max(pnull[j], evaluate(effects.periodic(period))["_null"][j])
         for r in rows:
-            if r["family"] == "periodic":
+            if r["family"] == "periodic" and r["_cand"].extra.get("line"):
                 r["_null"] = pnull
     if rate_alt and "rate_estimator" not in excluded:
         for alt in _rate_alternatives(train, cfg):
