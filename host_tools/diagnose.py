@@ -24,24 +24,25 @@ Procedure (:func:`diagnose`)
    scored on the held-out part (:class:`_Scanner`).  The score is on SCORE_TAU_S = 1-s means of
    the valid samples (the samples themselves at <= 1 Hz; at 50 Hz the white noise of single
    samples would swamp any slow effect): ``gain = 1 - SSE_heldout(with candidate) /
-   SSE_heldout(base)``, summed over folds.  With >= 2 training runs a candidate may also be
-   another rate estimator (lsq over 16 s or 64 s, family ``rate_estimator``): it replaces the v
-   terms instead of adding a column (within one run, blocks of the same record favour it even
-   when held-out runs get worse, so it is not offered there).
+   SSE_heldout(base)``, summed over folds.  A candidate may also be another rate estimator (lsq
+   over 16 or 64 s, iir with 2^shift / fs = 8, 32, 128 or 512 s; family ``rate_estimator``): it
+   replaces the v terms instead of adding a column, and is scored on the samples valid under
+   both estimators (a longer warm-up must not win by hiding the start of a run); effects are
+   preferred to it when both pass (its warm-up would hide a turn-on).
 4. **Selection rule** (:data:`RULE`): the best candidate is accepted only when
 
    a. its CV gain >= ``g_min`` (default 0.02: it explains at least 2 % of the held-out residual
       variance of 1-s means), and
-   b. its CV gain >= the 95 % level of the *largest* gain of the whole coarse scan on
-      ``n_surrogates`` (29) surrogates: each training run's residual is replaced by Gaussian
-      noise with the run's own noise spectrum (:func:`surrogates`, :func:`noise_continuum`: the
-      residual's periodogram smoothed by a local median that drops lines and the mode-sign
-      sidebands, its own power kept at the 4 lowest bins; random phases; no wrap-around, so it
-      drifts like a real record; corrected for what the base fit absorbs) and every candidate
-      is rescored, the periodic ones at the lines of each surrogate's own spectrum.  So the
-      threshold counts every candidate and scan point, the choice of the periods, and the run's
-      own white, flicker and slow noise (a slow random residual is what makes slow candidates
-      look good by chance), and
+   b. its CV gain >= the gain it needs under max-T: every candidate is rescored on
+      ``n_surrogates`` (39) surrogate noise series per training run (:func:`noise_model`: white +
+      flicker fitted to the residual's Allan variance at taus <= NOISE_TAU_MAX_S, where effects
+      are not; :func:`surrogates`: Gaussian, no wrap-around, through the model's combiner for
+      mode-reversal logs, absolute level, never rescaled to the residual); each candidate's gain
+      is standardized by its own null (median, 84th percentile - median); the 95 % level of the
+      scan's LARGEST standardized null gain over the surrogates, mapped back through each
+      candidate's own null, is the gain that candidate needs (``null95``).  So the threshold
+      counts every candidate and scan point, and a candidate that fits noise easily (a wandering
+      aux channel) does not raise the bar for the others; and
    c. it is consistent: it lowers the held-out error in a strict majority of the folds (all folds
       with 2 runs).
 
@@ -49,15 +50,21 @@ Procedure (:func:`diagnose`)
    the mode and the sample counter alone is preferred to one that needs another logged channel
    (board_temp, aux_*) (:func:`_preferred`).  The winner's continuous parameter (tau or period)
    is then refined on finer grids (ratios 2^(+-1/4, +-1/2), then 2^(+-1/8); periods +-2, 4 %,
-   then +-1 %) by the same CV gain.  Periodic candidates exist only at the periods of significant
-   lines of the training residual (power / continuum > ln(bins / 0.01): Bonferroni over the
-   frequency bins).
+   then +-1 %) by the same CV gain.  Periodic candidates: at the periods of significant lines of
+   the training residual (power / continuum > ln(bins / 0.01)) and on a period grid (120 s ..
+   a third of the run, ratio 2^(1/4)); never at a **combiner line** (:func:`combiner_lines`: the
+   reversal cycle, its harmonics and their sidebands with the chamber cycle), which is reported
+   in ``artifacts`` with the combiner as the cause and the structural fix.
 5. **Add the effect**: the polynomial terms plus every accepted generator as its own column are
    refitted by a small explicit least-squares solve on the training runs; the generator weights
    are normalized by the sum of their magnitudes (so |z| <= 1 everywhere, host_tools.regressors)
    and baked into ``AuxConfig('sum', ...)``; the fitter then fits the 17 coefficients with k7.
-   (A rate_estimator winner changes the model's rate estimator instead.)  Iterate while a
-   candidate passes the rule, at most ``max_iter`` (3) times.
+   (A rate_estimator winner changes the model's rate estimator instead.)  **Confirm** it on the
+   held-out runs (:data:`CONFIRM_RULE`): if the held-out error does not drop, the step is
+   reported ``confirmed: false`` and reverted, its family is not offered again.  Iterate while a
+   candidate passes the rule, at most ``max_iter`` (3) times.  Then, for mode-reversal logs, the
+   structural candidate regress-then-reverse (:func:`_order_step`: per-mode banks, each combiner,
+   whole-model CV), confirmed the same way.
 6. **Report**: per iteration the effect, its parameters, the evidence (CV gain, threshold, folds,
    ranking; PNG: residual vs the candidate, Allan deviation and spectrum before/after) and the
    error before and after (:func:`error_stats`: stability 1 sigma and variation p-p of 1-s and
@@ -117,13 +124,12 @@ TIE_TOLERANCE = 0.05         # gains within 5 % (relative) of the best are a tie
 
 RULE = ("accept the best candidate iff (a) its cross-validated gain (1 - held-out SSE of 1-s means "
         "with it / without it, the base terms refitted with it in every fold; folds: runs, or "
-        "contiguous blocks of one run) >= g_min, (b) that gain >= the "
-        f"{NULL_QUANTILE:.0%} level of the best gain of the whole coarse scan on surrogate residuals "
-        "(Gaussian noise with each run's own noise spectrum, lines removed, no wrap-around: the "
-        "threshold counts every candidate, scan point and chosen period and the run's own "
-        "white/flicker/slow noise), and (c) it lowers the held-out error in a strict majority of "
-        "the folds; ties within 5 % prefer a regressor of the proxy alone; then refine its "
-        "parameter; stop when no candidate passes or after max_iter iterations")
+        "contiguous blocks of one run) >= g_min, (b) that gain >= the gain it needs under max-T: "
+        "the 95 % level of the scan's largest standardized gain on surrogate noise (white + flicker "
+        "fitted to the residual's Allan variance at short taus, through the combiner), mapped back "
+        "through the candidate's own null, and (c) it lowers the held-out error in a strict "
+        "majority of the folds; ties within 5 % prefer a regressor of the proxy alone; then refine "
+        "its parameter; stop when no candidate passes or after max_iter iterations")
 
 
 # ---------------------------------------------------------------------------------------------
