@@ -239,3 +239,17 @@ def aux_stream(rng: np.random.Generator, table, n: int, reversal: bool = True, e
         k = np.arange(n, dtype=np.int64)
     s["k"] = k.astype(np.int64)
     return s
+
+
+def two_bank_table(table, bank2, combiner: int | None = None):
+    """A regress_first (order 1) table: ``table`` with bank 2 = bank 1 of ``bank2`` (a table of the
+    same data flow, e.g. quantized from another coefficient set) and ``combiner`` (1 pair, 2 trend,
+    3 none; default: the table's).  For equivalence tests and vectors, independent of the golden
+    fitter."""
+    import dataclasses
+
+    comb = table.combiner if combiner is None else combiner
+    if comb == 0:
+        raise ValueError("a regress_first table needs a mode-reversal combiner (1, 2, 3)")
+    return dataclasses.replace(table, order=1, n_banks=2, combiner=comb, e_row2=bank2.e_row, e_7_2=bank2.e_7,
+                               e_acc2=bank2.e_acc, mant2=bank2.mant)

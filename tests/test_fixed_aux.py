@@ -211,8 +211,8 @@ def test_aux_table_words_roundtrip_and_validate():
     q = quantize(aux_model(), n_random=10)
     t = q.table
     words = t.to_words()
-    assert words[1] == 1 and words[FIELD_INDEX["aux_gen"]] == 1
-    assert len(words) == 48 + 2 + 1 + 6 * F.AUX_TERM_WORDS and words[2] == len(words)
+    assert words[1] == 2 and words[FIELD_INDEX["aux_gen"]] == 1
+    assert len(words) == 73 + 2 + 1 + 6 * F.AUX_TERM_WORDS and words[2] == len(words)
     assert Table.from_words(words) == t == Table.from_bytes(t.to_bytes()) == Table.from_memh(t.to_memh())
     aux = t.aux()
     assert aux.fracs == (aux_channel_fracs(q.model.config.aux)[0],) and encode_aux(aux.fracs, aux.terms) == t.aux_params
