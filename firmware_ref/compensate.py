@@ -190,7 +190,8 @@ def check_table_matches(table, model) -> None:
     expect = quantize(model).table
     diffs = [name for name in ("proxy_kind", "p_ref", "g_u", "u_off", "sh_u", "rate_est", "rate_n", "rate_shift",
                                "rate_warmup", "g_v", "sh_v", "combiner", "settle_n", "max_stale_n", "mant",
-                               "e_row", "e_7", "e_acc", "aux_gen", "aux_params")
+                               "e_row", "e_7", "e_acc", "aux_gen", "aux_params", "order", "n_banks", "mant2",
+                               "e_row2", "e_7_2", "e_acc2")
              if getattr(table, name) != getattr(expect, name)]
     if diffs:
         raise ValueError(f"--table: the table does not match the model {model.source} "
