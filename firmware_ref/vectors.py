@@ -209,8 +209,13 @@ def with_aux(model, terms):
     coef = np.array(model.coef, np.float64)
     if coef[7] == 0.0:
         coef[7] = 1.0
+    coef2 = None
+    if model.coef_mode2 is not None:
+        coef2 = np.array(model.coef_mode2, np.float64)
+        if coef2[7] == 0.0:
+            coef2[7] = 1.0
     cfg = dataclasses.replace(model.config, aux=AuxConfig.from_terms(terms, model.config.rate.fs))
-    return BiasModel(cfg, tuple(sorted(set(model.terms) | {7})), coef, source="<vectors aux>")
+    return BiasModel(cfg, tuple(sorted(set(model.terms) | {7})), coef, source="<vectors aux>", coef_mode2=coef2)
 
 
 def random_aux_model(rng: np.random.Generator, reversal: bool = True, estimator: str | None = None,
