@@ -664,6 +664,17 @@ def test_ubsan_build(ubsan_exe):
     table = aux_extreme_table()
     s = aux_stream(np.random.default_rng(3), table, 5000, extreme=0.05)
     assert_same(kernel(table, s), run_bin(ubsan_exe, table, s), what="ubsan aux extremes")
+    from firmware_ref.vectors import two_bank_table    # regress_first: residual saturation, both banks
+    big = np.zeros(17)
+    big[0] = 2.0 ** 21 * 0.9
+    e = extreme_tables()
+    for comb in (1, 2, 3):
+        for t1, t2 in ((table_of("diffn", "pair"), table_of("diffn", "pair", coef=big)),
+                       (e["E0_max"], e["E52"])):
+            table = two_bank_table(t1 if t1.combiner else with_fields(t1, combiner=1), t2, comb)
+            s = corner_stream(table)
+            assert_same(kernel(table, s), run_bin(ubsan_exe, table, s), what=f"ubsan regress_first {comb}")
+            assert_same(kernel(table, s, True), run_bin(ubsan_exe, table, s, True), what=f"ubsan rtr {comb} timed")
     cases = primitive_cases(np.random.default_rng(1))
     out = run_text(ubsan_exe, [req for req, _ in cases], expect_rc=1)
     assert all(got.startswith(exp) for (_, exp), got in zip(cases, out)) and len(out) == len(cases)

@@ -262,3 +262,36 @@ def test_hdrg_quantize_through_the_cli_registry(tmp_path, capsys, monkeypatch):
     capsys.readouterr()
     assert cli.main(["quantize", str(tmp_path / "big.json"), "-o", str(tmp_path / "x.json")]) == 2
     assert "cannot quantize" in capsys.readouterr().err and not (tmp_path / "x.json").exists()
+
+
+# -- two banks (regress_first) -----------------------------------------------------------------------------
+
+def test_two_banks_per_bank_exponents_bounds_and_refusals(tmp_path, capsys):
+    """Each bank gets its own exponents (a bank 1000x smaller keeps ~10 more bits), its own
+    interval bound, and the measured |B_fixed - B_golden| of both banks is within the bound; the
+    residual-path bound grows none < pair < trend; a bank 2 that cannot be held is refused naming
+    bank 2."""
+    coef = np.array([1.5, -4.0, 0.3, 1.1, -1.2, -0.2, 0.9, 0.0, 0.05, 1.8, -0.1, 1.9, 0.7, 0.7, -0.02, -1.1, 0.9])
+    outs = {}
+    for comb in ("none", "pair", "trend"):
+        q = quantize(make_model(combiner=comb, order="regress_first", coef=coef, coef2=coef * 1e-3), n_random=500)
+        t = q.table
+        assert (t.order, t.n_banks, t.combiner) == (1, 2, F.COMBINERS.index(comb))
+        assert all(e2 >= e1 + 9 for e1, e2 in zip(t.e_row, t.e_row2))
+        np.testing.assert_allclose(q.coef_quantized(2), coef * 1e-3, atol=2.0 ** -(min(t.e_row2) - 1))
+        b = q.report["bound_dph"]
+        assert len(b["banks"]) == 2 and q.report["measured_dph"]["random"] <= b["bias_B"]
+        assert len(q.report["interval_bounds"]["banks"]) == 2 and "residual" in q.report["interval_bounds"]
+        outs[comb] = b["out"]
+        d = q.to_dict()
+        assert d["coef_mode2_dph"] == list(coef * 1e-3) and len(d["coef_quantized_mode2_dph"]) == N_TERMS
+    assert outs["none"] < outs["pair"] < outs["trend"] and outs["pair"] < 0.002
+    big = coef.copy()
+    big[0] = 3e9
+    with pytest.raises(QuantizeError, match="bank 2"):
+        quantize(make_model(combiner="pair", order="regress_first", coef=coef, coef2=big))
+    make_model(combiner="trend", order="regress_first").to_json(tmp_path / "m.json")
+    parser = argparse.ArgumentParser()
+    configure_cli(parser)
+    assert run_cli(parser.parse_args([str(tmp_path / "m.json"), "-o", str(tmp_path / "t.json")])) == 0
+    assert "bank 2 rows" in capsys.readouterr().out and read_table(tmp_path / "t.json").n_banks == 2
