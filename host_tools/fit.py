@@ -922,7 +922,7 @@ def design_matrix(u, v, z=None, terms=range(N_TERMS)) -> np.ndarray:
 
 # -- run-log glue and the `hdrg fit` command ------------------------------------------------------
 
-def fit_logs(logs, config, terms="all", *, drop_unidentifiable=False, cv_blocks=8, significance=1.0,
+def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8, significance=1.0,
              min_gain=0.02):
     """Fit a :class:`host_tools.model.BiasModel` with ``config`` (a ModelConfig) to RunLogs.
 
@@ -932,10 +932,12 @@ def fit_logs(logs, config, terms="all", *, drop_unidentifiable=False, cv_blocks=
     output).  One accumulator per run; with a single run and ``terms='auto'`` the run is cut into
     ``cv_blocks`` contiguous time blocks for the cross-validation.  A regress_first config fits
     two banks: target c = s * rate on the used samples, bank 1 on mode-1 samples, bank 2 on
-    mode-2 samples, one term set (see :func:`fit_accumulators`).  Returns (model, FitResult)."""
-    from host_tools.compensate import prepare
+    mode-2 samples, one term set (see :func:`fit_accumulators`).  ``terms`` None ->
+    host_tools.compensate.DEFAULT_TERMS.  Returns (model, FitResult)."""
+    from host_tools.compensate import DEFAULT_TERMS, prepare
     from host_tools.model import BiasModel
 
+    terms = DEFAULT_TERMS if terms is None else terms
     auto = isinstance(terms, str) and terms.strip().lower() == "auto"
     two = config.reversal is not None and config.reversal.order == "regress_first"
     accs = {}
@@ -970,15 +972,26 @@ def add_model_options(parser, what: str = "the model") -> None:
     `hdrg fit` and `hdrg diagnose` (its starting model)."""
     parser.add_argument("--proxy", choices=("freq", "temp"), default=None,
                         help="temperature proxy: freq (drive frequency, default when present) or temp (temp_c)")
-    parser.add_argument("--rate-estimator", default="diff", choices=("diff", "diffn", "lsq", "iir"),
-                        help=f"proxy-rate estimator of {what} (default: diff, the paper's consecutive difference)")
-    parser.add_argument("--rate-n", type=int, default=8, help="window length n of diffn/lsq [samples]")
-    parser.add_argument("--rate-shift", type=int, default=4, help="iir coefficient 2^-shift")
-    parser.add_argument("--terms", default="all",
+    from host_tools.compensate import DEFAULT_COMBINER, DEFAULT_ORDER, DEFAULT_RATE, DEFAULT_TERMS
+    from host_tools.reversal import COMBINERS, ORDERS
+
+    parser.add_argument("--rate-estimator", default=None, choices=("diff", "diffn", "lsq", "iir"),
+                        help=f"proxy-rate estimator of {what} (default: {DEFAULT_RATE['estimator']}; "
+                             f"diff is the paper's consecutive difference)")
+    parser.add_argument("--rate-n", type=int, default=None,
+                        help=f"window length n of diffn/lsq [samples] (default: {DEFAULT_RATE['n']})")
+    parser.add_argument("--rate-shift", type=int, default=None,
+                        help=f"iir coefficient 2^-shift (default: {DEFAULT_RATE['shift']})")
+    parser.add_argument("--terms", default=None,
                         help=f"terms of {what}: all (the paper's 16 terms) | auto (cross-validated selection) "
-                             f"| k0,k1,... | groups const,temp,rate,cross")
-    parser.add_argument("--combiner", choices=("pair", "trend"), default="trend",
-                        help="mode-reversal combiner (mode-reversal logs only): pair (the paper) or trend (ours, default)")
+                             f"| k0,k1,... | groups const,temp,rate,cross (default: {DEFAULT_TERMS})")
+    parser.add_argument("--order", choices=ORDERS, default=None,
+                        help=f"mode-reversal logs only: regress_first (two coefficient banks by mode, the combiner "
+                             f"pairs the residuals) or combine_first (legacy: combine, then one bank) "
+                             f"(default: {DEFAULT_ORDER})")
+    parser.add_argument("--combiner", choices=COMBINERS, default=None,
+                        help=f"mode-reversal combiner (mode-reversal logs only): pair (the paper), trend (ours) or "
+                             f"none (regress_first only: joint regression alone) (default: {DEFAULT_COMBINER})")
     parser.add_argument("--settle", type=float, default=0.0, help="settling time excluded after each exchange [s]")
     parser.add_argument("--proxy-range", default=None, help="declared proxy range LO,HI in proxy units (default: training range +10%%)")
     parser.add_argument("--rate-range", default=None, help="declared largest |d proxy/dt| [proxy units/s] (default: from data)")
@@ -998,7 +1011,7 @@ def run_cli(args) -> int:
     from host_tools.compensate import fit_config_from_logs
 
     logs = [runlog.read(p) for p in args.runs]
-    reversal = ({"combiner": args.combiner, "settle_s": args.settle}
+    reversal = ({"combiner": args.combiner, "settle_s": args.settle, "order": args.order}
                 if any(log.reversal for log in logs) else None)
     cfg = fit_config_from_logs(logs, proxy_kind=args.proxy, rate_estimator=args.rate_estimator,
                                n=args.rate_n, shift=args.rate_shift, proxy_range=args.proxy_range,
@@ -1017,5 +1030,7 @@ def run_cli(args) -> int:
     if res.cv:
         print(f"cross-validated rms: {res.cv['cv_rms']:.4g} deg/h over {res.cv['groups']} groups")
     for k in res.terms:
-        print(f"  k{k:<2d} {TERM_NAMES[k]:>9s} = {res.coef[k]: .6g} +- {res.stderr[k]:.2g} deg/h")
+        print(f"  k{k:<2d} {TERM_NAMES[k]:>9s} = {res.coef[k]: .6g} +- {res.stderr[k]:.2g} deg/h"
+              + ("" if res.coef_mode2 is None else
+                 f"   (mode 2: {res.coef_mode2[k]: .6g} +- {res.stderr_mode2[k]:.2g})"))
     return 0

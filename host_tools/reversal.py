@@ -88,12 +88,15 @@ _KIND = {"pair": 0, "trend": 1, "none": 2}
 class ReversalConfig:
     """Combination settings stored with a model: combiner name, staleness limit [s], settling time
     [s], order ('regress_first': per-mode bias banks, residuals combined; 'combine_first': legacy).
-    A dict without "order" (model files of version 1) reads as 'combine_first'."""
+    An unspecified order (the dataclass default, or a dict without "order" such as a model file of
+    version 1) is 'combine_first', so code written before the order existed keeps its meaning; new
+    models get their order from host_tools.compensate.fit_config_from_logs (default
+    regress_first)."""
 
     combiner: str = "pair"
     max_stale_s: float = DEFAULT_MAX_STALE_S
     settle_s: float = 0.0
-    order: str = "regress_first"
+    order: str = "combine_first"
 
     def __post_init__(self):
         if self.combiner not in COMBINERS:
