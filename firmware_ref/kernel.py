@@ -239,22 +239,46 @@ def _pass_b(co, co2, two, pb, p_ref, g_u, u_off, sh_u, a_s, g_v, sh_v, zb, a_m, 
     """Stateless part of a block, branch-free so LLVM vectorizes it (one-bank tables): u, v (from
     the clamped rate sum), z, B (bank 2 on mode-2 samples of a two-bank table, ``two``) and their
     flags (1 u clamped | 2 v clamped | 32 z clamped)."""
+    if two:
+        _uvzb_two(co, co2, pb, p_ref, g_u, u_off, sh_u, a_s, g_v, sh_v, zb, a_m, a_b, a_fb)
+    else:
+        _uvzb_one(co, pb, p_ref, g_u, u_off, sh_u, a_s, g_v, sh_v, zb, a_b, a_fb)
+
+
+@numba.njit(cache=True, inline="always")
+def _uvz(pb, p_ref, g_u, u_off, h_u, sh_u, s, g_v, h_v, sh_v, zz):
+    """Clamped u, v, z and their flags (1 u, 2 v, 32 z) of one sample."""
     one = np.int64(_ONE)
     lim32 = np.int64(2147483647)
+    dp = min(max(np.int64(pb) - p_ref, -lim32), lim32)
+    uu = (_mul32(dp, g_u) + u_off + h_u) >> sh_u
+    f = np.uint8((uu > one) | (uu < -one))
+    uu = min(max(uu, -one), one)
+    vv = (s * g_v + h_v) >> sh_v
+    f |= np.uint8((vv > one) | (vv < -one)) << 1
+    vv = min(max(vv, -one), one)
+    f |= np.uint8((zz > one) | (zz < -one)) << 5
+    zz = min(max(zz, -one), one)
+    return uu, vv, zz, f
+
+
+@numba.njit(cache=True)
+def _uvzb_one(co, pb, p_ref, g_u, u_off, sh_u, a_s, g_v, sh_v, zb, a_b, a_fb):
     h_u = (np.int64(1) << sh_u) >> 1
     h_v = (np.int64(1) << sh_v) >> 1
     for jb in range(a_s.shape[0]):
-        dp = min(max(np.int64(pb[jb]) - p_ref, -lim32), lim32)
-        uu = (_mul32(dp, g_u) + u_off + h_u) >> sh_u
-        f = np.uint8((uu > one) | (uu < -one))
-        uu = min(max(uu, -one), one)
-        vv = (a_s[jb] * g_v + h_v) >> sh_v
-        f |= np.uint8((vv > one) | (vv < -one)) << 1
-        vv = min(max(vv, -one), one)
-        zz = zb[jb]
-        f |= np.uint8((zz > one) | (zz < -one)) << 5
-        zz = min(max(zz, -one), one)
-        if two and a_m[jb] == 2:
+        uu, vv, zz, f = _uvz(pb[jb], p_ref, g_u, u_off, h_u, sh_u, a_s[jb], g_v, h_v, sh_v, zb[jb])
+        a_b[jb] = _bias(co, uu, vv, zz)
+        a_fb[jb] = f
+
+
+@numba.njit(cache=True)
+def _uvzb_two(co, co2, pb, p_ref, g_u, u_off, sh_u, a_s, g_v, sh_v, zb, a_m, a_b, a_fb):
+    h_u = (np.int64(1) << sh_u) >> 1
+    h_v = (np.int64(1) << sh_v) >> 1
+    for jb in range(a_s.shape[0]):
+        uu, vv, zz, f = _uvz(pb[jb], p_ref, g_u, u_off, h_u, sh_u, a_s[jb], g_v, h_v, sh_v, zb[jb])
+        if a_m[jb] == 2:
             a_b[jb] = _bias(co2, uu, vv, zz)
         else:
             a_b[jb] = _bias(co, uu, vv, zz)
