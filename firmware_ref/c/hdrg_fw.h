@@ -113,7 +113,7 @@ enum hdrg_seq_state {
 /* ---- errors ---------------------------------------------------------------------------- */
 enum hdrg_error {
     HDRG_OK = 0,
-    HDRG_ERR_LENGTH,    /* fewer than 48 words, or the length word disagrees with the count */
+    HDRG_ERR_LENGTH,    /* fewer than 73 (version 1: 48) words, or the length word disagrees with the count */
     HDRG_ERR_MAGIC,     /* word 0 is not 0x47524448 */
     HDRG_ERR_VERSION,   /* word 1 is not 1 or 2 */
     HDRG_ERR_CRC,       /* the last word is not the CRC-32 of the others */
