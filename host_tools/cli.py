@@ -35,6 +35,7 @@ COMMANDS = {
     "upload": ("host_tools.link.cli", "load a coefficient table into the controller (ack, read back, compare)"),
     "device": ("host_tools.link.device", "virtual gyroscope controller on a pseudo-terminal or a pyserial URL"),
     "demo": ("host_tools.demo", "simulate -> fit -> compensate -> report on embedded defaults"),
+    "bench": ("host_tools.bench", "measurement benchmarks: accuracy on random foreign devices, the closed loop"),
 }
 
 
