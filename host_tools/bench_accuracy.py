@@ -12,7 +12,7 @@ Per device (seed ``S * 100000 + i``, i = 0 .. N-1) and per run type (FTR, mode r
 
 For every option: ModelConfig from the training run (host_tools.compensate.fit_config_from_logs
 with the option's rate estimator and reversal settings), 17 terms fitted (host_tools.fit.fit_logs,
-terms 'all'), the held-out run compensated (float golden model); **metric = std at 1 s of the
+terms 'all', or the cross-validated selection 'auto' in the '+auto' options), the held-out run compensated (float golden model); **metric = std at 1 s of the
 compensated output over its valid samples / floor** (dimensionless; 1 = down to the noise floor;
 below 1 is possible for MR, whose combined output averages two modes).  ``*/raw`` rows: no
 model (FTR raw output; MR the combiner alone).
@@ -20,7 +20,7 @@ model (FTR raw output; MR the combiner alone).
 Options: ``ftr/EST``, ``mr-pair/EST``, ``mr-trend/EST`` (combine first: the combiner, then one
 bias), and, when host_tools.reversal.ReversalConfig has an ``order`` field (branch rtr),
 ``rf-none/EST``, ``rf-pair/EST``, ``rf-trend/EST`` (regress first: per-mode banks, residuals
-combined).  EST: ``diff``, ``diffn4``, ``diffn16``, ``lsq8``, ``lsq32``, ``iir4``, ``iir7``,
+combined); ``+auto`` variants for EST in AUTO_ESTIMATORS.  EST: ``diff``, ``diffn4``, ``diffn16``, ``lsq8``, ``lsq32``, ``iir4``, ``iir7``,
 ``iir9`` (host_tools.rate).  A fit or compensation that fails is counted per option, never
 dropped silently.
 
@@ -50,6 +50,7 @@ from host_tools.sim_foreign import damping_bias, foreign_device, simulate_foreig
 ESTIMATORS = {"diff": ("diff", 8, 4), "diffn4": ("diffn", 4, 4), "diffn16": ("diffn", 16, 4),
               "lsq8": ("lsq", 8, 4), "lsq32": ("lsq", 32, 4), "iir4": ("iir", 8, 4), "iir7": ("iir", 8, 7),
               "iir9": ("iir", 8, 9)}
+AUTO_ESTIMATORS = ("diff", "iir9")   # 'auto' costs ~0.5 s per fit (forward selection): two estimators only
 DAMPING_CHANGE_DPH = 0.5
 SEED_STRIDE = 100000
 
@@ -57,14 +58,16 @@ SEED_STRIDE = 100000
 @dataclass(frozen=True)
 class Option:
     """One pipeline option: ``kind`` ftr | mr-pair | mr-trend | rf-none | rf-pair | rf-trend,
-    ``est`` a key of ESTIMATORS or 'raw' (no model)."""
+    ``est`` a key of ESTIMATORS or 'raw' (no model), ``terms`` 'all' (17 terms) or 'auto'
+    (cross-validated term selection of host_tools.fit; name suffix '+auto')."""
 
     kind: str
     est: str
+    terms: str = "all"
 
     @property
     def name(self) -> str:
-        return f"{self.kind}/{self.est}"
+        return f"{self.kind}/{self.est}" + ("" if self.terms == "all" else f"+{self.terms}")
 
     @property
     def reversal(self) -> bool:
@@ -89,6 +92,7 @@ def all_options() -> list:
     kinds = ["ftr", "mr-pair", "mr-trend"] + (["rf-none", "rf-pair", "rf-trend"] if has_order() else [])
     out = [Option(k, "raw") for k in ("ftr", "mr-pair", "mr-trend")]
     out += [Option(k, e) for k in kinds for e in ESTIMATORS]
+    out += [Option(k, e, "auto") for k in kinds for e in AUTO_ESTIMATORS]
     return out
 
 
@@ -132,7 +136,7 @@ def evaluate_option(opt: Option, train, holdout) -> tuple[float, str]:
             return _std(c.out_dph[c.valid]), ""
         est, n, shift = ESTIMATORS[opt.est]
         cfg = fit_config_from_logs([train], rate_estimator=est, n=n, shift=shift, reversal=rev)
-        model, _ = fit_logs([train], cfg)
+        model, _ = fit_logs([train], cfg, terms=opt.terms)
         out = compensate(holdout, model)
         valid = out["valid"] > 0
         if valid.sum() < 2:

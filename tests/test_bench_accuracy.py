@@ -62,7 +62,8 @@ def test_options_and_errors():
     names = [o.name for o in ba.all_options()]
     assert "ftr/diff" in names and "mr-trend/iir9" in names and "mr-pair/lsq32" in names
     assert any(n.startswith("rf-") for n in names) == ba.has_order()
-    assert [o.name for o in ba.select_options(["ftr/iir*"])] == ["ftr/iir4", "ftr/iir7", "ftr/iir9"]
+    assert [o.name for o in ba.select_options(["ftr/iir*"])] == ["ftr/iir4", "ftr/iir7", "ftr/iir9", "ftr/iir9+auto"]
+    assert "mr-trend/diff+auto" in names
     with pytest.raises(ValueError, match="matches no option; known: ftr/raw"):
         ba.select_options(["ftr/kalman"])
     for kw, match in (({"n_devices": 0}, "--devices"), ({"seed": -1}, "--seed"), ({"holdout_rate": 0.0}, "--holdout-rate")):
