@@ -1,5 +1,6 @@
 """`hdrg bench accuracy` (host_tools.bench_accuracy) on a fast subset: 4 foreign devices, short
 runs.  Structure and sanity only; the 50-device table is measured with the command (docs/ACCURACY.md)."""
+import copy
 import json
 
 import numpy as np
@@ -87,3 +88,22 @@ def test_bench_registry_offers_only_importable_benchmarks(monkeypatch):
     monkeypatch.setitem(bench.BENCHMARKS, "ghost", "host_tools.no_such_bench_module")
     avail = bench.available()
     assert "accuracy" in avail and "ghost" not in avail
+
+
+def test_easy_device_reaches_the_floor_so_the_family_adds_no_unfittable_artefact():
+    """All bias on the resonator node (the proxy's node), cubic-representable, no power-on scale
+    change: FTR + 17 terms must come down to the noise floor on the held-out run.  The same device
+    with its bias on its own (other) nodes must not (the weakness the family is there to expose)."""
+    dev = foreign_device(1)
+    easy = copy.deepcopy(dev)
+    easy.damping_node = easy.common_node = easy.self_heating["node"] = easy.resonator_node
+    easy.damping["change_sigma"] = 0.0
+    easy.common["e3"] = 0.0
+    ratios = []
+    for d in (easy, dev):
+        train, hold = simulate_foreign(d, 4.0, False, 0, 0), simulate_foreign(d, 2.0, False, 1, 1)
+        floor = ba.floor_of(simulate_foreign(d, 2.0, False, 1, 1, thermal=False))
+        std, err = ba.evaluate_option(ba.Option("ftr", "diff"), train, hold)
+        assert not err
+        ratios.append(std / floor)
+    assert ratios[0] < 1.3 < 3.0 < ratios[1]
