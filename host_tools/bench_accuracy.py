@@ -225,6 +225,36 @@ def format_table(result: dict) -> str:
     return "\n".join(lines)
 
 
+def cubic_residual(log) -> float:
+    """Std [deg/h] of the raw rate minus its own least-squares cubic in ``temp_c`` (self-fit): how
+    much of an FTR run's bias is not a function of the temperature sensor's reading."""
+    t = log["temp_c"]
+    x = (t - t.mean()) / t.std()
+    X = np.column_stack([x ** k for k in range(4)])
+    coef, *_ = np.linalg.lstsq(X, log.rate_dph, rcond=None)
+    return float(np.std(log.rate_dph - X @ coef))
+
+
+def plausibility(n_devices: int, seed: int, measured=(), rate_c_per_min: float = 3.0) -> str:
+    """The family against measured FTR runs: cubic-in-temp_c residual / white floor (foreign: the
+    noise-only run's 1-s std; measured: std of consecutive differences / sqrt(2), per sample)."""
+    from host_tools.runlog import read
+    r = []
+    for i in range(n_devices):
+        dev = foreign_device(seed * SEED_STRIDE + i)
+        floor = floor_of(simulate_foreign(dev, rate_c_per_min, False, 0, 0, thermal=False))
+        r.append(cubic_residual(simulate_foreign(dev, rate_c_per_min, False, 0, 0)) / floor)
+    lines = [f"foreign ({n_devices} devices, FTR {rate_c_per_min:g} degC/min): cubic-in-temp_c residual / floor "
+             f"median {np.median(r):.1f}, 10..90 % {np.percentile(r, 10):.1f}..{np.percentile(r, 90):.1f}"]
+    for path in measured:
+        log = read(path)
+        white = float(np.std(np.diff(log.rate_dph)) / math.sqrt(2.0))
+        res = cubic_residual(log)
+        lines.append(f"{path}: cubic residual {res:.2f} deg/h, white {white:.2f} deg/h per sample "
+                     f"({log.sample_rate_hz:.3g} Hz), ratio {res / white:.1f}")
+    return "\n".join(lines)
+
+
 def configure_cli(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--devices", type=int, default=50, help="number of random devices (default 50)")
     parser.add_argument("--seed", type=int, default=0, help="device set: seeds S*100000 + i (default 0)")
@@ -235,9 +265,15 @@ def configure_cli(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--holdout-rate", type=float, default=2.0, metavar="CPM", help="held-out chamber rate (2)")
     parser.add_argument("--duration", type=float, default=None, metavar="S",
                         help="cut every run to S seconds (default: the whole chamber profile)")
+    parser.add_argument("--plausibility", nargs="*", metavar="RUN", default=None,
+                        help="instead: compare the family's FTR runs (3 degC/min) with measured FTR run logs "
+                             "(cubic-in-temp_c residual / white floor), then exit")
 
 
 def run_cli(args) -> int:
+    if args.plausibility is not None:
+        print(plausibility(args.devices, args.seed, args.plausibility))
+        return 0
     res = run_benchmark(args.devices, args.seed, args.pipelines, args.train_rate, args.holdout_rate, args.duration,
                         progress=lambda msg: print(f"hdrg bench accuracy: {msg}", file=sys.stderr))
     print(f"held-out std at 1 s / noise floor; {args.devices} foreign devices (seed {args.seed}), train "

@@ -107,3 +107,17 @@ def test_easy_device_reaches_the_floor_so_the_family_adds_no_unfittable_artefact
         assert not err
         ratios.append(std / floor)
     assert ratios[0] < 1.3 < 3.0 < ratios[1]
+
+
+def test_plausibility_against_measured(tmp_path):
+    log = simulate_foreign(3, 3.0, False, 0, 0, 3000.0)
+    path = tmp_path / "m.csv"
+    from host_tools import runlog
+    runlog.write(log, path)
+    text = ba.plausibility(2, 0, [str(path)])
+    assert text.startswith("foreign (2 devices") and f"{path}: cubic residual" in text
+    # a run that IS a cubic in temp_c plus white noise has residual / white about 1
+    t = log["temp_c"]
+    rng = np.random.default_rng(0)
+    fake = log.with_columns(rate_dph=3 + 2 * t - 0.01 * t ** 3 + 0.3 * rng.standard_normal(len(t)))
+    assert ba.cubic_residual(fake) == pytest.approx(0.3, rel=0.05)
