@@ -505,6 +505,12 @@ def add_cli_options(parser: argparse.ArgumentParser) -> None:
 
 def run_cli_random(args) -> int:
     """`hdrg simulate --family random`."""
+    if args.list:
+        print("random family: a device is --seed; undeclared effects (--effect NAME, --strength X):")
+        for k in EFFECTS.values():
+            print(f"  {k.name:19s} runs {k.runs:6s} {'flips' if k.flips else 'no flip'}; follows "
+                  f"{k.columns or '-'}; strength 1 = nominal ({k.units})")
+        return 0
     for opt, bad in (("--scenario", args.scenario), ("--profile", args.profile), ("--exchange-s", args.exchange_s),
                      ("--dwell-s", args.dwell_s), ("--inject", args.inject), ("--undeclared", args.undeclared),
                      ("--off", args.off), ("--set", args.set)):
