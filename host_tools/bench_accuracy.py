@@ -255,6 +255,23 @@ def plausibility(n_devices: int, seed: int, measured=(), rate_c_per_min: float =
     return "\n".join(lines)
 
 
+def effect_sizes(n_devices: int, seed: int, rate_c_per_min: float = 2.0) -> dict:
+    """Per effect kind: std of its term at strength 1 (the run with the effect minus the run
+    without, same noise, raw rate over the mode-1/2 samples of an MR run) / the run's floor, over
+    ``n_devices`` devices: {kind: [ratio per device]}.  Sizes the strengths of a loop benchmark."""
+    from host_tools.sim_foreign import EFFECT_KINDS
+    out = {k: [] for k in EFFECT_KINDS}
+    for i in range(n_devices):
+        dev = foreign_device(seed * SEED_STRIDE + i)
+        base = simulate_foreign(dev, rate_c_per_min, True, 1, 1)
+        floor = floor_of(simulate_foreign(dev, rate_c_per_min, True, 1, 1, thermal=False))
+        ok = base.mode != 3
+        for k in EFFECT_KINDS:
+            diff = simulate_foreign(dev, rate_c_per_min, True, 1, 1, effect=k).rate_dph - base.rate_dph
+            out[k].append(float(np.std(diff[ok]) / floor))
+    return out
+
+
 def configure_cli(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--devices", type=int, default=50, help="number of random devices (default 50)")
     parser.add_argument("--seed", type=int, default=0, help="device set: seeds S*100000 + i (default 0)")
@@ -265,12 +282,18 @@ def configure_cli(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--holdout-rate", type=float, default=2.0, metavar="CPM", help="held-out chamber rate (2)")
     parser.add_argument("--duration", type=float, default=None, metavar="S",
                         help="cut every run to S seconds (default: the whole chamber profile)")
+    parser.add_argument("--effect-sizes", action="store_true",
+                        help="instead: std of every effect kind's term at strength 1 / floor (MR, 2 degC/min), then exit")
     parser.add_argument("--plausibility", nargs="*", metavar="RUN", default=None,
                         help="instead: compare the family's FTR runs (3 degC/min) with measured FTR run logs "
                              "(cubic-in-temp_c residual / white floor), then exit")
 
 
 def run_cli(args) -> int:
+    if args.effect_sizes:
+        for k, v in effect_sizes(args.devices, args.seed).items():
+            print(f"{k:20s} median {np.median(v):.1f}, 10..90 % {np.percentile(v, 10):.1f}..{np.percentile(v, 90):.1f}")
+        return 0
     if args.plausibility is not None:
         print(plausibility(args.devices, args.seed, args.plausibility))
         return 0

@@ -121,3 +121,10 @@ def test_plausibility_against_measured(tmp_path):
     rng = np.random.default_rng(0)
     fake = log.with_columns(rate_dph=3 + 2 * t - 0.01 * t ** 3 + 0.3 * rng.standard_normal(len(t)))
     assert ba.cubic_residual(fake) == pytest.approx(0.3, rel=0.05)
+
+
+def test_effect_sizes_are_positive_for_every_kind():
+    from host_tools.sim_foreign import EFFECT_KINDS
+    sizes = ba.effect_sizes(1, 0)
+    assert list(sizes) == list(EFFECT_KINDS)
+    assert all(len(v) == 1 and 0.1 < v[0] < 100 for v in sizes.values())
