@@ -45,7 +45,7 @@ import numpy as np
 from host_tools.compensate import compensate, fit_config_from_logs
 from host_tools.fit import fit_logs
 from host_tools.reversal import ReversalConfig, combine
-from host_tools.sim_foreign import damping_bias, foreign_device, simulate_foreign
+from host_tools.sim_foreign import ForeignDevice, damping_bias, foreign_device, simulate_foreign
 
 ESTIMATORS = {"diff": ("diff", 8, 4), "diffn4": ("diffn", 4, 4), "diffn16": ("diffn", 16, 4),
               "lsq8": ("lsq", 8, 4), "lsq32": ("lsq", 32, 4), "iir4": ("iir", 8, 4), "iir7": ("iir", 8, 7),
@@ -146,10 +146,11 @@ def evaluate_option(opt: Option, train, holdout) -> tuple[float, str]:
         return float("nan"), f"{type(exc).__name__}: {exc}"
 
 
-def evaluate_device(seed: int, options, train_rate=4.0, holdout_rate=2.0, duration_s=None) -> dict:
-    """Every option on device ``seed``: {'seed', 'device', 'damping_change_dph', 'floor': {ftr, mr},
+def evaluate_device(seed, options, train_rate=4.0, holdout_rate=2.0, duration_s=None) -> dict:
+    """Every option on device ``seed`` (a seed or a ForeignDevice): {'seed', 'device', 'damping_change_dph', 'floor': {ftr, mr},
     'std': {option: deg/h}, 'ratio': {option: std/floor}, 'errors': {option: text}}."""
-    dev = foreign_device(seed)
+    dev = seed if isinstance(seed, ForeignDevice) else foreign_device(seed)
+    seed = dev.seed
     rec = {"seed": seed, "device": dev.describe(), "floor": {}, "std": {}, "ratio": {}, "errors": {}}
     sc0, _ = dev.damping_change(0)
     sc1, _ = dev.damping_change(1)
@@ -225,6 +226,54 @@ def format_table(result: dict) -> str:
     return "\n".join(lines)
 
 
+def _same_node(d):
+    d.damping_node = d.common_node = d.self_heating["node"] = d.resonator_node
+
+
+ABLATIONS = {   # name -> in-place change of a device copy: which physics costs what
+    "as drawn": lambda d: None,
+    "no power-on change": lambda d: d.damping.update(change_sigma=0.0, change_offset_max_dph=0.0),
+    "bias on the resonator node": _same_node,
+    "no tanh (cubic-representable common mode)": lambda d: d.common.update(e3=0.0),
+    "no settling tail": lambda d: d.exchange.update(tail_amp_dph=0.0),
+}
+
+
+def ablation(n_devices: int, seed: int, patterns, duration_s=None) -> str:
+    """Median / p90 of every selected option with one piece of the foreign physics removed at a
+    time (ABLATIONS), same devices: a markdown table."""
+    import copy
+    options = select_options(patterns)
+    lines = ["| physics | " + " | ".join(o.name for o in options) + " |", "|---" * (len(options) + 1) + "|"]
+    for label, change in ABLATIONS.items():
+        recs = []
+        for i in range(n_devices):
+            dev = copy.deepcopy(foreign_device(seed * SEED_STRIDE + i))
+            change(dev)
+            recs.append(evaluate_device(dev, options, duration_s=duration_s))
+        summ = summarize(recs, options)
+        lines.append(f"| {label} | " + " | ".join(f"{summ[o.name]['all']['median']:.2f} / {summ[o.name]['all']['p90']:.2f}"
+                                              for o in options) + " |")
+    return "\n".join(lines)
+
+
+def format_pivot(result: dict, subset: str = "all") -> str:
+    """Markdown table: one row per rate estimator (and '+auto'), one column per kind, cells
+    'median / p90' of held-out std / floor (``subset`` 'all' or 'damping_change')."""
+    s = result["summary"]
+    opts = [name.split("/") for name in s]
+    kinds = list(dict.fromkeys(k for k, _ in opts))
+    ests = list(dict.fromkeys(e for _, e in opts))
+    lines = ["| estimator | " + " | ".join(kinds) + " |", "|---" * (len(kinds) + 1) + "|"]
+    for e in ests:
+        cells = []
+        for k in kinds:
+            row = s.get(f"{k}/{e}")
+            cells.append("" if row is None else f"{row[subset]['median']:.2f} / {row[subset]['p90']:.2f}")
+        lines.append(f"| {e} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def cubic_residual(log) -> float:
     """Std [deg/h] of the raw rate minus its own least-squares cubic in ``temp_c`` (self-fit): how
     much of an FTR run's bias is not a function of the temperature sensor's reading."""
@@ -282,6 +331,8 @@ def configure_cli(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--holdout-rate", type=float, default=2.0, metavar="CPM", help="held-out chamber rate (2)")
     parser.add_argument("--duration", type=float, default=None, metavar="S",
                         help="cut every run to S seconds (default: the whole chamber profile)")
+    parser.add_argument("--ablation", action="store_true",
+                        help="instead: the selected options with one piece of the physics removed at a time, then exit")
     parser.add_argument("--effect-sizes", action="store_true",
                         help="instead: std of every effect kind's term at strength 1 / floor (MR, 2 degC/min), then exit")
     parser.add_argument("--plausibility", nargs="*", metavar="RUN", default=None,
@@ -290,6 +341,9 @@ def configure_cli(parser: argparse.ArgumentParser) -> None:
 
 
 def run_cli(args) -> int:
+    if args.ablation:
+        print(ablation(args.devices, args.seed, args.pipelines, args.duration))
+        return 0
     if args.effect_sizes:
         for k, v in effect_sizes(args.devices, args.seed).items():
             print(f"{k:20s} median {np.median(v):.1f}, 10..90 % {np.percentile(v, 10):.1f}..{np.percentile(v, 90):.1f}")
@@ -303,6 +357,10 @@ def run_cli(args) -> int:
           f"{args.train_rate:g} degC/min power-on 0, hold out {args.holdout_rate:g} degC/min power-on 1; "
           f"{res['config']['elapsed_s']} s")
     print(format_table(res))
+    print("\nmedian / p90, all devices:")
+    print(format_pivot(res))
+    print("\nmedian / p90, damping-change subset:")
+    print(format_pivot(res, "damping_change"))
     nerr = sum(len(r["errors"]) for r in res["records"])
     if nerr:
         print(f"{nerr} option runs failed (see the JSON 'errors'); e.g. "

@@ -77,7 +77,7 @@ def test_cli(tmp_path, capsys):
     assert cli.main(["bench", "accuracy", "--devices", "1", "--duration", "2500", "--pipelines", "ftr/diff",
                      "ftr/raw", "--json", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "| ftr/diff |" in text and "| ftr/raw |" in text
+    assert "| ftr/diff |" in text and "| ftr/raw |" in text and "| estimator | ftr |" in text
     data = json.loads(out.read_text(), parse_constant=lambda c: pytest.fail(f"non-strict JSON {c}"))
     assert data["records"][0]["seed"] == 0 and set(data["summary"]) == {"ftr/diff", "ftr/raw"}
     assert cli.main(["bench", "accuracy", "--devices", "1", "--pipelines", "nope/*"]) == 2
@@ -128,3 +128,10 @@ def test_effect_sizes_are_positive_for_every_kind():
     sizes = ba.effect_sizes(1, 0)
     assert list(sizes) == list(EFFECT_KINDS)
     assert all(len(v) == 1 and 0.1 < v[0] < 100 for v in sizes.values())
+
+
+def test_ablation_table():
+    text = ba.ablation(1, 0, ["ftr/diff"], duration_s=2500.0)
+    rows = text.splitlines()
+    assert rows[0] == "| physics | ftr/diff |" and len(rows) == 2 + len(ba.ABLATIONS)
+    assert all(" / " in r for r in rows[2:])
