@@ -72,10 +72,11 @@ FLAG_NAMES = {FLAG_PROXY_CLAMPED: "proxy_clamped", FLAG_RATE_CLAMPED: "rate_clam
 FS_TOLERANCE = 0.01  # relative mismatch allowed between the log's sample rate and the model's fs
 # Defaults of a new model, the one place: fit_config_from_logs (and fit_logs for the terms) fill
 # what is not given, so hdrg fit / diagnose / demo and everything reading their model files follow.
-DEFAULT_ORDER = "combine_first"  # interim: diagnose.py and the fixed-point flows do not take regress_first yet
-DEFAULT_COMBINER = "trend"
-DEFAULT_RATE = {"estimator": "diff", "n": 8, "shift": 4}
-DEFAULT_TERMS = "all"
+# Chosen on held-out runs at another temperature rate (docs/REGRESS_THEN_REVERSE.md "Defaults").
+DEFAULT_ORDER = "regress_first"
+DEFAULT_COMBINER = "pair"
+DEFAULT_RATE = {"estimator": "diff", "n": 8, "shift": 4}   # robust: no long warm-up, any fs, bursty logs
+DEFAULT_TERMS = "auto"
 IMPLS = ("float", "fixed")
 
 
@@ -243,9 +244,6 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
     logs = list(logs)
     if not logs:
         raise ValueError("no training logs")
-    rate_estimator = DEFAULT_RATE["estimator"] if rate_estimator is None else rate_estimator
-    n = DEFAULT_RATE["n"] if n is None else n
-    shift = DEFAULT_RATE["shift"] if shift is None else shift
     if proxy_kind is None:
         proxy_kind = "freq" if all("freq_hz" in log for log in logs) else "temp"
     column = ProxyConfig(proxy_kind, 0.0, 1.0).column
@@ -272,6 +270,12 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
         else:
             given = {k: v for k, v in dict(reversal or {}).items() if v is not None}
             rev = ReversalConfig.from_dict({"combiner": DEFAULT_COMBINER, "order": DEFAULT_ORDER, **given})
+    if rate_estimator == "auto":
+        raise ValueError("rate estimator 'auto' is chosen by fitting every candidate: use hdrg fit "
+                         "(host_tools.fit.fit_auto_rate), not a fixed model configuration")
+    rate_estimator = DEFAULT_RATE["estimator"] if rate_estimator is None else rate_estimator
+    n = DEFAULT_RATE["n"] if n is None else n
+    shift = DEFAULT_RATE["shift"] if shift is None else shift
     aux_cfg = AuxConfig() if aux is None else (aux if isinstance(aux, AuxConfig) else AuxConfig.from_dict(dict(aux)))
     keep = [np.asarray(log.mode) != rl.MODE_EXCHANGE for log in logs]
     ps = [log[column] for log in logs]

@@ -31,8 +31,9 @@ def mr_log(n_periods=30, gap_at=None, rate=None):
                                  rate_dph=np.zeros(n) if rate is None else rate, temp_c=temp)
 
 
-def config(log, combiner="none", order="regress_first", **kw):
-    return comp.fit_config_from_logs([log], reversal={"combiner": combiner, "order": order, **kw})
+def config(log, combiner="none", order="regress_first", rate_estimator=None, **kw):
+    return comp.fit_config_from_logs([log], rate_estimator=rate_estimator,
+                                     reversal={"combiner": combiner, "order": order, **kw})
 
 
 def with_bias(log, cfg, common, damping, omega=0.0):
@@ -316,3 +317,24 @@ def test_cli_fit_regress_first_and_compensate(tmp_path):
     np.testing.assert_allclose(res.rate_dph[res["valid"] == 1], 0.0, atol=1e-6)
     with pytest.raises(SystemExit):
         main(["fit", str(run), "-o", str(m), "--combiner", "median"])
+
+
+def test_rate_estimator_auto_keeps_least_cv_and_reports_it(tmp_path):
+    from host_tools.fit import RATE_CANDIDATES, fit_auto_rate
+
+    log = mr_log(n_periods=3)  # 900 samples: shorter than the iir shift-9 warm-up (1024)
+    log = with_bias(log, config(log, rate_estimator="diff"), common, damping)
+    model, res = fit_auto_rate([log], (0, 1, 4), reversal={"combiner": "pair", "order": "regress_first"})
+    sel = model.fit["rate_selection"]
+    assert len(sel["candidates"]) == len(RATE_CANDIDATES)
+    failed = [r for r in sel["candidates"] if "error" in r]
+    assert [r["estimator"] for r in failed] == ["iir shift=9"] and "warm-up" in failed[0]["error"]
+    ok = [r for r in sel["candidates"] if "cv_rms" in r]
+    best = min(ok, key=lambda r: r["cv_rms"])
+    assert sel["chosen"] == best["estimator"] and res.cv["cv_rms"] == best["cv_rms"]
+    assert sel["chosen"].split()[0] == model.config.rate.estimator
+    path = tmp_path / "m.json"
+    model.to_json(path)
+    assert json.loads(path.read_text())["fit"]["rate_selection"]["chosen"] == sel["chosen"]
+    with pytest.raises(ValueError, match="auto"):
+        comp.fit_config_from_logs([log], rate_estimator="auto")
