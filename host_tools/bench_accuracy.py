@@ -12,7 +12,7 @@ Per device (seed ``S * 100000 + i``, i = 0 .. N-1) and per run type (FTR, mode r
 
 For every option: ModelConfig from the training run (host_tools.compensate.fit_config_from_logs
 with the option's rate estimator and reversal settings), 17 terms fitted (host_tools.fit.fit_logs,
-terms 'all'), the held-out run compensated (float golden model); **metric = std at 1 s of the
+terms 'all', or the cross-validated selection 'auto' in the '+auto' options), the held-out run compensated (float golden model); **metric = std at 1 s of the
 compensated output over its valid samples / floor** (dimensionless; 1 = down to the noise floor;
 below 1 is possible for MR, whose combined output averages two modes).  ``*/raw`` rows: no
 model (FTR raw output; MR the combiner alone).
@@ -20,7 +20,7 @@ model (FTR raw output; MR the combiner alone).
 Options: ``ftr/EST``, ``mr-pair/EST``, ``mr-trend/EST`` (combine first: the combiner, then one
 bias), and, when host_tools.reversal.ReversalConfig has an ``order`` field (branch rtr),
 ``rf-none/EST``, ``rf-pair/EST``, ``rf-trend/EST`` (regress first: per-mode banks, residuals
-combined).  EST: ``diff``, ``diffn4``, ``diffn16``, ``lsq8``, ``lsq32``, ``iir4``, ``iir7``,
+combined); ``+auto`` variants for EST in AUTO_ESTIMATORS.  EST: ``diff``, ``diffn4``, ``diffn16``, ``lsq8``, ``lsq32``, ``iir4``, ``iir7``,
 ``iir9`` (host_tools.rate).  A fit or compensation that fails is counted per option, never
 dropped silently.
 
@@ -45,11 +45,12 @@ import numpy as np
 from host_tools.compensate import compensate, fit_config_from_logs
 from host_tools.fit import fit_logs
 from host_tools.reversal import ReversalConfig, combine
-from host_tools.sim_foreign import damping_bias, foreign_device, simulate_foreign
+from host_tools.sim_foreign import ForeignDevice, damping_bias, foreign_device, simulate_foreign
 
 ESTIMATORS = {"diff": ("diff", 8, 4), "diffn4": ("diffn", 4, 4), "diffn16": ("diffn", 16, 4),
               "lsq8": ("lsq", 8, 4), "lsq32": ("lsq", 32, 4), "iir4": ("iir", 8, 4), "iir7": ("iir", 8, 7),
               "iir9": ("iir", 8, 9)}
+AUTO_ESTIMATORS = ("diff", "iir9")   # 'auto' costs ~0.5 s per fit (forward selection): two estimators only
 DAMPING_CHANGE_DPH = 0.5
 SEED_STRIDE = 100000
 
@@ -57,14 +58,16 @@ SEED_STRIDE = 100000
 @dataclass(frozen=True)
 class Option:
     """One pipeline option: ``kind`` ftr | mr-pair | mr-trend | rf-none | rf-pair | rf-trend,
-    ``est`` a key of ESTIMATORS or 'raw' (no model)."""
+    ``est`` a key of ESTIMATORS or 'raw' (no model), ``terms`` 'all' (17 terms) or 'auto'
+    (cross-validated term selection of host_tools.fit; name suffix '+auto')."""
 
     kind: str
     est: str
+    terms: str = "all"
 
     @property
     def name(self) -> str:
-        return f"{self.kind}/{self.est}"
+        return f"{self.kind}/{self.est}" + ("" if self.terms == "all" else f"+{self.terms}")
 
     @property
     def reversal(self) -> bool:
@@ -89,6 +92,7 @@ def all_options() -> list:
     kinds = ["ftr", "mr-pair", "mr-trend"] + (["rf-none", "rf-pair", "rf-trend"] if has_order() else [])
     out = [Option(k, "raw") for k in ("ftr", "mr-pair", "mr-trend")]
     out += [Option(k, e) for k in kinds for e in ESTIMATORS]
+    out += [Option(k, e, "auto") for k in kinds for e in AUTO_ESTIMATORS]
     return out
 
 
@@ -132,7 +136,7 @@ def evaluate_option(opt: Option, train, holdout) -> tuple[float, str]:
             return _std(c.out_dph[c.valid]), ""
         est, n, shift = ESTIMATORS[opt.est]
         cfg = fit_config_from_logs([train], rate_estimator=est, n=n, shift=shift, reversal=rev)
-        model, _ = fit_logs([train], cfg)
+        model, _ = fit_logs([train], cfg, terms=opt.terms)
         out = compensate(holdout, model)
         valid = out["valid"] > 0
         if valid.sum() < 2:
@@ -142,10 +146,11 @@ def evaluate_option(opt: Option, train, holdout) -> tuple[float, str]:
         return float("nan"), f"{type(exc).__name__}: {exc}"
 
 
-def evaluate_device(seed: int, options, train_rate=4.0, holdout_rate=2.0, duration_s=None) -> dict:
-    """Every option on device ``seed``: {'seed', 'device', 'damping_change_dph', 'floor': {ftr, mr},
+def evaluate_device(seed, options, train_rate=4.0, holdout_rate=2.0, duration_s=None) -> dict:
+    """Every option on device ``seed`` (a seed or a ForeignDevice): {'seed', 'device', 'damping_change_dph', 'floor': {ftr, mr},
     'std': {option: deg/h}, 'ratio': {option: std/floor}, 'errors': {option: text}}."""
-    dev = foreign_device(seed)
+    dev = seed if isinstance(seed, ForeignDevice) else foreign_device(seed)
+    seed = dev.seed
     rec = {"seed": seed, "device": dev.describe(), "floor": {}, "std": {}, "ratio": {}, "errors": {}}
     sc0, _ = dev.damping_change(0)
     sc1, _ = dev.damping_change(1)
@@ -221,6 +226,101 @@ def format_table(result: dict) -> str:
     return "\n".join(lines)
 
 
+def _same_node(d):
+    d.damping_node = d.common_node = d.self_heating["node"] = d.resonator_node
+
+
+ABLATIONS = {   # name -> in-place change of a device copy: which physics costs what
+    "as drawn": lambda d: None,
+    "no power-on change": lambda d: d.damping.update(change_sigma=0.0, change_offset_max_dph=0.0),
+    "bias on the resonator node": _same_node,
+    "no tanh (cubic-representable common mode)": lambda d: d.common.update(e3=0.0),
+    "no settling tail": lambda d: d.exchange.update(tail_amp_dph=0.0),
+}
+
+
+def ablation(n_devices: int, seed: int, patterns, duration_s=None) -> str:
+    """Median / p90 of every selected option with one piece of the foreign physics removed at a
+    time (ABLATIONS), same devices: a markdown table."""
+    import copy
+    options = select_options(patterns)
+    lines = ["| physics | " + " | ".join(o.name for o in options) + " |", "|---" * (len(options) + 1) + "|"]
+    for label, change in ABLATIONS.items():
+        recs = []
+        for i in range(n_devices):
+            dev = copy.deepcopy(foreign_device(seed * SEED_STRIDE + i))
+            change(dev)
+            recs.append(evaluate_device(dev, options, duration_s=duration_s))
+        summ = summarize(recs, options)
+        lines.append(f"| {label} | " + " | ".join(f"{summ[o.name]['all']['median']:.2f} / {summ[o.name]['all']['p90']:.2f}"
+                                              for o in options) + " |")
+    return "\n".join(lines)
+
+
+def format_pivot(result: dict, subset: str = "all") -> str:
+    """Markdown table: one row per rate estimator (and '+auto'), one column per kind, cells
+    'median / p90' of held-out std / floor (``subset`` 'all' or 'damping_change')."""
+    s = result["summary"]
+    opts = [name.split("/") for name in s]
+    kinds = list(dict.fromkeys(k for k, _ in opts))
+    ests = list(dict.fromkeys(e for _, e in opts))
+    lines = ["| estimator | " + " | ".join(kinds) + " |", "|---" * (len(kinds) + 1) + "|"]
+    for e in ests:
+        cells = []
+        for k in kinds:
+            row = s.get(f"{k}/{e}")
+            cells.append("" if row is None else f"{row[subset]['median']:.2f} / {row[subset]['p90']:.2f}")
+        lines.append(f"| {e} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def cubic_residual(log) -> float:
+    """Std [deg/h] of the raw rate minus its own least-squares cubic in ``temp_c`` (self-fit): how
+    much of an FTR run's bias is not a function of the temperature sensor's reading."""
+    t = log["temp_c"]
+    x = (t - t.mean()) / t.std()
+    X = np.column_stack([x ** k for k in range(4)])
+    coef, *_ = np.linalg.lstsq(X, log.rate_dph, rcond=None)
+    return float(np.std(log.rate_dph - X @ coef))
+
+
+def plausibility(n_devices: int, seed: int, measured=(), rate_c_per_min: float = 3.0) -> str:
+    """The family against measured FTR runs: cubic-in-temp_c residual / white floor (foreign: the
+    noise-only run's 1-s std; measured: std of consecutive differences / sqrt(2), per sample)."""
+    from host_tools.runlog import read
+    r = []
+    for i in range(n_devices):
+        dev = foreign_device(seed * SEED_STRIDE + i)
+        floor = floor_of(simulate_foreign(dev, rate_c_per_min, False, 0, 0, thermal=False))
+        r.append(cubic_residual(simulate_foreign(dev, rate_c_per_min, False, 0, 0)) / floor)
+    lines = [f"foreign ({n_devices} devices, FTR {rate_c_per_min:g} degC/min): cubic-in-temp_c residual / floor "
+             f"median {np.median(r):.1f}, 10..90 % {np.percentile(r, 10):.1f}..{np.percentile(r, 90):.1f}"]
+    for path in measured:
+        log = read(path)
+        white = float(np.std(np.diff(log.rate_dph)) / math.sqrt(2.0))
+        res = cubic_residual(log)
+        lines.append(f"{path}: cubic residual {res:.2f} deg/h, white {white:.2f} deg/h per sample "
+                     f"({log.sample_rate_hz:.3g} Hz), ratio {res / white:.1f}")
+    return "\n".join(lines)
+
+
+def effect_sizes(n_devices: int, seed: int, rate_c_per_min: float = 2.0) -> dict:
+    """Per effect kind: std of its term at strength 1 (the run with the effect minus the run
+    without, same noise, raw rate over the mode-1/2 samples of an MR run) / the run's floor, over
+    ``n_devices`` devices: {kind: [ratio per device]}.  Sizes the strengths of a loop benchmark."""
+    from host_tools.sim_foreign import EFFECT_KINDS
+    out = {k: [] for k in EFFECT_KINDS}
+    for i in range(n_devices):
+        dev = foreign_device(seed * SEED_STRIDE + i)
+        base = simulate_foreign(dev, rate_c_per_min, True, 1, 1)
+        floor = floor_of(simulate_foreign(dev, rate_c_per_min, True, 1, 1, thermal=False))
+        ok = base.mode != 3
+        for k in EFFECT_KINDS:
+            diff = simulate_foreign(dev, rate_c_per_min, True, 1, 1, effect=k).rate_dph - base.rate_dph
+            out[k].append(float(np.std(diff[ok]) / floor))
+    return out
+
+
 def configure_cli(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--devices", type=int, default=50, help="number of random devices (default 50)")
     parser.add_argument("--seed", type=int, default=0, help="device set: seeds S*100000 + i (default 0)")
@@ -231,15 +331,36 @@ def configure_cli(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--holdout-rate", type=float, default=2.0, metavar="CPM", help="held-out chamber rate (2)")
     parser.add_argument("--duration", type=float, default=None, metavar="S",
                         help="cut every run to S seconds (default: the whole chamber profile)")
+    parser.add_argument("--ablation", action="store_true",
+                        help="instead: the selected options with one piece of the physics removed at a time, then exit")
+    parser.add_argument("--effect-sizes", action="store_true",
+                        help="instead: std of every effect kind's term at strength 1 / floor (MR, 2 degC/min), then exit")
+    parser.add_argument("--plausibility", nargs="*", metavar="RUN", default=None,
+                        help="instead: compare the family's FTR runs (3 degC/min) with measured FTR run logs "
+                             "(cubic-in-temp_c residual / white floor), then exit")
 
 
 def run_cli(args) -> int:
+    if args.ablation:
+        print(ablation(args.devices, args.seed, args.pipelines, args.duration))
+        return 0
+    if args.effect_sizes:
+        for k, v in effect_sizes(args.devices, args.seed).items():
+            print(f"{k:20s} median {np.median(v):.1f}, 10..90 % {np.percentile(v, 10):.1f}..{np.percentile(v, 90):.1f}")
+        return 0
+    if args.plausibility is not None:
+        print(plausibility(args.devices, args.seed, args.plausibility))
+        return 0
     res = run_benchmark(args.devices, args.seed, args.pipelines, args.train_rate, args.holdout_rate, args.duration,
                         progress=lambda msg: print(f"hdrg bench accuracy: {msg}", file=sys.stderr))
     print(f"held-out std at 1 s / noise floor; {args.devices} foreign devices (seed {args.seed}), train "
           f"{args.train_rate:g} degC/min power-on 0, hold out {args.holdout_rate:g} degC/min power-on 1; "
           f"{res['config']['elapsed_s']} s")
     print(format_table(res))
+    print("\nmedian / p90, all devices:")
+    print(format_pivot(res))
+    print("\nmedian / p90, damping-change subset:")
+    print(format_pivot(res, "damping_change"))
     nerr = sum(len(r["errors"]) for r in res["records"])
     if nerr:
         print(f"{nerr} option runs failed (see the JSON 'errors'); e.g. "

@@ -12,7 +12,7 @@ sample rate is 1 Hz.
 Physics of a device (ranges are the randomization, uniform unless said otherwise):
 
 1. **Chamber air** ``T_ch``: trapezoid cycles starting soaked at ``high_c`` (18..25 degC): hold,
-   ramp down to ``low_c`` (-25..-15), hold, ramp up, hold, ``n_cycles`` (1..2) times; holds 5..30
+   ramp down to ``low_c`` (-25..-15), hold, ramp up, hold, ``n_cycles`` (2..3) times; holds 5..30
    min; the ramp rate is the run's (1..5 degC/min in the benchmark).
 2. **Thermal nodes** (2..4): first-order lags, tau 60..1500 s (log-uniform); node 0 is fed by the
    chamber air, every later node by the air (parallel, p = 0.4) or by an earlier node (series).
@@ -211,7 +211,7 @@ def foreign_device(seed: int) -> ForeignDevice:
         self_heating={"node": int(r.integers(0, n_nodes)), "rise_c": float(r.uniform(0.5, 3.0)),
                       "tau_s": float(r.uniform(100.0, 900.0))},
         chamber={"high_c": float(r.uniform(18.0, 25.0)), "low_c": float(r.uniform(-25.0, -15.0)),
-                 "hold_s": float(60.0 * r.uniform(5.0, 30.0)), "n_cycles": int(r.integers(1, 3))},
+                 "hold_s": float(60.0 * r.uniform(5.0, 30.0)), "n_cycles": int(r.integers(2, 4))},
         drive={"f0_hz": float(r.uniform(6e3, 30e3)), "a1_per_c": -20.9e-6 * (1.0 + r.normal(0.0, 0.03)),
                "a2_per_c2": float(r.normal(0.0, 0.02e-6)), "a3_per_c3": float(r.normal(0.0, 2e-10)),
                "pll_noise_hz": float(r.uniform(0.05e-3, 0.2e-3)),
@@ -505,6 +505,12 @@ def add_cli_options(parser: argparse.ArgumentParser) -> None:
 
 def run_cli_random(args) -> int:
     """`hdrg simulate --family random`."""
+    if args.list:
+        print("random family: a device is --seed; undeclared effects (--effect NAME, --strength X):")
+        for k in EFFECTS.values():
+            print(f"  {k.name:19s} runs {k.runs:6s} {'flips' if k.flips else 'no flip'}; follows "
+                  f"{k.columns or '-'}; strength 1 = nominal ({k.units})")
+        return 0
     for opt, bad in (("--scenario", args.scenario), ("--profile", args.profile), ("--exchange-s", args.exchange_s),
                      ("--dwell-s", args.dwell_s), ("--inject", args.inject), ("--undeclared", args.undeclared),
                      ("--off", args.off), ("--set", args.set)):

@@ -1,5 +1,6 @@
 """`hdrg bench accuracy` (host_tools.bench_accuracy) on a fast subset: 4 foreign devices, short
 runs.  Structure and sanity only; the 50-device table is measured with the command (docs/ACCURACY.md)."""
+import copy
 import json
 
 import numpy as np
@@ -62,7 +63,8 @@ def test_options_and_errors():
     names = [o.name for o in ba.all_options()]
     assert "ftr/diff" in names and "mr-trend/iir9" in names and "mr-pair/lsq32" in names
     assert any(n.startswith("rf-") for n in names) == ba.has_order()
-    assert [o.name for o in ba.select_options(["ftr/iir*"])] == ["ftr/iir4", "ftr/iir7", "ftr/iir9"]
+    assert [o.name for o in ba.select_options(["ftr/iir*"])] == ["ftr/iir4", "ftr/iir7", "ftr/iir9", "ftr/iir9+auto"]
+    assert "mr-trend/diff+auto" in names
     with pytest.raises(ValueError, match="matches no option; known: ftr/raw"):
         ba.select_options(["ftr/kalman"])
     for kw, match in (({"n_devices": 0}, "--devices"), ({"seed": -1}, "--seed"), ({"holdout_rate": 0.0}, "--holdout-rate")):
@@ -75,7 +77,7 @@ def test_cli(tmp_path, capsys):
     assert cli.main(["bench", "accuracy", "--devices", "1", "--duration", "2500", "--pipelines", "ftr/diff",
                      "ftr/raw", "--json", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "| ftr/diff |" in text and "| ftr/raw |" in text
+    assert "| ftr/diff |" in text and "| ftr/raw |" in text and "| estimator | ftr |" in text
     data = json.loads(out.read_text(), parse_constant=lambda c: pytest.fail(f"non-strict JSON {c}"))
     assert data["records"][0]["seed"] == 0 and set(data["summary"]) == {"ftr/diff", "ftr/raw"}
     assert cli.main(["bench", "accuracy", "--devices", "1", "--pipelines", "nope/*"]) == 2
@@ -86,3 +88,50 @@ def test_bench_registry_offers_only_importable_benchmarks(monkeypatch):
     monkeypatch.setitem(bench.BENCHMARKS, "ghost", "host_tools.no_such_bench_module")
     avail = bench.available()
     assert "accuracy" in avail and "ghost" not in avail
+
+
+def test_easy_device_reaches_the_floor_so_the_family_adds_no_unfittable_artefact():
+    """All bias on the resonator node (the proxy's node), cubic-representable, no power-on scale
+    change: FTR + 17 terms must come down to the noise floor on the held-out run.  The same device
+    with its bias on its own (other) nodes must not (the weakness the family is there to expose)."""
+    dev = foreign_device(1)
+    easy = copy.deepcopy(dev)
+    easy.damping_node = easy.common_node = easy.self_heating["node"] = easy.resonator_node
+    easy.damping["change_sigma"] = 0.0
+    easy.common["e3"] = 0.0
+    ratios = []
+    for d in (easy, dev):
+        train, hold = simulate_foreign(d, 4.0, False, 0, 0), simulate_foreign(d, 2.0, False, 1, 1)
+        floor = ba.floor_of(simulate_foreign(d, 2.0, False, 1, 1, thermal=False))
+        std, err = ba.evaluate_option(ba.Option("ftr", "diff"), train, hold)
+        assert not err
+        ratios.append(std / floor)
+    assert ratios[0] < 1.3 < 3.0 < ratios[1]
+
+
+def test_plausibility_against_measured(tmp_path):
+    log = simulate_foreign(3, 3.0, False, 0, 0, 3000.0)
+    path = tmp_path / "m.csv"
+    from host_tools import runlog
+    runlog.write(log, path)
+    text = ba.plausibility(2, 0, [str(path)])
+    assert text.startswith("foreign (2 devices") and f"{path}: cubic residual" in text
+    # a run that IS a cubic in temp_c plus white noise has residual / white about 1
+    t = log["temp_c"]
+    rng = np.random.default_rng(0)
+    fake = log.with_columns(rate_dph=3 + 2 * t - 0.01 * t ** 3 + 0.3 * rng.standard_normal(len(t)))
+    assert ba.cubic_residual(fake) == pytest.approx(0.3, rel=0.05)
+
+
+def test_effect_sizes_are_positive_for_every_kind():
+    from host_tools.sim_foreign import EFFECT_KINDS
+    sizes = ba.effect_sizes(1, 0)
+    assert list(sizes) == list(EFFECT_KINDS)
+    assert all(len(v) == 1 and 0.1 < v[0] < 100 for v in sizes.values())
+
+
+def test_ablation_table():
+    text = ba.ablation(1, 0, ["ftr/diff"], duration_s=2500.0)
+    rows = text.splitlines()
+    assert rows[0] == "| physics | ftr/diff |" and len(rows) == 2 + len(ba.ABLATIONS)
+    assert all(" / " in r for r in rows[2:])

@@ -170,9 +170,12 @@ def test_default_combiner_is_the_fit_default():
     parser = build_parser()
     fit_args = parser.parse_args(["fit", "a.csv", "-o", "m.json"])
     met_args = parser.parse_args(["metrics", "a.csv"])
-    assert fit_args.combiner == reversal.DEFAULT_COMBINER
+    assert fit_args.combiner is None  # resolved by fit_config_from_logs to the default below
     assert met_args.combiner is None  # resolved to reversal.DEFAULT_COMBINER in run_metrics
-    same = metrics.run_metrics(log, taus=(1, 10), combiner=fit_args.combiner)
+    from host_tools.compensate import fit_config_from_logs
+    cfg = fit_config_from_logs([log], reversal={"combiner": fit_args.combiner}, proxy_range=(0.0, 50.0), rate_range=1.0)
+    assert cfg.reversal.combiner == reversal.DEFAULT_COMBINER
+    same = metrics.run_metrics(log, taus=(1, 10), combiner=cfg.reversal.combiner)
     assert same["per_tau"] == r["per_tau"]
 
 

@@ -220,6 +220,9 @@ def test_cli(tmp_path, capsys):
                       (["--scenario", "static"], "belongs to the hdrg family"), (["--seed", "-3"], "seed")):
         assert cli.main(["simulate", "--family", "random", "-o", str(out)] + argv) == 2
         assert msg in capsys.readouterr().err
+    assert cli.main(["simulate", "--family", "random", "--list"]) == 0
+    listing = capsys.readouterr().out
+    assert all(k in listing for k in EFFECT_KINDS)
     # the default family is still the calibrated simulator
     assert cli.main(["simulate", "--scenario", "static", "--duration", "10", "-o", str(out)]) == 0
     assert "family" not in runlog.read(out).metadata
