@@ -318,7 +318,7 @@ def test_tiny_data(runs, capsys, tmp_path):
     for extra in (["--drop-unidentifiable"], ["--terms", "auto"]):
         rc, _, err = hdrg(capsys, "fit", tiny, "-o", m, *extra)
         assert rc == 2 and "valid samples for" in err and not m.exists(), (extra, err)
-    rc, _, err = hdrg(capsys, "fit", tiny, "-o", m)
+    rc, _, err = hdrg(capsys, "fit", tiny, "-o", m, "--terms", "all")  # the default is auto
     assert rc == 2 and "--drop-unidentifiable" in err and "drop_unidentifiable=True" not in err
     # forced with enough degrees of freedom: error bars are numbers, never nan
     rc, out, _ = hdrg(capsys, "fit", tiny, "-o", m, "--terms", "k0,k1", "--force")
