@@ -147,14 +147,14 @@ def call_graph(ci: Path) -> tuple:
     [functions whose stack use is dynamic])."""
     stack, edges, dynamic = {}, collections.defaultdict(set), []
     for line in ci.read_text().splitlines():
-        m = re.match(r'node: \{ title: "([^"]+)" label: "([^"]*)"', line)
+        m = re.match(r'node: \{ title: "(?:[^"]*:)?([^":]+)" label: "([^"]*)"', line)
         if m:
             s = re.search(r"\\n(\d+) bytes \(([^)]*)\)", m.group(2))
             stack[m.group(1)] = int(s.group(1)) if s else None
             if s and "dynamic" in s.group(2):
                 dynamic.append(m.group(1))
             continue
-        m = re.match(r'edge: \{ sourcename: "([^"]+)" targetname: "([^"]+)"', line)
+        m = re.match(r'edge: \{ sourcename: "(?:[^"]*:)?([^":]+)" targetname: "(?:[^"]*:)?([^":]+)"', line)
         if m:
             edges[m.group(1)].add(m.group(2))
     return stack, edges, dynamic
@@ -183,13 +183,33 @@ def worst_stack(stack: dict, edges: dict, root: str) -> tuple:
     return go(root, {root})
 
 
-def mcu_sizes(b: dict, elf_syms: dict) -> dict:
-    """Code bytes of the library object and of the per-sample path; worst stack of a sample and of
-    a table load."""
+def elf_functions(elf: Path) -> tuple:
+    """From the linked ELF's disassembly: ({function: bytes}, {function: set of functions it branches
+    or calls to}); a function spans from its label to the next one (libgcc's assembler helpers have no
+    symbol size)."""
+    starts, edges, cur = [], collections.defaultdict(set), None
+    for line in _run([need("arm-none-eabi-objdump"), "-d", elf], what="objdump").splitlines():
+        m = re.match(r"([0-9a-f]+) <([^>]+)>:$", line)
+        if m:
+            cur = m.group(2)
+            starts.append((int(m.group(1), 16), cur))
+            continue
+        m = re.search(r"\t(b\S*|cbn?z)\s.*<([^>+]+)(\+0x[0-9a-f]+)?>", line)
+        if m and cur and m.group(2) != cur:
+            edges[cur].add(m.group(2))
+    end = max(a + s for a, s in symbols(elf).values())
+    sizes = {n: (starts[i + 1][0] if i + 1 < len(starts) else end) - a for i, (a, n) in enumerate(starts)}
+    return sizes, edges
+
+
+def mcu_sizes(b: dict) -> dict:
+    """Code bytes of the library object and of the per-sample path (every function of the linked ELF
+    reachable from hdrg_step_aux, libgcc helpers included); worst stack of a sample and of a table
+    load (GCC's call graph and stack use; libgcc helpers are not in it)."""
     lib_syms = symbols(b["lib"])
     stack, edges, dynamic = call_graph(b["ci"])
-    step_fns = reachable(edges, STEP)
-    step_code = {f: lib_syms[f][1] if f in lib_syms else elf_syms.get(f, (0, 0))[1] for f in sorted(step_fns)}
+    fsizes, fedges = elf_functions(b["elf"])
+    step_code = {f: fsizes[f] for f in sorted(reachable(fedges, STEP))}
     s_bytes, s_path = worst_stack(stack, edges, STEP)
     p_bytes, p_path = worst_stack(stack, edges, "hdrg_init")
     return {"library": section_sizes(b["lib"]), "functions": {f: s for f, (_, s) in sorted(lib_syms.items())},
@@ -365,7 +385,7 @@ def measure_mcu(target: str, work: Path, log=print) -> dict:
     for opt in ("-O2", "-Os"):
         builds[opt] = b = build_mcu(target, opt, work / f"{target}{opt}")
         rep = V.check_impl(qemu_argv(target, b["elf"]), log=lambda s: log(f"  {opt}: {s}"))
-        sizes = mcu_sizes(b, symbols(b["elf"]))
+        sizes = mcu_sizes(b)
         res[opt] = {"bit_exact": rep["mismatches"] == 0, "vectors": sum(s["rows"] for s in rep["sets"].values()),
                     "first_mismatch": rep["first"], **sizes}
     bad = build_mcu(target, "-O2", work / f"{target}-broken", defines=("HDRG_BREAK_ROUNDING",))
@@ -438,6 +458,125 @@ def section_sizes_host(obj: Path) -> int:
     return int(line[0])
 
 
+# -- FPGA: the time-multiplexed evaluator ------------------------------------------------------------
+
+HDL = V.DEFAULT_DIR / "hdl"
+TM_SOURCES = (HDL / "tb_eval_tm.v", HDL / "hdrg_eval_tm.v")
+TM_TOP, TM_PNR_TOP = "hdrg_eval_tm", "hdrg_eval_tm_pnr"
+FMAX_GOAL_MHZ = 24.0
+# Yosys cell -> resource, per family
+CELLS = {"ice40": {"luts": ("SB_LUT4",), "ffs": ("SB_DFF",), "dsps": ("SB_MAC16",), "brams": ("SB_RAM40_4K",),
+                   "carries": ("SB_CARRY",)},
+         "xc7": {"luts": ("LUT1", "LUT2", "LUT3", "LUT4", "LUT5", "LUT6"), "ffs": ("FD",), "dsps": ("DSP48E1",),
+                 "brams": ("RAMB18E1", "RAMB36E1"), "lutrams": ("RAM32M", "RAM64M", "RAM32X1D", "RAM64X1D"),
+                 "carries": ("CARRY4",)}}
+
+
+def _evaluator_meta():
+    meta = V.read_manifest(V.DEFAULT_DIR)["sets"]["evaluator"]
+    return meta, len(meta["tables"])
+
+
+def _tb_result(out: str, what: str) -> dict:
+    m = re.search(r"^RESULT vectors=(\d+) mismatches=(\d+) cycles=(-?\d+)$", out, re.M)
+    if not m or "ERROR" in out:
+        raise CostError(f"{what}: no RESULT line:\n{out[-1500:]}")
+    return {"vectors": int(m.group(1)), "mismatches": int(m.group(2)), "cycles": int(m.group(3))}
+
+
+def rtl_check_icarus(work: Path, defines=()) -> dict:
+    """The time-multiplexed evaluator's testbench under Icarus on the evaluator vectors."""
+    meta, n_tab = _evaluator_meta()
+    exe = work / ("tb_eval_tm" + "".join("_" + d for d in defines))
+    _run([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines), "-o", exe, *TM_SOURCES], what="iverilog")
+    out = _run([need("vvp"), "-n", exe, f"+vectors={V.DEFAULT_DIR / meta['mem']}",
+                f"+tables={V.DEFAULT_DIR / meta['tables_mem']}", f"+n_vec={meta['rows']}", f"+n_tab={n_tab}"],
+               what="vvp", timeout=900)
+    return _tb_result(out, "icarus")
+
+
+def rtl_check_verilator(work: Path) -> dict:
+    """The same testbench compiled by Verilator 5 (--binary)."""
+    meta, n_tab = _evaluator_meta()
+    obj = work / "verilator"
+    _run([need("verilator"), "--binary", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_eval_tm",
+          "-Mdir", obj, *TM_SOURCES], what="verilator", timeout=900)
+    out = _run([obj / "Vtb_eval_tm", f"+vectors={V.DEFAULT_DIR / meta['mem']}",
+                f"+tables={V.DEFAULT_DIR / meta['tables_mem']}", f"+n_vec={meta['rows']}", f"+n_tab={n_tab}"],
+               what="verilator run", timeout=900)
+    return _tb_result(out, "verilator")
+
+
+def yosys_cells(stat: str) -> dict:
+    """Cell name -> count from the last 'Number of cells' block of a Yosys `stat`."""
+    block = stat[stat.rindex("Number of cells"):]
+    out = {}
+    for line in block.splitlines()[1:]:
+        m = re.match(r"\s+(\S+)\s+(\d+)$", line)
+        if not m:
+            break
+        out[m.group(1)] = int(m.group(2))
+    return out
+
+
+def resources(family: str, cells: dict) -> dict:
+    return {k: sum(n for c, n in cells.items() if c.startswith(prefixes)) for k, prefixes in CELLS[family].items()}
+
+
+def synth(family: str, work: Path) -> dict:
+    """Yosys synthesis of the evaluator alone (synth_ice40 -dsp / synth_xilinx): cells and resources."""
+    cmd = (f"read_verilog {HDL / 'hdrg_eval_tm.v'}; "
+           + ("synth_ice40 -dsp" if family == "ice40" else "synth_xilinx") + f" -top {TM_TOP}; tee -o {work / 'stat.txt'} stat")
+    _run([need("yosys"), "-q", "-p", cmd], what="yosys", timeout=900)
+    cells = yosys_cells((work / "stat.txt").read_text())
+    return {"cells": cells, **resources(family, cells)}
+
+
+def pnr_ice40(work: Path, seed: int = 1) -> dict:
+    """nextpnr-ice40 --up5k of the pin-light wrapper: Fmax of the clock, utilisation."""
+    js = work / "pnr.json"
+    _run([need("yosys"), "-q", "-p", f"read_verilog {HDL / 'hdrg_eval_tm.v'} {HDL / 'hdrg_eval_tm_pnr.v'}; "
+                                     f"synth_ice40 -dsp -top {TM_PNR_TOP} -json {js}"], what="yosys", timeout=900)
+    pr = subprocess.run([need("nextpnr-ice40"), "--up5k", "--package", "sg48", "--json", str(js),
+                         "--pcf-allow-unconstrained", "--freq", str(FMAX_GOAL_MHZ), "--seed", str(seed)],
+                        capture_output=True, text=True, timeout=1200)
+    log = pr.stdout + pr.stderr
+    fm = re.findall(r"Max frequency for clock '(clk[^']*)': ([\d.]+) MHz", log)
+    if not fm:
+        raise CostError(f"nextpnr-ice40 reported no Fmax (status {pr.returncode}):\n{log[-1500:]}")
+    util = {m.group(1): (int(m.group(2)), int(m.group(3)))
+            for m in re.finditer(r"(ICESTORM_LC|ICESTORM_DSP|ICESTORM_RAM|SB_IO):\s+(\d+)/\s*(\d+)", log)}
+    return {"fmax_mhz": float(fm[-1][1]), "utilisation": util, "seed": seed}
+
+
+def measure_fpga(target: str, work: Path, log=print) -> dict:
+    work.mkdir(parents=True, exist_ok=True)
+    family = "ice40" if target == "ice40" else "xc7"
+    tools = {"yosys": tool_version("yosys", "-V"), "iverilog": tool_version("iverilog", "-V"),
+             "verilator": tool_version("verilator")}
+    ic = rtl_check_icarus(work)
+    log(f"  icarus: {ic}")
+    vl = rtl_check_verilator(work)
+    log(f"  verilator: {vl}")
+    broken = rtl_check_icarus(work, ("HDRG_BREAK_ROUNDING",))
+    syn = synth(family, work)
+    log(f"  yosys: {syn}")
+    res = {"target": target, "design": "vectors/hdl/hdrg_eval_tm.v (time-multiplexed evaluator: one 32x32 multiplier)",
+           "scope": "evaluator only (the rest of the pipeline is not in RTL yet: docs/COST.md)",
+           "tools": tools, "bit_exact": ic["mismatches"] == 0 and vl["mismatches"] == 0 and ic["vectors"] > 0,
+           "vectors": ic["vectors"], "icarus": ic, "verilator": vl, "broken_build_caught": broken["mismatches"] > 0,
+           "cycles_per_sample": ic["cycles"], **{k: v for k, v in syn.items()}}
+    if family == "ice40":
+        tools["nextpnr-ice40"] = tool_version("nextpnr-ice40")
+        p = pnr_ice40(work)
+        log(f"  nextpnr: {p}")
+        res.update({"fmax_mhz": p["fmax_mhz"], "pnr": p, "device": "iCE40 UP5K (sg48)",
+                    "samples_per_s_at_fmax": round(p["fmax_mhz"] * 1e6 / ic["cycles"])})
+    else:
+        res.update({"fmax_mhz": None, "device": "Xilinx 7-series (Yosys synth_xilinx; no place-and-route in Debian)"})
+    return res
+
+
 # -- CLI -----------------------------------------------------------------------------------------------
 
 def measure(target: str, work: Path, log=print) -> dict:
@@ -445,8 +584,7 @@ def measure(target: str, work: Path, log=print) -> dict:
         return measure_mcu(target, work, log)
     if target == "host":
         return measure_host(work, log)
-    from host_tools import cost_fpga
-    return cost_fpga.measure(target, work, log)
+    return measure_fpga(target, work, log)
 
 
 def summary(r: dict) -> str:
