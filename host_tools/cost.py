@@ -178,7 +178,7 @@ def worst_stack(stack: dict, edges: dict, root: str) -> tuple:
         best = (0, [])
         for g in edges.get(f, ()):
             if g not in seen:
-                best = max(best, go(g, seen | {g}), key=lambda x: x[0])
+                best = max(best, go(g, seen | {g}), key=lambda x: (x[0], len(x[1])))
         return (own or 0) + best[0], [f if own is not None else f + "?"] + best[1]
     return go(root, {root})
 

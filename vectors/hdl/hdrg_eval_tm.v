@@ -61,10 +61,10 @@ module hdrg_eval_tm (
     // ---- table: exponents in registers, mantissas in a memory ----
     reg [31:0] mant [0:31];
     reg [5:0]  e_row0, e_row1, e_row2, e_row3, e_7, e_acc;
-    wire [5:0] mwa = waddr - 6'd28;
+    wire [4:0] mwa = waddr[4:0] - 5'd28;   // 28..44 -> 0..16 (mod 32)
     always @(posedge clk) begin
         if (we && waddr >= 6'd28 && waddr <= 6'd44)
-            mant[mwa[4:0]] <= wdata;
+            mant[mwa] <= wdata;
         if (we) begin
             case (waddr)
                 6'd22: e_row0 <= wdata[5:0];
