@@ -488,7 +488,8 @@ def rtl_check_icarus(work: Path, defines=()) -> dict:
     """The time-multiplexed evaluator's testbench under Icarus on the evaluator vectors."""
     meta, n_tab = _evaluator_meta()
     exe = work / ("tb_eval_tm" + "".join("_" + d for d in defines))
-    _run([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines), "-o", exe, *TM_SOURCES], what="iverilog")
+    _run([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines), f"-Ptb_eval_tm.TAB_WORDS={meta['table_words']}",
+          "-o", exe, *TM_SOURCES], what="iverilog")
     out = _run([need("vvp"), "-n", exe, f"+vectors={V.DEFAULT_DIR / meta['mem']}",
                 f"+tables={V.DEFAULT_DIR / meta['tables_mem']}", f"+n_vec={meta['rows']}", f"+n_tab={n_tab}"],
                what="vvp", timeout=900)
@@ -500,6 +501,7 @@ def rtl_check_verilator(work: Path) -> dict:
     meta, n_tab = _evaluator_meta()
     obj = work / "verilator"
     _run([need("verilator"), "--binary", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_eval_tm",
+          f"-GTAB_WORDS={meta['table_words']}",
           "-Mdir", obj, *TM_SOURCES], what="verilator", timeout=900)
     out = _run([obj / "Vtb_eval_tm", f"+vectors={V.DEFAULT_DIR / meta['mem']}",
                 f"+tables={V.DEFAULT_DIR / meta['tables_mem']}", f"+n_vec={meta['rows']}", f"+n_tab={n_tab}"],
