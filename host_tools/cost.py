@@ -509,6 +509,48 @@ def rtl_check_verilator(work: Path) -> dict:
     return _tb_result(out, "verilator")
 
 
+FRONT_SOURCES = (HDL / "tb_front.v", HDL / "hdrg_front.v")
+
+
+def front_params(set_name: str, work: Path) -> tuple:
+    """(testbench parameters, plusargs) of tb_front for a pipeline vector set: the LSB position of
+    each field in the set's $readmemh record and a file of each case's table start word."""
+    meta = V.read_manifest(V.DEFAULT_DIR)["sets"][set_name]
+    rec = sum(f["bits"] for f in meta["mem_record"])
+    pos, top = {}, rec
+    for f in meta["mem_record"]:
+        top -= f["bits"]
+        pos[f["name"]] = top
+    offsets = meta.get("table_offsets") or [k * meta["table_words"] for k in range(len(meta["tables"]))]
+    off_file = work / f"{set_name}.case_offsets.mem"
+    off_file.write_text("".join(f"{offsets[c['table']]:08x}\n" for c in meta["cases"]))
+    n_words = len((V.DEFAULT_DIR / meta["tables_mem"]).read_text().split())
+    params = {"REC": rec, "P_CASE": pos["case"], "P_F": pos["F"], "P_T": pos["T"], "P_RESTART": pos["RESTART"],
+              "P_U": pos["u"], "P_V": pos["v"], "P_S": pos["s"], "P_FLAGS": pos["flags"]}
+    plus = [f"+vectors={V.DEFAULT_DIR / meta['mem']}", f"+tables={V.DEFAULT_DIR / meta['tables_mem']}",
+            f"+offsets={off_file}", f"+n_vec={meta['rows']}", f"+n_words={n_words}", f"+n_tab={len(meta['cases'])}"]
+    return params, plus
+
+
+def rtl_front_check(set_name: str, work: Path, simulator: str = "icarus", defines=()) -> dict:
+    """hdrg_front (proxy + rate) on a pipeline vector set under Icarus or Verilator."""
+    work.mkdir(parents=True, exist_ok=True)
+    params, plus = front_params(set_name, work)
+    tag = f"{set_name}_{simulator}" + "".join("_" + d for d in defines)
+    if simulator == "icarus":
+        exe = work / f"tb_front_{tag}"
+        _run([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines),
+              *(f"-Ptb_front.{k}={v}" for k, v in params.items()), "-o", exe, *FRONT_SOURCES], what="iverilog")
+        out = _run([need("vvp"), "-n", exe, *plus], what="vvp", timeout=1800)
+    else:
+        obj = work / f"vl_front_{tag}"
+        _run([need("verilator"), "--binary", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_front",
+              *(f"-D{d}" for d in defines), *(f"-G{k}={v}" for k, v in params.items()), "-Mdir", obj,
+              *FRONT_SOURCES], what="verilator", timeout=900)
+        out = _run([obj / "Vtb_front", *plus], what="verilator run", timeout=1800)
+    return _tb_result(out, f"{simulator} front {set_name}")
+
+
 def yosys_cells(stat: str) -> dict:
     """Cell name -> count from the last 'Number of cells' block of a Yosys `stat`."""
     block = stat[stat.rindex("Number of cells"):]
