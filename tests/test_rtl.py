@@ -42,3 +42,29 @@ def test_tm_evaluator_lint_clean():
 def test_tm_evaluator_bit_exact_verilator(tmp_path):
     r = cost.rtl_check_verilator(tmp_path)
     assert r["mismatches"] == 0 and r["vectors"] > 1000 and 25 <= r["cycles"] <= CYCLES_GOAL
+
+
+# -- proxy + rate (vectors/hdl/hdrg_front.v) on the pipeline sets ----------------------------------
+
+@pytest.mark.skipif(not ICARUS, reason="Icarus Verilog not installed (Debian package iverilog)")
+@pytest.mark.parametrize("set_name", ["sequencer", "e2e", "aux"])
+def test_front_bit_exact_icarus(set_name, tmp_path):
+    from host_tools import vectors as V
+    rows = V.read_manifest(V.DEFAULT_DIR)["sets"][set_name]["rows"]
+    r = cost.rtl_front_check(set_name, tmp_path)
+    assert r["vectors"] == rows > 1000 and r["mismatches"] == 0
+    assert r["cycles"] >= 4
+
+
+@pytest.mark.skipif(not ICARUS, reason="Icarus Verilog not installed (Debian package iverilog)")
+def test_broken_front_is_caught(tmp_path):
+    r = cost.rtl_front_check("sequencer", tmp_path, defines=("HDRG_BREAK_ROUNDING",))
+    assert r["mismatches"] > r["vectors"] // 10
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not VERILATOR, reason="Verilator not installed (Debian package verilator)")
+@pytest.mark.parametrize("set_name", ["sequencer", "e2e"])
+def test_front_bit_exact_verilator(set_name, tmp_path):
+    r = cost.rtl_front_check(set_name, tmp_path, "verilator")
+    assert r["vectors"] > 1000 and r["mismatches"] == 0
