@@ -576,6 +576,19 @@ def synth(family: str, work: Path) -> dict:
     return {"cells": cells, **resources(family, cells)}
 
 
+FRONT_N_HIST = 64                       # ring depth synthesized for the proxy + rate RTL (a parameter)
+
+
+def synth_front(family: str, work: Path) -> dict:
+    """Yosys synthesis of hdrg_front (proxy + rate; N_HIST = FRONT_N_HIST): cells and resources."""
+    cmd = (f"read_verilog {HDL / 'hdrg_front.v'}; chparam -set N_HIST {FRONT_N_HIST} hdrg_front; "
+           + ("synth_ice40 -dsp" if family == "ice40" else "synth_xilinx") + f" -top hdrg_front; "
+           f"tee -o {work / 'stat_front.txt'} stat")
+    _run([need("yosys"), "-q", "-p", cmd], what="yosys", timeout=900)
+    cells = yosys_cells((work / "stat_front.txt").read_text())
+    return {"n_hist": FRONT_N_HIST, "cells": cells, **resources(family, cells)}
+
+
 def pnr_ice40(work: Path, seed: int = 1) -> dict:
     """nextpnr-ice40 --up5k of the pin-light wrapper: Fmax of the clock, utilisation."""
     js = work / "pnr.json"
@@ -605,11 +618,17 @@ def measure_fpga(target: str, work: Path, log=print) -> dict:
     broken = rtl_check_icarus(work, ("HDRG_BREAK_ROUNDING",))
     syn = synth(family, work)
     log(f"  yosys: {syn}")
+    front = {"icarus": {n: rtl_front_check(n, work) for n in ("sequencer", "e2e", "aux")}}
+    front.update(synth_front(family, work))
+    front["bit_exact"] = all(r["mismatches"] == 0 and r["vectors"] > 0 for r in front["icarus"].values())
+    front["cycles_per_sample_max"] = max(r["cycles"] for r in front["icarus"].values())
+    log(f"  proxy + rate RTL: {front}")
     res = {"target": target, "design": "vectors/hdl/hdrg_eval_tm.v (time-multiplexed evaluator: one 32x32 multiplier)",
            "scope": "evaluator only (the rest of the pipeline is not in RTL yet: docs/COST.md)",
            "tools": tools, "bit_exact": ic["mismatches"] == 0 and vl["mismatches"] == 0 and ic["vectors"] > 0,
            "vectors": ic["vectors"], "icarus": ic, "verilator": vl, "broken_build_caught": broken["mismatches"] > 0,
-           "cycles_per_sample": ic["cycles"], **{k: v for k, v in syn.items()}}
+           "cycles_per_sample": ic["cycles"], **{k: v for k, v in syn.items()},
+           "front_end": {"design": "vectors/hdl/hdrg_front.v (proxy + rate, not time-multiplexed yet)", **front}}
     if family == "ice40":
         tools["nextpnr-ice40"] = tool_version("nextpnr-ice40")
         p = pnr_ice40(work)
@@ -637,6 +656,12 @@ def summary(r: dict) -> str:
               "ns_per_sample", "luts", "ffs", "dsps", "brams", "fmax_mhz", "broken_build_caught"):
         if k in r:
             lines.append(f"  {k}: {r[k]}")
+    if "front_end" in r:
+        f = r["front_end"]
+        lines.append(f"  proxy + rate RTL: bit_exact {f['bit_exact']} (Icarus: "
+                     + ", ".join(f"{n} {x['vectors']}" for n, x in f["icarus"].items())
+                     + f"), max {f['cycles_per_sample_max']} cycles/sample; luts {f['luts']}, ffs {f['ffs']}, "
+                       f"dsps {f['dsps']}, brams {f['brams']} (N_HIST {f['n_hist']})")
     if "per_stage" in r:
         for w, d in r["per_stage"].items():
             lines.append(f"  instructions per sample by stage ({w}, -O2 -fno-inline, mean of {d['samples']}): "

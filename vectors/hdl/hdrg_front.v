@@ -97,7 +97,7 @@ module hdrg_front #(
     endfunction
 
     // ---- rate state ----
-    reg [31:0] ring [0:(1 << AW) - 1];
+    reg [31:0] ring [0:N_HIST];          // n + 1 <= N_HIST + 1 words used
     reg [AW-1:0] head, rd_addr, clr_addr;
     reg [31:0] k;
     reg signed [63:0] iy, p, acc, pr;
