@@ -99,6 +99,7 @@ def test_mcu_cost_json(target, tmp_path):
 def test_fpga_cost_json(target, tmp_path):
     r = _cost_json(target, tmp_path)
     assert r["broken_build_caught"] is True and r["icarus"]["mismatches"] == r["verilator"]["mismatches"] == 0
+    assert r["front_end"]["bit_exact"] is True and r["front_end"]["luts"] > 100
     assert 25 <= r["cycles_per_sample"] <= 200
     assert 100 < r["luts"] and 100 < r["ffs"] and 1 <= r["dsps"]
     if target == "ice40":                # the UP5K goals
