@@ -484,28 +484,57 @@ def _tb_result(out: str, what: str) -> dict:
     return {"vectors": int(m.group(1)), "mismatches": int(m.group(2)), "cycles": int(m.group(3))}
 
 
+def record_positions(meta: dict) -> tuple:
+    """(record bits, {field: LSB position}) of a set's $readmemh record (manifest "mem_record", MSB first)."""
+    rec = sum(f["bits"] for f in meta["mem_record"])
+    pos, top = {}, rec
+    for f in meta["mem_record"]:
+        top -= f["bits"]
+        pos[f["name"]] = top
+    return rec, pos
+
+
+def _offsets_file(meta: dict, work: Path, name: str, per_case: bool) -> tuple:
+    """A file of table start words (one per table, or per case: the case's table) and the number of
+    table words."""
+    n_words = len((V.DEFAULT_DIR / meta["tables_mem"]).read_text().split())
+    offsets = meta.get("table_offsets") or [k * meta["table_words"] for k in range(len(meta["tables"]))]
+    rows = [offsets[c["table"]] for c in meta["cases"]] if per_case else offsets
+    path = work / f"{name}.offsets.mem"
+    path.write_text("".join(f"{o:08x}\n" for o in rows))
+    return path, len(rows), n_words
+
+
+def _eval_tb_args(work: Path) -> tuple:
+    """(parameters, plusargs) of tb_eval_tm for the committed evaluator set."""
+    meta = V.read_manifest(V.DEFAULT_DIR)["sets"]["evaluator"]
+    rec, pos = record_positions(meta)
+    work.mkdir(parents=True, exist_ok=True)
+    off, n_tab, n_words = _offsets_file(meta, work, "evaluator", per_case=False)
+    params = {"REC": rec, "P_CASE": pos["case"], "P_U": pos["u"], "P_V": pos["v"], "P_Z": pos["z"], "P_B": pos["b"],
+              "P_ZC": pos["zclamped"], "HAS_BANK": int("bank" in pos), "P_BANK": pos.get("bank", 0)}
+    plus = [f"+vectors={V.DEFAULT_DIR / meta['mem']}", f"+tables={V.DEFAULT_DIR / meta['tables_mem']}",
+            f"+offsets={off}", f"+n_vec={meta['rows']}", f"+n_tab={n_tab}", f"+n_words={n_words}"]
+    return params, plus
+
+
 def rtl_check_icarus(work: Path, defines=()) -> dict:
     """The time-multiplexed evaluator's testbench under Icarus on the evaluator vectors."""
-    meta, n_tab = _evaluator_meta()
+    params, plus = _eval_tb_args(work)
     exe = work / ("tb_eval_tm" + "".join("_" + d for d in defines))
-    _run([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines), f"-Ptb_eval_tm.TAB_WORDS={meta['table_words']}",
-          "-o", exe, *TM_SOURCES], what="iverilog")
-    out = _run([need("vvp"), "-n", exe, f"+vectors={V.DEFAULT_DIR / meta['mem']}",
-                f"+tables={V.DEFAULT_DIR / meta['tables_mem']}", f"+n_vec={meta['rows']}", f"+n_tab={n_tab}"],
-               what="vvp", timeout=900)
+    _run([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines),
+          *(f"-Ptb_eval_tm.{k}={v}" for k, v in params.items()), "-o", exe, *TM_SOURCES], what="iverilog")
+    out = _run([need("vvp"), "-n", exe, *plus], what="vvp", timeout=900)
     return _tb_result(out, "icarus")
 
 
 def rtl_check_verilator(work: Path) -> dict:
     """The same testbench compiled by Verilator 5 (--binary)."""
-    meta, n_tab = _evaluator_meta()
+    params, plus = _eval_tb_args(work)
     obj = work / "verilator"
     _run([need("verilator"), "--binary", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_eval_tm",
-          f"-GTAB_WORDS={meta['table_words']}",
-          "-Mdir", obj, *TM_SOURCES], what="verilator", timeout=900)
-    out = _run([obj / "Vtb_eval_tm", f"+vectors={V.DEFAULT_DIR / meta['mem']}",
-                f"+tables={V.DEFAULT_DIR / meta['tables_mem']}", f"+n_vec={meta['rows']}", f"+n_tab={n_tab}"],
-               what="verilator run", timeout=900)
+          *(f"-G{k}={v}" for k, v in params.items()), "-Mdir", obj, *TM_SOURCES], what="verilator", timeout=900)
+    out = _run([obj / "Vtb_eval_tm", *plus], what="verilator run", timeout=900)
     return _tb_result(out, "verilator")
 
 
@@ -516,19 +545,12 @@ def front_params(set_name: str, work: Path) -> tuple:
     """(testbench parameters, plusargs) of tb_front for a pipeline vector set: the LSB position of
     each field in the set's $readmemh record and a file of each case's table start word."""
     meta = V.read_manifest(V.DEFAULT_DIR)["sets"][set_name]
-    rec = sum(f["bits"] for f in meta["mem_record"])
-    pos, top = {}, rec
-    for f in meta["mem_record"]:
-        top -= f["bits"]
-        pos[f["name"]] = top
-    offsets = meta.get("table_offsets") or [k * meta["table_words"] for k in range(len(meta["tables"]))]
-    off_file = work / f"{set_name}.case_offsets.mem"
-    off_file.write_text("".join(f"{offsets[c['table']]:08x}\n" for c in meta["cases"]))
-    n_words = len((V.DEFAULT_DIR / meta["tables_mem"]).read_text().split())
+    rec, pos = record_positions(meta)
+    off_file, n_cases, n_words = _offsets_file(meta, work, set_name, per_case=True)
     params = {"REC": rec, "P_CASE": pos["case"], "P_F": pos["F"], "P_T": pos["T"], "P_RESTART": pos["RESTART"],
               "P_U": pos["u"], "P_V": pos["v"], "P_S": pos["s"], "P_FLAGS": pos["flags"]}
     plus = [f"+vectors={V.DEFAULT_DIR / meta['mem']}", f"+tables={V.DEFAULT_DIR / meta['tables_mem']}",
-            f"+offsets={off_file}", f"+n_vec={meta['rows']}", f"+n_words={n_words}", f"+n_tab={len(meta['cases'])}"]
+            f"+offsets={off_file}", f"+n_vec={meta['rows']}", f"+n_words={n_words}", f"+n_tab={n_cases}"]
     return params, plus
 
 

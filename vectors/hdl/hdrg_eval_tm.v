@@ -34,10 +34,11 @@
 // plus the k7 bound at most 2^31 - 1; the C twin checks it: HDRG_ERR_HORNER) keeps p, q, a_i and t
 // within +-(2^31 - 1), so acc and t are 32-bit registers; |A W| < 2^62; B < 2^53 in 64 bits.
 //
-// Table load (the coefficient table layout, FORMATS.md): write word k (22..44) of the table through
+// Table load (the coefficient table layout, FORMATS.md): write word k of the table through
 // (we, waddr, wdata): words 22..27 are the exponents e_0..e_3, e_7, E (6 bits), words 28..44 the
-// mantissas m_0..m_16 (a 32 x 32 memory; Yosys maps it to block RAM).  Other addresses are
-// ignored (the header, CRC and checks are the loader's job).  Do not write while busy.
+// mantissas m_0..m_16; a two-bank table (layout v2) adds bank 2's exponents (49..54) and mantissas
+// (55..71), selected per sample by `bank` (a 64 x 32 memory; Yosys maps it to block RAM).  Other
+// addresses are ignored (the header, CRC and checks are the loader's job).  Do not write while busy.
 //
 // `define HDRG_BREAK_ROUNDING builds a deliberately wrong evaluator (RHU truncates).
 `timescale 1ns / 1ns
@@ -45,9 +46,10 @@ module hdrg_eval_tm (
     input  wire               clk,
     input  wire               rst,        // synchronous, active high: idle, done low
     input  wire               we,         // table word write
-    input  wire [5:0]         waddr,      // table word index (22..44 used)
+    input  wire [6:0]         waddr,      // table word index (22..44; bank 2: 49..71)
     input  wire [31:0]        wdata,
-    input  wire               start,      // one-cycle pulse: evaluate u, v, z (sampled at start)
+    input  wire               start,      // one-cycle pulse: evaluate u, v, z, bank (sampled at start)
+    input  wire               bank,       // 0: bank 1 (words 22..44), 1: bank 2 (words 49..71)
     input  wire signed [31:0] u,          // Q1.30 proxy, in [-2^30, 2^30]
     input  wire signed [31:0] v,          // Q1.30 proxy rate, in [-2^30, 2^30]
     input  wire signed [31:0] z,          // Q1.30 aux word, any int32 (clamped)
@@ -58,25 +60,37 @@ module hdrg_eval_tm (
 );
     localparam signed [31:0] ONE = 32'sd1073741824;   // 2^30
 
-    // ---- table: exponents in registers, mantissas in a memory ----
-    reg [31:0] mant [0:31];
-    reg [5:0]  e_row0, e_row1, e_row2, e_row3, e_7, e_acc;
-    wire [4:0] mwa = waddr[4:0] - 5'd28;   // 28..44 -> 0..16 (mod 32)
+    // ---- table: exponents in registers, mantissas in a memory (bank 1 at 0..16, bank 2 at 32..48) ----
+    reg [31:0] mant [0:63];
+    reg [5:0]  e1_0, e1_1, e1_2, e1_3, e1_7, e1_acc, e2_0, e2_1, e2_2, e2_3, e2_7, e2_acc;
+    wire [5:0] mwa1 = waddr[5:0] - 6'd28;    // 28..44 -> 0..16
+    wire [5:0] mwa2 = waddr[5:0] - 6'd23;    // 55..71 -> 32..48 (mod 64)
     always @(posedge clk) begin
-        if (we && waddr >= 6'd28 && waddr <= 6'd44)
-            mant[mwa] <= wdata;
+        if (we && waddr >= 7'd28 && waddr <= 7'd44)
+            mant[mwa1] <= wdata;
+        if (we && waddr >= 7'd55 && waddr <= 7'd71)
+            mant[mwa2] <= wdata;
         if (we) begin
             case (waddr)
-                6'd22: e_row0 <= wdata[5:0];
-                6'd23: e_row1 <= wdata[5:0];
-                6'd24: e_row2 <= wdata[5:0];
-                6'd25: e_row3 <= wdata[5:0];
-                6'd26: e_7    <= wdata[5:0];
-                6'd27: e_acc  <= wdata[5:0];
+                7'd22: e1_0   <= wdata[5:0];
+                7'd23: e1_1   <= wdata[5:0];
+                7'd24: e1_2   <= wdata[5:0];
+                7'd25: e1_3   <= wdata[5:0];
+                7'd26: e1_7   <= wdata[5:0];
+                7'd27: e1_acc <= wdata[5:0];
+                7'd49: e2_0   <= wdata[5:0];
+                7'd50: e2_1   <= wdata[5:0];
+                7'd51: e2_2   <= wdata[5:0];
+                7'd52: e2_3   <= wdata[5:0];
+                7'd53: e2_7   <= wdata[5:0];
+                7'd54: e2_acc <= wdata[5:0];
                 default: ;
             endcase
         end
     end
+    reg bank_q;                         // the bank of the sample (latched at start)
+    wire [5:0] e_row0 = bank_q ? e2_0 : e1_0, e_row1 = bank_q ? e2_1 : e1_1, e_row2 = bank_q ? e2_2 : e1_2;
+    wire [5:0] e_row3 = bank_q ? e2_3 : e1_3, e_7 = bank_q ? e2_7 : e1_7, e_acc = bank_q ? e2_acc : e1_acc;
 
     // ---- the program counter: row i (3..0) and position pos within it ----
     // pos 0 L, 1..3 M (c2, c1, c0), 4 A, 5 H (rows 2..0), 6 Z, 7 B
@@ -96,7 +110,8 @@ module hdrg_eval_tm (
             midx = 5'd7;                // Z reads m_7 (A, H, B read nothing)
     end
 
-    // shift amounts and the B scale, registered from the exponents (stable after a table load)
+    // shift amounts and the B scale, registered from the exponents of the sample's bank (valid from
+    // the cycle after start on)
     reg [5:0] sh_row0, sh_row1, sh_row2, sh_row3, sh_z, sh_b;
     reg signed [31:0] bscale;
     always @(posedge clk) begin
@@ -163,6 +178,7 @@ module hdrg_eval_tm (
                 pos <= 3'd0;
                 phase <= 3'd0;
                 uq <= u;
+                bank_q <= bank;
                 vq <= v;
                 z_clamped <= (z > ONE) || (z < -ONE);
                 zq <= (z > ONE) ? ONE : ((z < -ONE) ? -ONE : z);
@@ -170,7 +186,7 @@ module hdrg_eval_tm (
         end else begin
             case (phase)
                 3'd0: begin
-                    mrd <= mant[midx];
+                    mrd <= mant[{bank_q, midx}];
                     phase <= 3'd1;
                 end
                 3'd1: begin

@@ -8,8 +8,8 @@ module hdrg_eval_tm_pnr (
     input  wire rst,
     input  wire sdi,
     input  wire shift,      // shift sdi into the input register
-    input  wire we,         // write table word sr[31:0] at address sr[37:32]
-    input  wire start,      // evaluate u = sr[127:96], v = sr[95:64], z = sr[63:32]
+    input  wire we,         // write table word sr[31:0] at address sr[38:32]
+    input  wire start,      // evaluate u = sr[127:96], v = sr[95:64], z = sr[63:32], bank = sr[39]
     output wire sdo,
     output wire busy,
     output reg  done_q,
@@ -26,6 +26,6 @@ module hdrg_eval_tm_pnr (
         zc_q <= zc;
     end
     assign sdo = so[63];
-    hdrg_eval_tm ev (.clk(clk), .rst(rst), .we(we), .waddr(sr[37:32]), .wdata(sr[31:0]), .start(start),
+    hdrg_eval_tm ev (.clk(clk), .rst(rst), .we(we), .waddr(sr[38:32]), .wdata(sr[31:0]), .start(start), .bank(sr[39]),
                      .u(sr[127:96]), .v(sr[95:64]), .z(sr[63:32]), .b(b), .z_clamped(zc), .busy(busy), .done(done));
 endmodule
