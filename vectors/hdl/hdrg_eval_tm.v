@@ -40,7 +40,8 @@
 // (55..71), selected per sample by `bank` (a 64 x 32 memory; Yosys maps it to block RAM).  Other
 // addresses are ignored (the header, CRC and checks are the loader's job).  Do not write while busy.
 //
-// `define HDRG_BREAK_ROUNDING builds a deliberately wrong evaluator (RHU truncates).
+// `define HDRG_BREAK_ROUNDING builds a deliberately wrong evaluator (RHU truncates), HDRG_BREAK_BANK
+// one that reads bank 1's mantissas for bank 2.
 `timescale 1ns / 1ns
 module hdrg_eval_tm (
     input  wire               clk,
@@ -186,7 +187,11 @@ module hdrg_eval_tm (
         end else begin
             case (phase)
                 3'd0: begin
+`ifdef HDRG_BREAK_BANK
+                    mrd <= mant[{1'b0, midx}];          // wrong on purpose: bank 2's mantissas ignored
+`else
                     mrd <= mant[{bank_q, midx}];
+`endif
                     phase <= 3'd1;
                 end
                 3'd1: begin
