@@ -9,13 +9,22 @@ Data flow, per sample i, all causal (sample i uses samples <= i only)::
             --(B = model, Horner form)-------------------------> B
     output: rate_dph = y - B, bias_dph = B, valid
 
+or, for a mode-reversal model of order ``regress_first`` (host_tools.reversal, the default)::
+
+    run log --> y = c = s * rate (rate-corrected, not combined); u, v, z as above
+            --(B = bank of the sample's mode)------------------> B
+            --(combiner on the residual r = c - B, host_tools.reversal)--> out, valid
+    output: rate_dph = out, bias_dph = B, valid
+
 Exact semantics (the fixed-point reference copies them):
 
 * **Target y** [deg/h]: FTR model (``reversal`` None): the log must be all mode 0; ``y = rate_dph``
   and the combined output is valid at every sample.  Mode-reversal model: the log must use mode
   reversal (modes 1/2/3); ``y, combined_valid = host_tools.reversal.combine(log, combiner,
   max_stale_s, settle_s, fs_hz=rate.fs)`` (the model's nominal fs, as in firmware).  A model/log
-  mismatch is an error.
+  mismatch is an error.  regress_first model: ``y = c = s * rate`` (0 at exchange samples);
+  ``used`` = mode 1/2, past settling, rate estimator warm (the samples a fit uses, bank by mode);
+  combined-valid = the validity of the model's combiner on these (it does not depend on values).
 * **u** from the proxy column of the model's kind (host_tools.proxy); **v** from the same column
   by the model's rate estimator, restarted at every ``RunLog.segments`` start
   (host_tools.rate); **z** from the aux generator (0 for 'none').
@@ -25,9 +34,10 @@ Exact semantics (the fixed-point reference copies them):
   2 (v was clamped), ``FLAG_WARMUP`` 4 (rate estimator in warm-up), ``FLAG_EXCHANGE`` 8 (mode 3),
   ``FLAG_STALE`` 16 (mode-reversal output not valid at a mode 1/2 sample: settling, no
   complete window of the other mode yet, or that window older than max_stale_s).
-* **B[i]** = ``model.evaluate(u[i], v[i], z[i])`` at every sample (Horner form,
-  host_tools.regressors), deg/h.
-* **Output** (:func:`compensate`): where valid, ``rate_dph = y - B`` and ``bias_dph = B``; where
+* **B[i]** = ``model.evaluate(u[i], v[i], z[i], mode[i])`` at every sample (Horner form,
+  host_tools.regressors; bank by mode for regress_first), deg/h.
+* **Output** (:func:`compensate`): where valid, ``rate_dph = y - B`` (regress_first: the
+  combiner's output on the residual r = y - B, :func:`residual`) and ``bias_dph = B``; where
   not valid, both *hold* their last valid values (0.0 before the first valid sample; the hold
   is not reset at segment starts), like the combiner's output; ``valid`` = 1.0 / 0.0.
 
@@ -50,7 +60,7 @@ from host_tools.model import BiasModel, ModelConfig
 from host_tools.proxy import ProxyConfig, parse_range
 from host_tools.rate import RateConfig, parse_rate_range
 from host_tools.regressors import AuxConfig, aux_regressor
-from host_tools.reversal import ReversalConfig, combine
+from host_tools.reversal import ReversalConfig, check_modes, combine, combine_values, sign_of
 
 FLAG_PROXY_CLAMPED = 1
 FLAG_RATE_CLAMPED = 2
@@ -60,6 +70,13 @@ FLAG_STALE = 16
 FLAG_NAMES = {FLAG_PROXY_CLAMPED: "proxy_clamped", FLAG_RATE_CLAMPED: "rate_clamped",
               FLAG_WARMUP: "warmup", FLAG_EXCHANGE: "exchange", FLAG_STALE: "stale"}
 FS_TOLERANCE = 0.01  # relative mismatch allowed between the log's sample rate and the model's fs
+# Defaults of a new model, the one place: fit_config_from_logs (and fit_logs for the terms) fill
+# what is not given, so hdrg fit / diagnose / demo and everything reading their model files follow.
+# Chosen on held-out runs at another temperature rate (docs/REGRESS_THEN_REVERSE.md "Defaults").
+DEFAULT_ORDER = "regress_first"
+DEFAULT_COMBINER = "pair"
+DEFAULT_RATE = {"estimator": "diff", "n": 8, "shift": 4}   # robust: no long warm-up, any fs, bursty logs
+DEFAULT_TERMS = "auto"
 IMPLS = ("float", "fixed")
 
 
@@ -67,7 +84,10 @@ IMPLS = ("float", "fixed")
 class Prepared:
     """Per-sample inputs of the model and the target, all float64[n] / bool[n] / uint8[n]:
     ``p`` proxy [Hz or degC], ``u``, ``v``, ``z`` (normalized regressors), ``y`` target [deg/h]
-    (FTR rate_dph or the mode-reversal combined output), ``valid``, ``flags`` (FLAG_* bits)."""
+    (FTR rate_dph, the combine_first combined output, or for regress_first the rate-corrected
+    c = s * rate), ``valid`` (final output valid), ``flags`` (FLAG_* bits); ``mode`` int64[n],
+    ``segments`` (segment starts), ``used`` (the samples a fit uses: = valid, except for
+    regress_first: mode 1/2, past settling, rate estimator warm), ``order`` (None for FTR)."""
 
     p: np.ndarray
     u: np.ndarray
@@ -77,6 +97,10 @@ class Prepared:
     valid: np.ndarray
     flags: np.ndarray
     source: str = "<memory>"
+    mode: np.ndarray | None = None
+    segments: np.ndarray | None = None
+    used: np.ndarray | None = None
+    order: str | None = None
 
     def __len__(self) -> int:
         return len(self.y)
@@ -122,15 +146,37 @@ def prepare(log, config) -> Prepared:
         if not log.reversal:
             raise ValueError(f"{log.source}: the model is for mode reversal "
                              f"(combiner {cfg.reversal.combiner!r}) but the log is FTR (all mode 0)")
-        comb = combine(log, combiner=cfg.reversal.combiner, max_stale_s=cfg.reversal.max_stale_s,
-                       settle_s=cfg.reversal.settle_s, fs_hz=cfg.rate.fs)
-        y = np.asarray(comb.out_dph, np.float64)
-        combined_valid = np.asarray(comb.valid, bool)
+        if cfg.reversal.order == "regress_first":
+            check_modes(log)
+            y = sign_of(mode) * np.asarray(log.rate_dph, np.float64)
+            _, combined_valid, used = combine_values(mode, y, ~warm, log.segments, cfg.reversal, cfg.rate.fs)
+        else:
+            comb = combine(log, combiner=cfg.reversal.combiner, max_stale_s=cfg.reversal.max_stale_s,
+                           settle_s=cfg.reversal.settle_s, fs_hz=cfg.rate.fs)
+            y = np.asarray(comb.out_dph, np.float64)
+            combined_valid = np.asarray(comb.valid, bool)
     exchange = mode == rl.MODE_EXCHANGE
     valid = combined_valid & ~warm & ~exchange
     flags = (u_clamped * FLAG_PROXY_CLAMPED + v_clamped * FLAG_RATE_CLAMPED + warm * FLAG_WARMUP
              + exchange * FLAG_EXCHANGE + (~combined_valid & ~exchange) * FLAG_STALE).astype(np.uint8)
-    return Prepared(np.asarray(p, np.float64), u, v, z, y, valid, flags, log.source)
+    order = None if cfg.reversal is None else cfg.reversal.order
+    return Prepared(np.asarray(p, np.float64), u, v, z, y, valid, flags, log.source, np.asarray(mode, np.int64),
+                    np.asarray(log.segments, np.int64), used if order == "regress_first" else valid, order)
+
+
+def residual(pr: Prepared, model: BiasModel):
+    """(out, B) per sample [deg/h], not held: B = the model's bias (bank by mode), out = y - B, or
+    for a regress_first model the combiner's output on the residual r = y - B (host_tools.reversal;
+    valid where ``pr.valid``)."""
+    bias = model.evaluate(pr.u, pr.v, pr.z, mode=pr.mode)
+    rev = model.config.reversal
+    if rev is None or rev.order != "regress_first":
+        return pr.y - bias, bias
+    if pr.order != "regress_first":
+        raise ValueError(f"{pr.source}: prepared for order {pr.order!r}, the model is regress_first")
+    warm = (pr.flags & FLAG_WARMUP) != 0
+    out, _, _ = combine_values(pr.mode, pr.y - bias, ~warm, pr.segments, rev, model.config.rate.fs)
+    return out, bias
 
 
 def _hold(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -163,8 +209,8 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
         raise ValueError(f"{log.source}: the log is already compensated (metadata 'compensated: yes' "
                          f"or a 'bias_dph' column)")
     prep = prepare(log, model)
-    bias = model.evaluate(prep.u, prep.v, prep.z)
-    out = log.with_columns(rate_dph=_hold(prep.y - bias, prep.valid), bias_dph=_hold(bias, prep.valid),
+    value, bias = residual(prep, model)
+    out = log.with_columns(rate_dph=_hold(value, prep.valid), bias_dph=_hold(bias, prep.valid),
                            valid=prep.valid.astype(np.float64))
     nvalid = int(np.count_nonzero(prep.valid))
     out.metadata.update({
@@ -177,20 +223,22 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
     return out
 
 
-def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: str = "diff", n: int = 8,
-                         shift: int = 4, proxy_range=None, rate_range: float | None = None,
+def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: str | None = None,
+                         n: int | None = None, shift: int | None = None, proxy_range=None, rate_range: float | None = None,
                          proxy_margin: float = 0.1, rate_margin: float = 0.1, rate_percentile: float = 99.9,
                          reversal=None, aux=None, fs: float | None = None) -> ModelConfig:
     """The default ModelConfig for training ``logs`` (RunLogs, all FTR or all mode reversal).
 
     * proxy kind: ``proxy_kind`` or 'freq' if every log has ``freq_hz``, else 'temp';
+    * rate estimator: ``rate_estimator``, ``n``, ``shift``; each None -> DEFAULT_RATE;
     * fs [Hz]: ``fs`` or the first log's sample rate; every log must match it within 1 %;
     * proxy range: ``proxy_range`` (LO, HI) in proxy units, else ProxyConfig.from_data over the
       logs' non-exchange samples widened by ``proxy_margin``;
     * rate span: ``rate_range`` [proxy units/s], else RateConfig.from_data (``rate_percentile``
       of |dp/dt| past warm-up on non-exchange samples, times 1 + ``rate_margin``);
     * reversal: None for FTR logs (giving one is an error); for mode-reversal logs ``reversal``
-      (ReversalConfig or dict) or the default ReversalConfig();
+      (a ReversalConfig, used as is; or a dict, whose missing or None "combiner" / "order" are
+      DEFAULT_COMBINER / DEFAULT_ORDER) or ReversalConfig(DEFAULT_COMBINER, order=DEFAULT_ORDER);
     * aux: ``aux`` (AuxConfig or dict) or AuxConfig() ('none').
     """
     logs = list(logs)
@@ -217,8 +265,17 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
             raise ValueError("reversal settings given but the training logs are FTR (all mode 0)")
         rev = None
     else:
-        rev = ReversalConfig() if reversal is None else (
-            reversal if isinstance(reversal, ReversalConfig) else ReversalConfig.from_dict(dict(reversal)))
+        if isinstance(reversal, ReversalConfig):
+            rev = reversal
+        else:
+            given = {k: v for k, v in dict(reversal or {}).items() if v is not None}
+            rev = ReversalConfig.from_dict({"combiner": DEFAULT_COMBINER, "order": DEFAULT_ORDER, **given})
+    if rate_estimator == "auto":
+        raise ValueError("rate estimator 'auto' is chosen by fitting every candidate: use hdrg fit "
+                         "(host_tools.fit.fit_auto_rate), not a fixed model configuration")
+    rate_estimator = DEFAULT_RATE["estimator"] if rate_estimator is None else rate_estimator
+    n = DEFAULT_RATE["n"] if n is None else n
+    shift = DEFAULT_RATE["shift"] if shift is None else shift
     aux_cfg = AuxConfig() if aux is None else (aux if isinstance(aux, AuxConfig) else AuxConfig.from_dict(dict(aux)))
     keep = [np.asarray(log.mode) != rl.MODE_EXCHANGE for log in logs]
     ps = [log[column] for log in logs]

@@ -24,24 +24,25 @@ Procedure (:func:`diagnose`)
    scored on the held-out part (:class:`_Scanner`).  The score is on SCORE_TAU_S = 1-s means of
    the valid samples (the samples themselves at <= 1 Hz; at 50 Hz the white noise of single
    samples would swamp any slow effect): ``gain = 1 - SSE_heldout(with candidate) /
-   SSE_heldout(base)``, summed over folds.  With >= 2 training runs a candidate may also be
-   another rate estimator (lsq over 16 s or 64 s, family ``rate_estimator``): it replaces the v
-   terms instead of adding a column (within one run, blocks of the same record favour it even
-   when held-out runs get worse, so it is not offered there).
+   SSE_heldout(base)``, summed over folds.  A candidate may also be another rate estimator (lsq
+   over 16 or 64 s, iir with 2^shift / fs = 8, 32, 128 or 512 s; family ``rate_estimator``): it
+   replaces the v terms instead of adding a column, and is scored on the samples valid under
+   both estimators (a longer warm-up must not win by hiding the start of a run); effects are
+   preferred to it when both pass (its warm-up would hide a turn-on).
 4. **Selection rule** (:data:`RULE`): the best candidate is accepted only when
 
    a. its CV gain >= ``g_min`` (default 0.02: it explains at least 2 % of the held-out residual
       variance of 1-s means), and
-   b. its CV gain >= the 95 % level of the *largest* gain of the whole coarse scan on
-      ``n_surrogates`` (29) surrogates: each training run's residual is replaced by Gaussian
-      noise with the run's own noise spectrum (:func:`surrogates`, :func:`noise_continuum`: the
-      residual's periodogram smoothed by a local median that drops lines and the mode-sign
-      sidebands, its own power kept at the 4 lowest bins; random phases; no wrap-around, so it
-      drifts like a real record; corrected for what the base fit absorbs) and every candidate
-      is rescored, the periodic ones at the lines of each surrogate's own spectrum.  So the
-      threshold counts every candidate and scan point, the choice of the periods, and the run's
-      own white, flicker and slow noise (a slow random residual is what makes slow candidates
-      look good by chance), and
+   b. its CV gain >= the gain it needs under max-T: every candidate is rescored on
+      ``n_surrogates`` (39) surrogate noise series per training run (:func:`noise_model`: white +
+      flicker fitted to the residual's Allan variance at taus <= NOISE_TAU_MAX_S, where effects
+      are not; :func:`surrogates`: Gaussian, no wrap-around, through the model's combiner for
+      mode-reversal logs, absolute level, never rescaled to the residual); each candidate's gain
+      is standardized by its own null (median, 84th percentile - median); the 95 % level of the
+      scan's LARGEST standardized null gain over the surrogates, mapped back through each
+      candidate's own null, is the gain that candidate needs (``null95``).  So the threshold
+      counts every candidate and scan point, and a candidate that fits noise easily (a wandering
+      aux channel) does not raise the bar for the others; and
    c. it is consistent: it lowers the held-out error in a strict majority of the folds (all folds
       with 2 runs).
 
@@ -49,15 +50,21 @@ Procedure (:func:`diagnose`)
    the mode and the sample counter alone is preferred to one that needs another logged channel
    (board_temp, aux_*) (:func:`_preferred`).  The winner's continuous parameter (tau or period)
    is then refined on finer grids (ratios 2^(+-1/4, +-1/2), then 2^(+-1/8); periods +-2, 4 %,
-   then +-1 %) by the same CV gain.  Periodic candidates exist only at the periods of significant
-   lines of the training residual (power / continuum > ln(bins / 0.01): Bonferroni over the
-   frequency bins).
+   then +-1 %) by the same CV gain.  Periodic candidates: at the periods of significant lines of
+   the training residual (power / continuum > ln(bins / 0.01)) and on a period grid (120 s ..
+   a third of the run, ratio 2^(1/4)); never at a **combiner line** (:func:`combiner_lines`: the
+   reversal cycle, its harmonics and their sidebands with the chamber cycle), which is reported
+   in ``artifacts`` with the combiner as the cause and the structural fix.
 5. **Add the effect**: the polynomial terms plus every accepted generator as its own column are
    refitted by a small explicit least-squares solve on the training runs; the generator weights
    are normalized by the sum of their magnitudes (so |z| <= 1 everywhere, host_tools.regressors)
    and baked into ``AuxConfig('sum', ...)``; the fitter then fits the 17 coefficients with k7.
-   (A rate_estimator winner changes the model's rate estimator instead.)  Iterate while a
-   candidate passes the rule, at most ``max_iter`` (3) times.
+   (A rate_estimator winner changes the model's rate estimator instead.)  **Confirm** it on the
+   held-out runs (:data:`CONFIRM_RULE`): if the held-out error does not drop, the step is
+   reported ``confirmed: false`` and reverted, its family is not offered again.  Iterate while a
+   candidate passes the rule, at most ``max_iter`` (3) times.  Then, for mode-reversal logs, the
+   structural candidate regress-then-reverse (:func:`_order_step`: per-mode banks, each combiner,
+   whole-model CV), confirmed the same way.
 6. **Report**: per iteration the effect, its parameters, the evidence (CV gain, threshold, folds,
    ranking; PNG: residual vs the candidate, Allan deviation and spectrum before/after) and the
    error before and after (:func:`error_stats`: stability 1 sigma and variation p-p of 1-s and
@@ -78,6 +85,7 @@ import argparse
 import json
 import math
 import os
+import sys
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -93,27 +101,35 @@ from host_tools.regressors import AuxConfig, generator_values, regressor_matrix
 G_MIN = 0.02                 # minimum CV gain (fraction of held-out residual variance)
 N_SURROGATES = 39            # surrogate residuals for the null of the scan's best gain
 NULL_QUANTILE = 0.95
+NULL_SD_FLOOR = 0.005        # max-T: smallest upper-tail scale of a candidate's null gains
 MAX_ITER = 3
 CV_BLOCKS = 16               # single training run: contiguous blocks ...
 CV_FOLDS = 4                 # ... dealt round-robin into folds
 BAND_RATIO = 2 ** 0.25       # spectrum continuum: median over 1/4-octave bands
 LINE_ALPHA = 0.01            # spectrum lines: false-alarm level over all bins (Bonferroni)
-MAX_LINES = 3                # periodic candidates: at most this many lines
-RATE_ALTERNATIVES_S = (16.0, 64.0)   # rate_estimator candidates: lsq windows [s]
+MAX_LINES = 3                # periodic candidates: at most this many lines ...
+PERIOD_GRID_MIN_S = 120.0    # ... plus a grid of periods from this, ratio 2^(1/4), up to a third of the run
+PERIOD_GRID_RATIO = 2 ** 0.25
+RATE_ALTERNATIVES_S = (16.0, 64.0)   # rate_estimator candidates: lsq windows [s] ...
+RATE_IIR_TAUS_S = (8.0, 32.0, 128.0, 512.0)   # ... and iir time constants 2^shift / fs [s]
 REPORT_TAUS = (1.0, 100.0)
 TOP_RANKING = 12
+CONFIRM_MIN_DROP = 0.05      # a confirmed step lowers the held-out error by >= 5 % ...
+CONFIRM_TOL_1S = 0.01        # ... and raises the held-out 1-s std by at most 1 %
+CONFIRM_RULE = ("a step is confirmed iff, on the held-out runs, the std of 100-s averages (1-s where "
+                "100 s is undefined) drops by >= 5 % and the std of 1-s averages rises by at most 1 %; an "
+                "unconfirmed step is reverted and its family not offered again")
 SCORE_TAU_S = 1.0            # the CV scores bin means of this many seconds (the report's shortest tau)
 TIE_TOLERANCE = 0.05         # gains within 5 % (relative) of the best are a tie: prefer the proxy
 
 RULE = ("accept the best candidate iff (a) its cross-validated gain (1 - held-out SSE of 1-s means "
         "with it / without it, the base terms refitted with it in every fold; folds: runs, or "
-        "contiguous blocks of one run) >= g_min, (b) that gain >= the "
-        f"{NULL_QUANTILE:.0%} level of the best gain of the whole coarse scan on surrogate residuals "
-        "(Gaussian noise with each run's own noise spectrum, lines removed, no wrap-around: the "
-        "threshold counts every candidate, scan point and chosen period and the run's own "
-        "white/flicker/slow noise), and (c) it lowers the held-out error in a strict majority of "
-        "the folds; ties within 5 % prefer a regressor of the proxy alone; then refine its "
-        "parameter; stop when no candidate passes or after max_iter iterations")
+        "contiguous blocks of one run) >= g_min, (b) that gain >= the gain it needs under max-T: "
+        "the 95 % level of the scan's largest standardized gain on surrogate noise (white + flicker "
+        "fitted to the residual's Allan variance at short taus, through the combiner), mapped back "
+        "through the candidate's own null, and (c) it lowers the held-out error in a strict "
+        "majority of the folds; ties within 5 % prefer a regressor of the proxy alone; then refine "
+        "its parameter; stop when no candidate passes or after max_iter iterations")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -283,7 +299,6 @@ def _filled(resid, valid):
     return np.interp(np.arange(len(r)), idx, rv)
 
 
-SLOW_BINS = 4                # surrogates keep the residual's own power at bins 1..4
 MIN_BAND_BINS = 5            # continuum bands with fewer bins: mean instead of median
 
 
@@ -343,18 +358,6 @@ def local_continuum(power, exact_upto=256) -> np.ndarray:
     return out
 
 
-def noise_continuum(power) -> np.ndarray:
-    """The noise spectrum the surrogates get: the periodogram itself at the lowest bins 1 ..
-    SLOW_BINS (fewer than that many cycles per record: one run cannot tell a slow deterministic
-    effect from slow noise there, so its power counts as noise: conservative), above them the
-    robust :func:`local_continuum` (narrow features such as lines and the sidebands of the
-    mode-sign modulation are not noise)."""
-    out = local_continuum(power)
-    k = min(SLOW_BINS, len(power) - 1)
-    out[1:k + 1] = np.maximum(power[1:k + 1], 1e-300)
-    return out
-
-
 def spectral_lines(resid, valid, fs, max_lines=MAX_LINES, alpha=LINE_ALPHA) -> list:
     """Significant lines of a residual: periodogram (Hann window) of the mean-free residual
     (invalid samples interpolated, :func:`_filled`)
@@ -384,77 +387,148 @@ def spectral_lines(resid, valid, fs, max_lines=MAX_LINES, alpha=LINE_ALPHA) -> l
 
 
 SURROGATE_OVERSAMPLE = 4     # surrogates are cut from a series this many times longer (no wrap-around)
-SURROGATE_ROUNDS = 2         # spectrum corrections for what the base fit absorbs
-MAX_SPECTRUM_BOOST = 100.0   # largest correction of the noise spectrum per round
+NOISE_TAU_MAX_S = 64.0       # the noise model is fitted to the Allan variance at taus <= this [s]
 
 
-def _low_slope(level) -> float:
-    """Log-log slope of a spectrum over its lowest bins 1..2*SLOW_BINS, clamped to [-2, 0]
-    (random walk .. white): how it continues below the lowest bin of the record."""
-    k = np.arange(1, min(2 * SLOW_BINS, len(level) - 1) + 1)
-    if len(k) < 2:
-        return 0.0
-    slope = np.polyfit(np.log(k), np.log(np.maximum(level[k], 1e-300)), 1)[0]
-    return float(np.clip(slope, -2.0, 0.0))
+def noise_model(resid, t_s, valid, fs, reversal=False) -> dict:
+    """The noise of a residual, fitted where slow effects are not: the overlapping Allan variance
+    of the valid gap-free stretches (host_tools.metrics.allan, allantools; a mode-reversal log's
+    stretches are single dwells) at taus <= NOISE_TAU_MAX_S is fitted (non-negative least squares,
+    relative errors) by ``AVAR(tau) = A / tau + B + C tau + D tau^2``: white noise (A = sigma^2 /
+    fs, sigma the per-sample std), flicker / bias instability (B = 2 ln2 h_-1), rate random walk
+    (C = 2 pi^2 h_-2 / 3) and a drift (D, deterministic: dropped).  So the noise is what the
+    short-tau statistics say, extrapolated to long taus by its white and flicker laws; a slow
+    effect in the residual (power at long taus only) does not enter it.  The random-walk and
+    drift terms are fitted but NOT kept: at taus <= 64 s a rate random walk cannot be told from
+    the start of a slow effect (on the foreign devices with an undeclared effect the fitted C was
+    50x the true random walk), so keeping it would let the noise swallow the effect.  A real
+    random walk does not repeat from run to run or block to block: the cross-validation and the
+    held-out confirmation are what stand against it.
+
+    For a mode-reversal residual (``reversal``) the combined output within a window is half the
+    raw output plus a deterministic part of the other window, so the raw noise is twice the
+    fitted one: the returned coefficients are for the RAW per-sample output (the surrogates pass
+    it through the combiner, :func:`surrogates`).  Returns {white_dph (sigma), flicker_dph
+    (sqrt B: the flat Allan level), rw_dph_per_sqrt_s (0, see above), slow_dropped (the tau /
+    tau^2 terms were non-zero), taus_s, fs, raw_scale} or None when fewer than 3 taus are available."""
+    from scipy.optimize import nnls
+    a = metrics.allan(resid, t_s, valid, fs)
+    taus = np.asarray(a["tau_s"], np.float64)
+    adev = np.asarray(a["adev_dph"], np.float64)
+    keep = (taus <= NOISE_TAU_MAX_S) & (adev > 0)
+    if keep.sum() < 3:
+        return None
+    taus, avar = taus[keep], adev[keep] ** 2
+    cols = [1.0 / taus, np.ones_like(taus)] + ([taus, taus ** 2] if keep.sum() >= 5 else [])
+    M = np.column_stack(cols) / avar[:, None]
+    coef = nnls(M, np.ones(len(taus)))[0]
+    scale = 2.0 if reversal else 1.0
+    A, B = coef[:2] * scale ** 2
+    C = 0.0      # the tau and tau^2 terms absorb slow structure (effects): not noise
+    return {"white_dph": float(math.sqrt(A * fs)), "flicker_dph": float(math.sqrt(B)),
+            "rw_dph_per_sqrt_s": float(math.sqrt(3.0 * C)), "slow_dropped": bool(len(coef) > 2 and np.any(coef[2:] > 0)),
+            "taus_s": taus.tolist(), "fs": float(fs), "raw_scale": scale,
+            "_psd": (2.0 * A, B / (2.0 * math.log(2.0)), 3.0 * C / (2.0 * math.pi ** 2))}
 
 
-def _surrogate_series(level, n, count, rng) -> np.ndarray:
-    """``count`` Gaussian series (n, count), random phases, power per bin of an n-record
-    ``level`` (bins 0..n//2), each a random window of a SURROGATE_OVERSAMPLE x longer series:
-    the level interpolated in frequency, continued below the lowest bin with the slope of the
-    lowest bins (:func:`_low_slope`), so a window holds the random offset and drift of a real
-    record (a run's mean wanders from run to run like the record's slow part)."""
+def _noise_series(nm, n, count, rng) -> np.ndarray:
+    """``count`` Gaussian series (n, count) with the one-sided PSD ``h0 + h1 / f + h2 / f^2`` of
+    the noise model ``nm`` (:func:`noise_model`), each a random window of a SURROGATE_OVERSAMPLE x
+    longer series (no wrap-around: it drifts and wanders like a real record)."""
+    h0, h1, h2 = nm["_psd"]
+    fs = nm["fs"]
     L = SURROGATE_OVERSAMPLE * n
-    kf = np.arange(L // 2 + 1) * (n / L)
-    lev = np.interp(kf, np.arange(1, len(level)), level[1:])
-    below = (kf > 0) & (kf < 1)
-    lev[below] = level[1] * kf[below] ** _low_slope(level)
-    amp = np.sqrt(lev * (L / n))
+    f = np.arange(L // 2 + 1) * (fs / L)
+    f[0] = 1.0
+    amp = np.sqrt((h0 + h1 / f + h2 / f ** 2) * L * fs / 2.0)
     amp[0] = 0.0
     out = np.zeros((n, count))
     for c in range(count):
-        x = np.fft.irfft(amp * np.exp(1j * rng.uniform(0.0, 2.0 * math.pi, len(amp))), L)
+        spec = amp * (rng.standard_normal(len(amp)) + 1j * rng.standard_normal(len(amp))) / math.sqrt(2.0)
+        x = np.fft.irfft(spec, L)
         start = int(rng.integers(0, L - n + 1))
         out[:, c] = x[start:start + n]
     return out
 
 
-def surrogates(resid, valid, count, rng, project=None, rounds=SURROGATE_ROUNDS):
-    """``(noise, residual)``: ``count`` surrogate *noise* series (n, count) for a residual, and
-    their residuals after the base fit (``noise - project(noise)``): Gaussian, random phases, such
-    that their residual after the base fit has the noise spectrum (:func:`noise_continuum`) of
-    the actual residual.
-
-    * No wrap-around: each is a random window of a series SURROGATE_OVERSAMPLE times longer, so a
-      surrogate can drift and wander like a real record (a plain FFT surrogate is periodic in n:
-      it cannot drift, and slow candidates would look better on real slow noise than on it).
-    * ``project`` (a function (n, k) -> (n, k) returning the part the base fit would remove) lets
-      the noise spectrum be corrected in ``rounds`` steps, band ratio by band ratio, for what the
-      base fit absorbs: the actual residual is noise minus its projection on the base terms, so
-      the noise itself has more slow power than the residual shows (FTR runs with a slow
-      non-repeatable wander are the case).
-    * Scaled so that the std of the surrogate's residual equals the actual residual's.
-    Lines and phase structure are not kept."""
-    valid = np.asarray(valid, bool)
-    r = _filled(np.asarray(resid, np.float64), valid)
-    n = len(r)
-    if count == 0 or n < 4 or not valid.any():
-        return np.zeros((n, count)), np.zeros((n, count))
-    target = noise_continuum(np.abs(np.fft.rfft(r)) ** 2)
-    level = target.copy()
-    probe = max(4, min(count, 8))
-    for _ in range(rounds if project is not None else 0):
-        w = _surrogate_series(level, n, probe, rng)
-        rs = w - project(w)
-        got = np.mean([noise_continuum(np.abs(np.fft.rfft(_filled(rs[:, c], valid))) ** 2)
-                       for c in range(probe)], axis=0)
-        ratio = np.where(got > 0, target / np.where(got > 0, got, 1.0), 1.0)
-        level = level * np.clip(ratio, 1.0, MAX_SPECTRUM_BOOST)
-    w = _surrogate_series(level, n, count, rng)
+def surrogates(nm, log, cfg, count, rng, project=None):
+    """``(noise, residual)``: ``count`` surrogate noise series (n, count) of a training log from
+    its noise model ``nm`` (:func:`noise_model`; absolute level, not rescaled to the residual)
+    and their residuals after the base fit (``noise - project(noise)``).  On a mode-reversal log
+    the raw noise goes through the model's combiner (host_tools.reversal, the same kernel), so the
+    surrogate carries what the combiner does to noise (window means, trend extrapolation)."""
+    n = len(log)
+    if count == 0 or nm is None:
+        z = np.zeros((n, count))
+        return z, z
+    w = _noise_series(nm, n, count, rng)
+    if cfg.reversal is not None:
+        from host_tools.reversal import combine_values
+        mode = np.asarray(log.mode, np.int64)
+        ok = np.ones(n, np.bool_)
+        for c in range(count):
+            w[:, c] = combine_values(mode, w[:, c], ok, log.segments, cfg.reversal, cfg.rate.fs)[0]
     rs = w - project(w) if project is not None else w
-    sd = np.std(rs[valid], axis=0)
-    scale = float(np.std(r[valid])) / np.where(sd > 0, sd, 1.0)
-    return w * scale, rs * scale
+    return w, rs
+
+
+ARTIFACT_HARMONICS = 4       # combiner artifacts: lines at m f_rev + k f_chamber, m = 1..4 ...
+ARTIFACT_SIDEBANDS = 3       # ... |k| <= 3
+
+
+def combiner_lines(train, cfg) -> dict | None:
+    """Where the mode-reversal combiner puts spectral lines: the reversal cycle f_rev (median time
+    between the starts of mode-1 windows), its harmonics m f_rev (m <= ARTIFACT_HARMONICS) and
+    their sidebands with the chamber cycle m f_rev + k f_ch (|k| <= ARTIFACT_SIDEBANDS; f_ch: the
+    strongest bin of the Hann periodogram of the mean-free proxy).  A residual the combiner leaves
+    (a mode-sign term times a slowly varying envelope) is a square wave at f_rev modulated by the
+    chamber cycle: exactly these lines.  None for FTR logs or without two reversal cycles."""
+    if cfg.reversal is None:
+        return None
+    fs = cfg.rate.fs
+    starts, fch = [], []
+    for log in train:
+        mode = np.asarray(log.mode)
+        st = np.flatnonzero((mode[1:] == 1) & (mode[:-1] != 1)) + 1
+        if len(st) >= 3:
+            starts.append(np.diff(log.t_s[st]))
+        _, prx = log.proxy(cfg.proxy.kind)
+        prx = np.asarray(prx, np.float64) - np.mean(prx)
+        P = np.abs(np.fft.rfft(prx * np.hanning(len(prx)))) ** 2
+        if len(P) > 2:
+            fch.append((1 + int(np.argmax(P[1:]))) * fs / len(prx))
+    if not starts:
+        return None
+    t_rev = float(np.median(np.concatenate(starts)))
+    f_ch = float(np.median(fch)) if fch else 0.0
+    dur = max(float(log.t_s[-1] - log.t_s[0]) for log in train)
+    tol = min(1.5 / dur, f_ch / 3.0) if f_ch > 0 else 1.5 / dur
+    return {"reversal_period_s": t_rev, "chamber_period_s": 1.0 / f_ch if f_ch > 0 else None,
+            "tolerance_hz": tol, "combiner": cfg.reversal.combiner}
+
+
+def artifact_of(period_s, cl) -> str | None:
+    """'m f_rev + k f_ch' when a line at ``period_s`` is a combiner line of :func:`combiner_lines`
+    ``cl``, else None."""
+    if cl is None:
+        return None
+    f, f_rev = 1.0 / period_s, 1.0 / cl["reversal_period_s"]
+    f_ch = 1.0 / cl["chamber_period_s"] if cl["chamber_period_s"] else 0.0
+    for m in range(1, ARTIFACT_HARMONICS + 1):
+        for k in range(-ARTIFACT_SIDEBANDS, ARTIFACT_SIDEBANDS + 1) if f_ch else (0,):
+            if abs(f - (m * f_rev + k * f_ch)) <= cl["tolerance_hz"]:
+                return f"{m} f_rev {'+' if k >= 0 else '-'} {abs(k)} f_chamber"
+    return None
+
+
+def _artifact_entry(line, cl, why) -> dict:
+    fix = ("another combiner (--combiner pair or trend), or regress-then-reverse (the bias model applied "
+           "per mode before the combiner: order regress_first, combiner none)")
+    return {"period_s": line["period_s"], "amp_dph": line["amp_dph"], "ratio": line["ratio"], "at": why,
+            "cause": f"the mode-reversal combiner ({cl['combiner']}): a line at the reversal cycle "
+                     f"({cl['reversal_period_s']:g} s), its harmonics or their sidebands with the chamber cycle "
+                     f"({_fmt(cl['chamber_period_s'])} s); not a periodic bias of the sensor",
+            "structural_fix": fix}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -544,15 +618,19 @@ def _mean_stats(rows) -> dict:
     return out
 
 
-def error_stats(logs, model: BiasModel) -> dict:
+def error_stats(logs, model: BiasModel, other: BiasModel | None = None) -> dict:
     """The error of ``model`` on ``logs``: the compensated output (host_tools.compensate) judged
     by host_tools.metrics: ``std_dph``/``pp_dph`` (1 sigma / peak-to-peak of 1-s averages) and
     ``std100_dph``/``pp100_dph`` (100-s averages), deg/h, mean over the logs (None where no log
-    supports that tau); ``runs`` holds the per-run values."""
+    supports that tau); ``runs`` holds the per-run values.  With ``other``, only the samples
+    valid under both models count (a longer rate warm-up must not win by hiding samples)."""
     rows = []
     for log in logs:
         out = compensate(log, model)
-        rows.append({"run": log.source, **_stats_one(out.rate_dph, log.t_s, np.asarray(out["valid"]) == 1)})
+        valid = np.asarray(out["valid"]) == 1
+        if other is not None:
+            valid &= np.asarray(compensate(log, other)["valid"]) == 1
+        rows.append({"run": log.source, **_stats_one(out.rate_dph, log.t_s, valid)})
     return {**_mean_stats(rows), "runs": rows}
 
 
@@ -625,25 +703,33 @@ def _explicit_weights(train, cfg, poly, gen_terms) -> list:
 
 
 def _rate_alternatives(train, cfg) -> list:
-    """(label, params) of the rate_estimator candidates: lsq windows RATE_ALTERNATIVES_S (at the
-    nominal fs), shorter than half the shortest segment, different from the current one."""
+    """The rate_estimator candidates {estimator, n, shift}: lsq over RATE_ALTERNATIVES_S seconds
+    and iir with time constants 2^shift / fs in RATE_IIR_TAUS_S (nominal fs), a warm-up shorter
+    than half the shortest segment, different from the current estimator."""
+    from host_tools.rate import MAX_SHIFT, warmup_length
     fs = cfg.rate.fs
     shortest = min(int(np.min(np.diff(np.append(log.segments, len(log))))) for log in train)
+    cur = (cfg.rate.estimator, cfg.rate.n if cfg.rate.estimator == "lsq" else 0,
+           cfg.rate.shift if cfg.rate.estimator == "iir" else 0)
     out = []
     for sec in RATE_ALTERNATIVES_S:
-        n = max(2, int(round(sec * fs)))
-        if n > shortest // 2:
-            continue
-        if cfg.rate.estimator == "lsq" and cfg.rate.n == n:
-            continue
-        out.append({"estimator": "lsq", "n": n})
-    return out
+        out.append({"estimator": "lsq", "n": max(2, int(round(sec * fs))), "shift": cfg.rate.shift})
+    shifts = sorted({min(MAX_SHIFT, max(0, int(round(math.log2(t * fs))))) for t in RATE_IIR_TAUS_S})
+    out += [{"estimator": "iir", "n": cfg.rate.n, "shift": sh} for sh in shifts]
+    keep = []
+    for alt in out:
+        key = (alt["estimator"], alt["n"] if alt["estimator"] == "lsq" else 0,
+               alt["shift"] if alt["estimator"] == "iir" else 0)
+        if key != cur and warmup_length(alt["estimator"], alt["n"], alt["shift"]) <= shortest // 2:
+            keep.append(alt)
+    return keep
 
 
 def _config(train, opts, rate=None, aux=None):
     o = dict(opts)
     if rate is not None:
         o["rate_estimator"], o["n"] = rate["estimator"], rate["n"]
+        o["shift"] = rate.get("shift", o["shift"])
     return fit_config_from_logs(train, aux=aux, **o)
 
 
@@ -652,14 +738,33 @@ def _gain(e1, e0):
     return 1.0 - e1.sum(axis=0) / np.maximum(e0.sum(axis=0), 1e-300)
 
 
+def _score(stats):
+    """(primary, 1-s) error of error_stats: the std of 100-s averages where defined, else of 1-s."""
+    return (stats["std100_dph"] if stats["std100_dph"] is not None else stats["std_dph"]), stats["std_dph"]
+
+
+def confirmed_on_holdout(before, after) -> bool:
+    """CONFIRM_RULE: the held-out std of 100-s averages (1-s where 100 s is undefined) drops by at
+    least CONFIRM_MIN_DROP and the held-out std of 1-s averages does not rise by more than
+    CONFIRM_TOL_1S (relative)."""
+    p0, s0 = _score(before)
+    p1, s1 = _score(after)
+    if p0 is None or p1 is None:
+        return False
+    return bool(p1 <= p0 * (1.0 - CONFIRM_MIN_DROP)
+                and (s0 is None or s1 is None or s1 <= s0 * (1.0 + CONFIRM_TOL_1S)))
+
+
 def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator="diff", rate_n=8, rate_shift=4,
              terms="all", combiner="trend", settle_s=0.0, proxy_range=None, rate_range=None,
              max_iter=MAX_ITER, n_surrogates=N_SURROGATES, g_min=G_MIN, cv_blocks=CV_BLOCKS,
              cv_folds=CV_FOLDS, seed=0, families=None, rate_alternatives=True, out_dir=None,
-             plots=True) -> tuple:
+             plots=True, progress=None) -> tuple:
     """Run the closed loop (module doc) on RunLogs.  Returns ``(report, model)``: the report dict
-    (the JSON of the module doc) and the final BiasModel.  With ``out_dir`` the files are written
-    there (:func:`write_report`)."""
+    (the JSON of the module doc) and the final BiasModel (the last step confirmed on the held-out
+    runs; without held-out runs the last accepted one).  With ``out_dir`` the files are written
+    there (:func:`write_report`).  ``progress``: a callable(str) told what is being done."""
+    say = progress or (lambda msg: None)
     train = list(train_logs)
     hold = list(holdout_logs)
     if not train:
@@ -667,8 +772,9 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator="diff", 
     rev = any(log.reversal for log in train)
     opts = dict(proxy_kind=proxy, rate_estimator=rate_estimator, n=rate_n, shift=rate_shift,
                 proxy_range=proxy_range, rate_range=rate_range,
-                reversal={"combiner": combiner, "settle_s": settle_s} if rev else None)
+                reversal={"combiner": combiner, "settle_s": settle_s, "order": "combine_first"} if rev else None)
     cfg = _config(train, opts)
+    say(f"fitting the base model on {len(train)} training run(s)")
     model, _ = fit_logs(train, cfg, terms, drop_unidentifiable=True)
     poly = _poly_terms(model)
     evals = hold if hold else train
@@ -678,9 +784,11 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator="diff", 
     rate_choice = None
     iterations = []
     stopped = None
+    excluded: set = set()
     first_stats = error_stats(evals, model)
     report = {"train": [log.source for log in train], "holdout": [log.source for log in hold],
               "evaluated_on": "holdout" if hold else "train", "rule": RULE,
+              "confirm_rule": CONFIRM_RULE if hold else "no held-out runs: steps are not confirmed",
               "settings": {"g_min": g_min, "n_surrogates": n_surrogates, "null_quantile": NULL_QUANTILE,
                            "cv": "runs" if len(train) >= 2 else f"{cv_blocks} blocks round-robin in {cv_folds} folds",
                            "max_iter": max_iter, "seed": seed, "terms": [int(k) for k in poly]},
@@ -688,21 +796,29 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator="diff", 
                            "train": error_stats(train, model) if hold else first_stats},
               "noise_floor": noise_floor(evals, model)}
     characterization = None
+    artifacts = None
     for it in range(1, max_iter + 1):
+        say(f"iteration {it}: scoring the candidate effects (CV, {n_surrogates} noise-model surrogates)")
         scan = _scan(train, cfg, model, poly, gen_terms, rng, n_surrogates, g_min, cv_blocks, cv_folds,
-                     families, rate_alternatives and rate_choice is None)
+                     families, rate_alternatives and rate_choice is None, frozenset(excluded))
         if characterization is None:
             characterization = {"train": scan["characterization"],
                                 "holdout": [characterize(log, r, pr.valid, cfg.rate.fs, pr.v)
-                                            for log, (pr, r) in zip(hold, _residuals(hold, model))]}
+                                            for log, (pr, r) in zip(hold, _residuals(hold, model))],
+                                "noise_models": [jsonable(nm, skip_private=True) if nm else None
+                                                 for nm in scan["noise_models"]]}
+            artifacts = {"lines": scan["artifacts"], "combiner_lines": scan["combiner_lines"]}
         if not scan["accept"]:
             stopped = {k: scan[k] for k in ("best", "threshold", "ranking", "reason", "null_max")}
             break
         best = scan["winner"]
-        before_model = model
+        say(f"iteration {it}: {best['label']} passes (CV gain {best['gain']:.3f} >= {scan['threshold']:.3f}); "
+            f"refitting and checking it on the {'held-out' if hold else 'training'} runs")
+        before_model, before_cfg, before_gen, before_rate = model, cfg, gen_terms, rate_choice
         before = error_stats(evals, model)
         if best["family"] == "rate_estimator":
-            rate_choice = {"estimator": best["params"]["estimator"], "n": best["params"]["n"]}
+            bp = best["params"]
+            rate_choice = {"estimator": bp["estimator"], "n": bp.get("n", rate_n), "shift": bp.get("shift", rate_shift)}
             acc = _Accepted("rate_estimator", dict(best["params"]), [], rate_choice)
         else:
             acc = _Accepted(best["family"], dict(best["params"]), [dict(t) for t in best["terms"]])
@@ -714,9 +830,14 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator="diff", 
             model, _ = fit_logs(train, cfg, tuple(poly) + (K_AUX,), drop_unidentifiable=True)
         else:
             model, _ = fit_logs(train, cfg, tuple(poly), drop_unidentifiable=True)
-        accepted.append(acc)
         after = error_stats(evals, model)
+        if model.config.rate != before_model.config.rate:      # compare on the common valid samples
+            confirmed = confirmed_on_holdout(error_stats(evals, before_model, model),
+                                             error_stats(evals, model, before_model)) if hold else None
+        else:
+            confirmed = confirmed_on_holdout(before, after) if hold else None
         entry = {"effect": acc.family, "params": acc.params, "before": _clean(before), "after": _clean(after),
+                 "confirmed": confirmed,
                  "train_before": _clean(error_stats(train, before_model)) if hold else _clean(before),
                  "train_after": _clean(error_stats(train, model)) if hold else _clean(after),
                  "cv_gain": best["gain"], "threshold": scan["threshold"], "refined_from": best["coarse"],
@@ -726,15 +847,42 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator="diff", 
                  "before_runs": before["runs"], "after_runs": after["runs"]}
         entry["_plot"] = (before_model, model, best)
         iterations.append(entry)
+        if confirmed is False:
+            say(f"iteration {it}: {acc.family} NOT confirmed on the held-out runs "
+                f"({_fmt(_score(before)[0])} -> {_fmt(_score(after)[0])} deg/h): reverted")
+            entry["status"] = "not confirmed on held-out: reverted (the model stays the last confirmed one)"
+            model, cfg, gen_terms, rate_choice = before_model, before_cfg, before_gen, before_rate
+            excluded.add(acc.family)
+        else:
+            entry["status"] = "confirmed on held-out" if confirmed else "accepted (no held-out runs)"
+            accepted.append(acc)
     else:
         if max_iter > 0:
             stopped = {"reason": f"max_iter ({max_iter}) reached", "best": None, "threshold": None,
                        "ranking": [], "null_max": []}
+    if rev and max_iter > 0:
+        say("structural candidates: regress-then-reverse (per-mode banks) with each combiner, by CV")
+        entry, alt_model = _order_step(train, hold, evals, cfg, model, cv_blocks, cv_folds)
+        if entry is not None:
+            iterations.append(entry)
+            if entry["confirmed"] is not False:
+                model = alt_model
+                accepted.append(_Accepted(entry["effect"], entry["params"]))
+            say(f"structural: {entry['effect']} {entry['params']}: {entry['status']}")
     final = error_stats(evals, model)
+    kept = [e for e in iterations if e["confirmed"] is not False]
+    if any(e["effect"] not in STRUCTURAL for e in kept):
+        verdict = "effect found"
+    elif kept:
+        verdict = "model structure improved"
+    elif iterations:
+        verdict = "no confirmed effect"
+    else:
+        verdict = "no significant missing effect"
     report.update({"iterations": iterations, "final": _clean(final), "final_runs": final["runs"],
                    "final_train": _clean(error_stats(train, model)) if hold else _clean(final),
-                   "verdict": "effect found" if iterations else "no significant missing effect",
-                   "stopped": stopped, "characterization": characterization})
+                   "verdict": verdict, "verdict_detail": _verdict_detail(iterations, hold),
+                   "artifacts": artifacts, "stopped": stopped, "characterization": characterization})
     model.fit["diagnose"] = {"effects": [{"effect": a.family, "params": a.params} for a in accepted],
                              "verdict": report["verdict"]}
     if out_dir is not None:
@@ -744,11 +892,96 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator="diff", 
     return report, model
 
 
+ORDER_ALTERNATIVES = ("none", "pair", "trend")   # regress_first with each combiner
+STRUCTURAL = ("rate_estimator", "reversal_order")  # steps that change the model's structure, not an effect
+
+
+def _fold_logs(train, cv_blocks, cv_folds) -> list:
+    """(training logs, held-out logs) per CV fold for whole-model refits: leave one run out, or
+    with a single run its ``cv_blocks`` contiguous blocks dealt round-robin into ``cv_folds``
+    folds (RunLog.select: the blocks become gap-separated segments)."""
+    if len(train) >= 2:
+        return [([g for j, g in enumerate(train) if j != f], [train[f]]) for f in range(len(train))]
+    log = train[0]
+    block = (np.arange(len(log)) * cv_blocks) // len(log)
+    return [([log.select(block % cv_folds != k)], [log.select(block % cv_folds == k)]) for k in range(cv_folds)]
+
+
+def _order_step(train, hold, evals, cfg, model, cv_blocks, cv_folds):
+    """The structural candidate 'regress-then-reverse' (host_tools.reversal order regress_first:
+    two coefficient banks by mode, the combiner applied to the residual) with each combiner of
+    ORDER_ALTERNATIVES, the current terms and aux generators kept: every fold refits the whole
+    model (current and alternative) on its training part and scores the error (std of 100-s
+    averages, 1-s where undefined) on its held-out part.  The best alternative is a step when it
+    lowers the CV error by >= CONFIRM_MIN_DROP in total and in a strict majority of folds; then it
+    is confirmed on the held-out runs like every step.  Returns (entry, model) or (None, None)."""
+    from host_tools.reversal import ReversalConfig
+    terms = tuple(model.terms)
+    rc = cfg.reversal
+    folds = _fold_logs(train, cv_blocks, cv_folds)
+
+    def cv(c):
+        errs = []
+        for tr, te in folds:
+            try:
+                m, _ = fit_logs(tr, c, terms, drop_unidentifiable=True)
+                errs.append(_score(error_stats(te, m))[0])
+            except ValueError:
+                return None
+        return None if any(e is None for e in errs) else np.array(errs)
+
+    base = cv(cfg)
+    if base is None:
+        return None, None
+    rows = []
+    for comb in ORDER_ALTERNATIVES:
+        alt = replace(cfg, reversal=ReversalConfig(comb, rc.max_stale_s, rc.settle_s, order="regress_first"))
+        e = cv(alt)
+        if e is not None:
+            rows.append({"combiner": comb, "cfg": alt, "gain": float(1.0 - e.sum() / base.sum()),
+                         "folds_improved": int(np.sum(e < base)), "folds": len(folds)})
+    if not rows:
+        return None, None
+    best = max(rows, key=lambda r: r["gain"])
+    if not (best["gain"] >= CONFIRM_MIN_DROP and best["folds_improved"] > len(folds) // 2):
+        return None, None
+    alt_model, _ = fit_logs(train, best["cfg"], terms, drop_unidentifiable=True)
+    before, after = error_stats(evals, model), error_stats(evals, alt_model)
+    confirmed = confirmed_on_holdout(before, after) if hold else None
+    entry = {"effect": "reversal_order", "params": {"order": "regress_first", "combiner": best["combiner"]},
+             "before": _clean(before), "after": _clean(after), "confirmed": confirmed,
+             "train_before": _clean(error_stats(train, model)), "train_after": _clean(error_stats(train, alt_model)),
+             "cv_gain": best["gain"], "threshold": CONFIRM_MIN_DROP, "refined_from": None,
+             "folds_improved": best["folds_improved"], "folds": best["folds"],
+             "ranking": [{"label": f"reversal_order(regress_first, {r['combiner']})", "family": "reversal_order",
+                          "gain": r["gain"], "folds_improved": r["folds_improved"], "folds": r["folds"]}
+                         for r in sorted(rows, key=lambda r: -r["gain"])],
+             "null_max": [], "aux": alt_model.config.aux.to_dict(), "rate": alt_model.config.rate.to_dict(),
+             "before_runs": before["runs"], "after_runs": after["runs"],
+             "status": ("confirmed on held-out" if confirmed else "accepted (no held-out runs)") if confirmed is not False
+             else "not confirmed on held-out: reverted (the model stays the last confirmed one)"}
+    return entry, alt_model
+
+
+def _verdict_detail(iterations, hold) -> str:
+    if not iterations:
+        return "no candidate passed the selection rule on the training runs"
+    parts = []
+    for k, e in enumerate(iterations, 1):
+        tag = {True: "confirmed on held-out", False: "not confirmed on held-out (reverted)",
+               None: "not confirmed (no held-out runs)"}[e["confirmed"]]
+        parts.append(f"step {k} {e['effect']}: {tag}")
+    kept = [k for k, e in enumerate(iterations, 1) if e["confirmed"] is not False]
+    final = f"final model: after step {kept[-1]}" if kept else "final model: the base model"
+    return "; ".join(parts) + "; " + final
+
+
 def _clean(stats) -> dict:
     return {k: stats[k] for k in STAT_KEYS}
 
 
-def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_folds, families, rate_alt):
+def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_folds, families, rate_alt,
+          excluded=frozenset()):
     """Score every candidate (module doc, steps 3-4) against the current base; returns a dict with
     the ranking, the null, the decision and the (refined) winner."""
     fs = cfg.rate.fs
@@ -766,10 +999,19 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
     resid = [np.where(v, pr.y - f, 0.0) for pr, f, v in zip(preps, fitted, valid)]
     charac = [characterize(log, r, v, fs, pr.v) for log, r, v, pr in zip(train, resid, valid, preps)]
     gapfree = all(len(log.segments) == 1 for log in train)
-    periods = _pooled_periods([c["lines"] for c in charac]) if gapfree else []
+    clines = combiner_lines(train, cfg)
+    artifacts = []
+    for c in charac:
+        for ln in c["lines"]:
+            why = artifact_of(ln["period_s"], clines)
+            if why:
+                artifacts.append(_artifact_entry(ln, clines, why))
+    periods = _pooled_periods([[ln for ln in c["lines"] if not artifact_of(ln["period_s"], clines)]
+                               for c in charac]) if gapfree else []
     Y_logs = []
     sur_resids = []
-    for X, pr, f, r, v in zip(X_logs, preps, fitted, resid, valid):
+    noise_models = []
+    for log, X, pr, f, r, v in zip(train, X_logs, preps, fitted, resid, valid):
         Xs = X[v] / norms
         Qv = np.linalg.qr(Xs)[0]
 
@@ -778,7 +1020,9 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
             out[v] = Qv @ (Qv.T @ W[v])
             return out
 
-        sur, sur_resid = surrogates(r, v, n_sur, rng, project)
+        nm = noise_model(r, log.t_s, v, fs, reversal=cfg.reversal is not None)
+        noise_models.append(nm)
+        sur, sur_resid = surrogates(nm, log, cfg, n_sur, rng, project)
         Y_logs.append(np.column_stack([pr.y, f[:, None] + sur]))
         sur_resids.append(sur_resid)
     binners = [_Binner(log, v, fs) for log, v in zip(train, valid)]
@@ -789,9 +1033,18 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
     nfold = len(groups)
     majority = nfold // 2 + 1
     cands = effects.library(train, cfg, periods=periods, families=families)
+    for c in cands:
+        if c.family == "periodic":
+            c.extra["line"] = True
+    if families is None or "periodic" in families:      # a period grid too: a line may hide under slow residual
+        dur = max(float(log.t_s[-1] - log.t_s[0]) for log in train)
+        grid = PERIOD_GRID_MIN_S * PERIOD_GRID_RATIO ** np.arange(64)
+        cands += [effects.periodic(float(p)) for p in grid[grid <= dur / 3.0]
+                  if not artifact_of(float(p), clines) and all(abs(p / q - 1.0) > 0.05 for q in periods)]
     # drop candidates equal to an accepted generator
     have = [json.dumps(t, sort_keys=True) for t in gen_terms]
-    cands = [c for c in cands if not any(json.dumps(t, sort_keys=True) in have for t in c.terms)]
+    cands = [c for c in cands if not any(json.dumps(t, sort_keys=True) in have for t in c.terms)
+             and c.family not in excluded]
     rows = []
     nsur = Y_logs[0].shape[1] - 1
 
@@ -809,12 +1062,14 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
         # periodic family counts the selection
         pnull = np.zeros(nsur)
         for j in range(nsur):
-            for period in _pooled_periods([spectral_lines(sr[:, j], v, fs) for sr, v in zip(sur_resids, valid)]):
+            sl = [[ln for ln in spectral_lines(sr[:, j], v, fs) if not artifact_of(ln["period_s"], clines)]
+                  for sr, v in zip(sur_resids, valid)]
+            for period in _pooled_periods(sl):
                 pnull[j] = max(pnull[j], evaluate(effects.periodic(period))["_null"][j])
         for r in rows:
-            if r["family"] == "periodic":
+            if r["family"] == "periodic" and r["_cand"].extra.get("line"):
                 r["_null"] = pnull
-    if rate_alt and len(train) >= 2:      # a base change is only judged across runs (see the doc)
+    if rate_alt and "rate_estimator" not in excluded:
         for alt in _rate_alternatives(train, cfg):
             try:
                 acfg = _config_like(train, cfg, alt)
@@ -829,36 +1084,56 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
             g_base = _Scanner([b.mean(X) for b, X in zip(cb, X_logs)], Yc, cgroups).e0
             g_alt = _Scanner([b.mean(X) for b, X in zip(cb, AX)], Yc, cgroups).e0
             g = _gain(g_alt, g_base)
-            params = {"estimator": alt["estimator"], "n": alt["n"], "window_s": alt["n"] / acfg.rate.fs}
-            rows.append({"family": "rate_estimator", "label": f"rate_estimator(lsq, n={alt['n']})",
+            if alt["estimator"] == "lsq":
+                params = {"estimator": "lsq", "n": alt["n"], "window_s": alt["n"] / acfg.rate.fs}
+            else:
+                params = {"estimator": "iir", "shift": alt["shift"], "tau_s": 2.0 ** alt["shift"] / acfg.rate.fs}
+            inner = ", ".join(f"{k}={_fmt(v)}" for k, v in params.items() if k != "estimator")
+            rows.append({"family": "rate_estimator", "label": f"rate_estimator({alt['estimator']}, {inner})",
                          "params": params, "terms": [], "gain": float(g[0]),
                          "folds_improved": int(np.sum(g_alt[:, 0] < g_base[:, 0])), "folds": nfold,
                          "_cand": None, "_null": g[1:]})
-    out = {"characterization": charac, "accept": False, "reason": None, "winner": None, "ranking": [],
+    out = {"characterization": charac, "artifacts": artifacts, "combiner_lines": clines,
+           "noise_models": noise_models, "accept": False, "reason": None, "winner": None, "ranking": [],
            "best": None, "threshold": None, "null_max": []}
     if not rows:
         out["reason"] = "no candidates"
         return out
     # rule (b): the largest gain of the whole scan on each surrogate; its 95 % level
+    # (max-T: every candidate's gain standardized by its own null (median, 84th percentile - median),
+    # so a candidate that fits noise easily (a wandering channel) does not raise the bar for the others)
     nulls = np.array([r["_null"] for r in rows]).reshape(len(rows), nsur)
-    null_max = nulls.max(axis=0)
-    level = float(np.quantile(null_max, NULL_QUANTILE)) if nsur else -np.inf
-    threshold = max(g_min, level)
-    for r in rows:
-        r["significant"] = bool(r["gain"] >= threshold and r["folds_improved"] >= majority)
+    if nsur:     # robust location / upper-tail scale: a wild negative tail must not inflate the bar
+        mu = np.median(nulls, axis=1)
+        sd = np.maximum(np.quantile(nulls, 0.8413, axis=1) - mu, NULL_SD_FLOOR)
+        null_max = ((nulls - mu[:, None]) / sd[:, None]).max(axis=0)
+        t_level = float(np.quantile(null_max, NULL_QUANTILE))
+    else:
+        mu, sd, null_max, t_level = np.zeros(len(rows)), np.ones(len(rows)), np.zeros(0), -np.inf
+    for r, m, d in zip(rows, mu, sd):
+        r["t"] = float((r["gain"] - m) / d)
+        r["null95"] = float(m + t_level * d) if nsur else g_min     # the gain this candidate needs
+        r["significant"] = bool(r["gain"] >= max(g_min, r["null95"]) and r["folds_improved"] >= majority)
+    threshold = t_level
     rows.sort(key=lambda r: -r["gain"])
-    keys = ("label", "family", "gain", "significant", "folds_improved", "folds")
+    keys = ("label", "family", "gain", "null95", "t", "significant", "folds_improved", "folds")
     out.update(ranking=[{k: r[k] for k in keys} for r in rows[:TOP_RANKING]], threshold=threshold,
                null_max=[float(x) for x in null_max])
     passing = [r for r in rows if r["significant"]]
+    if any(r["family"] != "rate_estimator" for r in passing):
+        # a longer rate warm-up hides the start of every run (turn-on): effects first
+        passing = [r for r in passing if r["family"] != "rate_estimator"]
     best = _preferred(passing if passing else rows)
     out["best"] = {k: best[k] for k in keys}
+    out["threshold"] = max(g_min, best["null95"])
+    out["t_level"] = t_level
     if not passing:
         if best["gain"] < g_min:
-            out["reason"] = f"best CV gain {best['gain']:.4f} < g_min {g_min}"
-        elif best["gain"] < level:
-            out["reason"] = (f"best CV gain {best['gain']:.4f} ({best['label']}) < {level:.4f}, the "
-                             f"{NULL_QUANTILE:.0%} level of the scan's best gain on {nsur} surrogate residuals")
+            out["reason"] = f"best CV gain {best['gain']:.4f} ({best['label']}) < g_min {g_min}"
+        elif best["gain"] < best["null95"]:
+            out["reason"] = (f"best CV gain {best['gain']:.4f} ({best['label']}) < {best['null95']:.4f}, the gain "
+                             f"it needs: the {NULL_QUANTILE:.0%} level of the scan's largest standardized gain "
+                             f"(max-T {t_level:.2f}) on {nsur} noise-model surrogates")
         else:
             out["reason"] = (f"inconsistent: {best['label']} improves {best['folds_improved']} of {nfold} folds "
                              f"(need {majority})")
@@ -916,7 +1191,7 @@ def _config_like(train, cfg, alt):
     from host_tools.rate import RateConfig
     keep = [np.asarray(log.mode) != rl.MODE_EXCHANGE for log in train]
     ps = [log[cfg.proxy.column] for log in train]
-    rate = RateConfig.from_data(ps, cfg.rate.fs, alt["estimator"], alt["n"], cfg.rate.shift,
+    rate = RateConfig.from_data(ps, cfg.rate.fs, alt["estimator"], alt["n"], alt.get("shift", cfg.rate.shift),
                                 restarts=[log.segments for log in train], masks=keep)
     return replace(cfg, rate=rate)
 
@@ -962,14 +1237,18 @@ def markdown(doc, model) -> str:
              "", f"**Verdict: {doc['verdict']}**", "",
              "Errors in deg/h on the " + ("held-out" if on == "holdout" else "training") + " runs: stability "
              "(1 sigma) and variation (p-p) of 1-s and 100-s averages of the compensated output.", "",
-             "| step | effect | params | std 1 s | p-p 1 s | std 100 s | p-p 100 s | CV gain | threshold |",
-             "|---|---|---|---:|---:|---:|---:|---:|---:|"]
+             "| step | effect | params | std 1 s | p-p 1 s | std 100 s | p-p 100 s | CV gain | threshold | held-out |",
+             "|---|---|---|---:|---:|---:|---:|---:|---:|---|"]
     first = doc["baseline"][on]
-    lines.append(f"| 0 | (base model) | terms {doc['settings']['terms']} | {_stats_line(first)} | | |")
+    lines.append(f"| 0 | (base model) | terms {doc['settings']['terms']} | {_stats_line(first)} | | | |")
     for k, it in enumerate(doc["iterations"], 1):
         params = ", ".join(f"{a}={_fmt(b) if isinstance(b, float) else b}" for a, b in it["params"].items())
         lines.append(f"| {k} | {it['effect']} | {params} | {_stats_line(it['after'])} | "
-                     f"{_fmt(it['cv_gain'])} | {_fmt(it['threshold'])} |")
+                     f"{_fmt(it['cv_gain'])} | {_fmt(it['threshold'])} | {it['status']} |")
+    lines += ["", f"{doc['verdict_detail']}.  Confirmation: {doc['confirm_rule']}."]
+    for a in (doc.get("artifacts") or {}).get("lines", []):
+        lines += ["", f"Line at {a['period_s']:.4g} s ({a['at']}, {a['amp_dph']:.3g} deg/h): {a['cause']}.  "
+                      f"Structural fix: {a['structural_fix']}."]
     nf = doc["noise_floor"]
     lines += ["", f"Noise floor (white noise of the residual): {_fmt(nf['std_dph'])} deg/h at 1 s, "
                   f"{_fmt(nf['std100_dph'])} deg/h at 100 s.", "",
@@ -1102,7 +1381,8 @@ def run_cli(args) -> int:
                              combiner=args.combiner, settle_s=args.settle, proxy_range=args.proxy_range,
                              rate_range=args.rate_range, max_iter=args.max_iter, n_surrogates=args.surrogates,
                              g_min=args.g_min, cv_blocks=args.cv_blocks, cv_folds=args.cv_folds,
-                             seed=args.seed, out_dir=args.out, plots=not args.no_plots)
+                             seed=args.seed, out_dir=args.out, plots=not args.no_plots,
+                             progress=lambda msg: print(f"hdrg diagnose: {msg}", file=sys.stderr, flush=True))
     if args.json:
         with open(os.path.join(args.out, "diagnose.json"), encoding="utf-8") as src, \
                 open(args.json, "w", encoding="utf-8") as dst:
@@ -1114,7 +1394,10 @@ def run_cli(args) -> int:
     for k, it in enumerate(report["iterations"], 1):
         params = ", ".join(f"{a}={_fmt(b) if isinstance(b, float) else b}" for a, b in it["params"].items())
         print(f"  {k}. {it['effect']} ({params}): {_fmt(it['after']['std_dph'])} / {_fmt(it['after']['std100_dph'])}"
-              f"  [CV gain {it['cv_gain']:.3f} >= {it['threshold']:.3f}]")
+              f"  [CV gain {it['cv_gain']:.3f} >= {it['threshold']:.3f}; {it['status']}]")
+    print(f"  {report['verdict_detail']}")
+    for a in (report.get("artifacts") or {}).get("lines", []):
+        print(f"  line at {a['period_s']:.4g} s ({a['at']}): {a['cause']}; fix: {a['structural_fix']}")
     if report.get("stopped"):
         print(f"  stopped: {report['stopped']['reason']}")
     print(f"written: {os.path.join(args.out, 'diagnose.md')}, diagnose.json, model.json")

@@ -13,6 +13,8 @@ family               regressor (u: the model's normalized proxy, s: mode       s
 thermal_lag          lag(u, tau): the proxy through a first-order filter: a   tau_s in TAU_GRID_S
                      heat source that lags the proxy (bias vs proxy
                      hysteresis beyond what the rate terms model)
+thermal_lag block    lag(u, tau), lag^2, lag^3 (3 columns, one k7 sum: a        tau_s
+                     lagged node with its own polynomial; order=3)
 turn_on              decay since power-on exp(-t/tau)                         tau_s in TAU_GRID_S
 exchange_transient   decay since the end of the last mode exchange; or s      tau_s in
                      times it together with s (2 columns): a transient that   EXCHANGE_TAUS_S,
@@ -53,6 +55,7 @@ EXCHANGE_TAUS_S = (2.0, 4.0, 8.0, 16.0, 32.0, 64.0)
 RANGE_MARGIN = 0.1
 RAMP_MARGIN = 0.1
 MAX_TAU_FRACTION = 0.5     # thermal_lag / board_temp / aux lags: tau <= this x the longest training run
+LAG_BLOCK_ORDER = 3          # thermal_lag block: lag(u, tau)^1..3, three columns
 MAX_TURN_ON_FRACTION = 0.25  # turn_on: tau <= this x the longest training run (it must have decayed)
 FAMILIES = ("thermal_lag", "turn_on", "exchange_transient", "imperfect_reversal", "proxy_high_order",
             "board_temp", "aux", "aging", "periodic")
@@ -134,6 +137,11 @@ def library(train_logs, config, *, tau_grid=TAU_GRID_S, exchange_taus=EXCHANGE_T
             out.append(Candidate("thermal_lag", {"tau_s": tau},
                                  (_term("input", "thermal_lag", column=pcol, ref=pref, span=pspan, tau_s=tau),),
                                  "tau_s"))
+    if "thermal_lag" in want:     # lag-state polynomial block: lag, lag^2, lag^3 (one k7 sum)
+        for tau in lag_taus:
+            out.append(Candidate("thermal_lag", {"tau_s": tau, "order": LAG_BLOCK_ORDER},
+                                 tuple(_term("input", "thermal_lag", column=pcol, ref=pref, span=pspan, tau_s=tau,
+                                             power=k) for k in range(1, LAG_BLOCK_ORDER + 1)), "tau_s"))
     if "turn_on" in want:
         for tau in (t for t in tau_grid if t <= MAX_TURN_ON_FRACTION * dur):
             out.append(Candidate("turn_on", {"tau_s": tau}, (_term("decay_on", "turn_on", tau_s=tau),), "tau_s"))

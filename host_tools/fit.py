@@ -593,6 +593,8 @@ class FitResult:
     cv: dict | None = None
     rcond: float = RCOND
     extra: dict = field(default_factory=dict)
+    coef_mode2: np.ndarray | None = None
+    stderr_mode2: np.ndarray | None = None
 
     def predict(self, u, v, z=None) -> np.ndarray:
         """Model bias in deg/h at (u, v, z)."""
@@ -608,6 +610,8 @@ class FitResult:
             "sum_w": self.sum_w, "dof": self.dof, "u_range": self.u_range, "v_range": self.v_range,
             "cv": self.cv, "rcond": self.rcond, "extra": self.extra,
             "stderr_note": "assumes white residuals; optimistic for autocorrelated data",
+            **({} if self.coef_mode2 is None else {"coef_mode2": self.coef_mode2,
+                                                  "stderr_mode2": self.stderr_mode2}),
         })
 
 
@@ -663,16 +667,29 @@ def _heldout_sse(coef, G, b, yy):
     return max(yy - 2.0 * float(d @ b) + float(d @ G @ d), 0.0)
 
 
+def _banks_of(group) -> tuple:
+    """A CV group as a tuple of per-bank Accumulators (an Accumulator is one bank)."""
+    return group if isinstance(group, tuple) else (group,)
+
+
 class _CV:
+    """Held-out errors per group.  A group is an Accumulator, or a tuple of per-bank Accumulators
+    (regress_first: (mode-1 samples, mode-2 samples)); every bank is fitted with the same terms
+    on the other groups' samples of that bank, and a group's error is the sum over its banks."""
+
     def __init__(self, accs, rcond):
-        self.accs = list(accs)
+        self.accs = [_banks_of(a) for a in accs]
         if len(self.accs) < 2:
             raise ValueError(f"cross-validation needs at least 2 groups (runs or time blocks), got {len(self.accs)}")
-        total = sum(self.accs)
-        self.total = total
-        self.tests = [a.system() for a in self.accs]
-        self.trains = [_factor(total - a) if total.n - a.n > 0 else None for a in self.accs]
-        self.sum_w = total.sum_w
+        nb = len(self.accs[0])
+        if any(len(g) != nb for g in self.accs):
+            raise ValueError("cross-validation groups differ in their number of banks")
+        totals = [sum(g[b] for g in self.accs) for b in range(nb)]
+        self.total = sum(totals)
+        self.tests = [[g[b].system() for b in range(nb)] for g in self.accs]
+        self.trains = [[_factor(totals[b] - g[b]) if totals[b].n - g[b].n > 0 else None for b in range(nb)]
+                       for g in self.accs]
+        self.sum_w = self.total.sum_w
         self.rcond = rcond
         self.cache = {}
 
@@ -680,11 +697,12 @@ class _CV:
         key = tuple(sorted(terms))
         if key not in self.cache:
             out = np.zeros(len(self.accs))
-            for f, (fac, test) in enumerate(zip(self.trains, self.tests)):
-                coef = np.zeros(N_TERMS)
-                if fac is not None:
-                    coef = _solve_terms(fac, key, self.rcond, explain=False)["coef"]
-                out[f] = _heldout_sse(coef, *test)
+            for f, (facs, tests) in enumerate(zip(self.trains, self.tests)):
+                for fac, test in zip(facs, tests):
+                    coef = np.zeros(N_TERMS)
+                    if fac is not None:
+                        coef = _solve_terms(fac, key, self.rcond, explain=False)["coef"]
+                    out[f] += _heldout_sse(coef, *test)
             self.cache[key] = out
         return self.cache[key]
 
@@ -705,7 +723,8 @@ def select_terms(accs, candidates=None, *, start=(0,), significance=1.0, min_gai
     model on it whose CV error is within a tolerance of the best one, then backward pruning.
 
     accs: sequence or mapping of per-group :class:`Accumulator` (runs, or contiguous time blocks
-    of one run; at least 2).  Fold f trains on total - group f and is scored by the group's
+    of one run; at least 2), or of per-group tuples of per-bank Accumulators (regress_first: the
+    banks share the term set and a group's error is the sum over its banks).  Fold f trains on total - group f and is scored by the group's
     held-out weighted squared error e_f (from its sums); CV MSE = sum_f e_f / sum w.  From
     ``start`` (default {k0}, always kept) the candidate that lowers the CV MSE most is added,
     step by step, until no candidate is left; let b be the step of least CV MSE.  Tolerance =
@@ -727,7 +746,7 @@ def select_terms(accs, candidates=None, *, start=(0,), significance=1.0, min_gai
     fixed = tuple(sorted(_check_terms(start, has_z))) if start else ()
     chosen = fixed
     g = len(accs)
-    errs = [cv.sse(chosen) if chosen else np.array([a.system()[2] for a in accs])]
+    errs = [cv.sse(chosen) if chosen else np.array([sum(b.system()[2] for b in g) for g in cv.accs])]
     path = [{"step": 0, "added": None, "terms": list(chosen)}]
     while True:
         rest = [k for k in cand if k not in chosen]
@@ -740,7 +759,7 @@ def select_terms(accs, candidates=None, *, start=(0,), significance=1.0, min_gai
         path.append({"step": len(path), "added": best, "terms": list(chosen),
                      "candidates": {f"k{k}": math.sqrt(trials[k].sum() / cv.sum_w) for k in rest}})
     eb = errs[int(np.argmin([e.sum() for e in errs]))]
-    sw = np.array([a.sum_w for a in accs])
+    sw = np.array([sum(b.sum_w for b in g) for g in cv.accs])
     tol = max(min_gain * eb.sum() / cv.sum_w, significance * _cv_se(eb, sw))  # in MSE
 
     def excess(e):  # CV MSE above the best, in units of the tolerance
@@ -779,6 +798,9 @@ def fit_accumulators(accs, terms=None, *, drop_unidentifiable=False, rcond=RCOND
         groups = list(accs.values()) if isinstance(accs, Mapping) else list(accs)
     if not groups:
         raise ValueError("no accumulators to fit")
+    if isinstance(groups[0], tuple):
+        return _fit_banks(groups, terms, drop_unidentifiable=drop_unidentifiable, rcond=rcond,
+                          significance=significance, min_gain=min_gain, candidates=candidates)
     total = sum(groups)
     cv = None
     if isinstance(terms, str) and terms.strip().lower() == "auto":
@@ -796,6 +818,49 @@ def fit_accumulators(accs, terms=None, *, drop_unidentifiable=False, rcond=RCOND
             cv = {"method": "fixed", "groups": len(groups), "cv_rms": cvo.rms(res.terms)}
     res.cv = cv
     return res
+
+
+def _fit_banks(groups, terms, *, drop_unidentifiable, rcond, significance, min_gain, candidates) -> FitResult:
+    """Two-bank (regress_first) fit: groups are (mode-1 Accumulator, mode-2 Accumulator) tuples.
+    One term set for both banks (selected jointly for 'auto'); a term unidentifiable in either
+    bank is dropped from both (or refused).  Returns one FitResult: coef/stderr of bank 1,
+    coef_mode2/stderr_mode2 of bank 2; rms, n, sum_w, dof over both; cond the larger one."""
+    if any(len(g) != 2 for g in groups):
+        raise ValueError("a two-bank fit needs (mode 1, mode 2) accumulator pairs")
+    totals = [sum(g[b] for g in groups) for b in range(2)]
+    for b, t in enumerate(totals):
+        if t.n == 0:
+            raise ValueError(f"no samples of mode {b + 1} to fit its coefficient bank")
+    merged = totals[0] + totals[1]
+    cv = None
+    auto = isinstance(terms, str) and terms.strip().lower() == "auto"
+    if auto:
+        if len(groups) < 2:
+            raise ValueError("terms='auto' needs at least 2 groups (runs or time blocks) to cross-validate")
+        terms, cv = select_terms(groups, candidates, significance=significance, min_gain=min_gain, rcond=rcond)
+        requested = _check_terms(candidates, merged.has_z)
+    else:
+        requested = _check_terms(terms, merged.has_z)
+    keep = tuple(requested if not auto else terms)
+    sols = [_solve_terms(_factor(t), keep, rcond) for t in totals]
+    collinear = {}
+    for sol in sols:
+        collinear.update(sol["collinear"])
+    if collinear and not (drop_unidentifiable or auto):
+        raise UnidentifiableError(_unidentifiable_message(collinear), collinear)
+    if collinear:
+        keep = tuple(k for k in keep if k not in collinear)
+        sols = [_solve_terms(_factor(t), keep, rcond) for t in totals]
+    res = [_result(sol, keep, t.n, t.sum_w, t.u_range, t.v_range, rcond) for sol, t in zip(sols, totals)]
+    rss = sum(r.rms ** 2 * r.sum_w for r in res)
+    n, sw, dof = merged.n, merged.sum_w, merged.n - 2 * len(keep)
+    if len(groups) >= 2 and cv is None:
+        cv = {"method": "fixed", "groups": len(groups), "cv_rms": _CV(groups, rcond).rms(keep)}
+    return FitResult(coef=res[0].coef, terms=keep, requested=tuple(requested), dropped=tuple(collinear),
+                     collinear=collinear, stderr=res[0].stderr, cond=max(r.cond for r in res),
+                     rms=math.sqrt(rss / sw), sigma=math.sqrt(rss / dof * n / sw) if dof > 0 else math.nan,
+                     n=n, sum_w=sw, dof=dof, u_range=merged.u_range, v_range=merged.v_range, cv=cv,
+                     rcond=rcond, coef_mode2=res[1].coef, stderr_mode2=res[1].stderr)
 
 
 def fit(u, v, z, y, w=None, *, terms=None, groups=None, cv_blocks=8, drop_unidentifiable=False,
@@ -857,39 +922,89 @@ def design_matrix(u, v, z=None, terms=range(N_TERMS)) -> np.ndarray:
 
 # -- run-log glue and the `hdrg fit` command ------------------------------------------------------
 
-def fit_logs(logs, config, terms="all", *, drop_unidentifiable=False, cv_blocks=8, significance=1.0,
-             min_gain=0.02):
+def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8, significance=1.0,
+             min_gain=0.02, blocks=None):
     """Fit a :class:`host_tools.model.BiasModel` with ``config`` (a ModelConfig) to RunLogs.
 
     Each log goes through the golden pipeline (:func:`host_tools.compensate.prepare`): only its
-    valid samples enter (exchange samples, rate-estimator warm-up and the samples before the
-    first valid mode-reversal output never do).  One accumulator per run; with a single run and
-    ``terms='auto'`` the run is cut into ``cv_blocks`` contiguous time blocks for the
-    cross-validation.  Returns (model, FitResult)."""
-    from host_tools.compensate import prepare
+    used samples enter (``Prepared.used``: exchange samples, rate-estimator warm-up and settling
+    never do; FTR and combine_first: nor the samples before the first valid mode-reversal
+    output).  One accumulator per run; with a single run and ``terms='auto'`` the run is cut into
+    ``cv_blocks`` contiguous time blocks for the cross-validation.  A regress_first config fits
+    two banks: target c = s * rate on the used samples, bank 1 on mode-1 samples, bank 2 on
+    mode-2 samples, one term set (see :func:`fit_accumulators`).  ``terms`` None ->
+    host_tools.compensate.DEFAULT_TERMS.  ``blocks`` True: cut a single run into ``cv_blocks``
+    time blocks whatever the terms (so fixed terms get a cross-validated rms too); None: only for
+    'auto'.  Returns (model, FitResult)."""
+    from host_tools.compensate import DEFAULT_TERMS, prepare
     from host_tools.model import BiasModel
 
+    terms = DEFAULT_TERMS if terms is None else terms
     auto = isinstance(terms, str) and terms.strip().lower() == "auto"
+    two = config.reversal is not None and config.reversal.order == "regress_first"
     accs = {}
     for i, log in enumerate(logs):
         pr = prepare(log, config)
-        if not pr.valid.any():
+        if not pr.used.any():
             raise ValueError(f"{log.source}: no valid sample to fit (all exchange, warm-up or before the first pair)")
-        if auto and len(logs) == 1:
+        masks = [pr.used & (pr.mode == 1), pr.used & (pr.mode == 2)] if two else [pr.used]
+        if (auto if blocks is None else blocks) and len(logs) == 1:
             groups = block_groups(len(pr.y), cv_blocks)
-            for g, acc in accumulate_groups(pr.u, pr.v, pr.z, pr.y, pr.valid, groups).items():
-                accs[f"{log.source}#block{g}"] = acc
+            per = [accumulate_groups(pr.u, pr.v, pr.z, pr.y, w, groups) for w in masks]
+            for g in per[0]:
+                accs[f"{log.source}#block{g}"] = tuple(p[g] for p in per) if two else per[0][g]
         else:
-            accs[f"{log.source}#{i}"] = Accumulator().add(pr.u, pr.v, pr.z, pr.y, pr.valid)
+            banks = tuple(Accumulator().add(pr.u, pr.v, pr.z, pr.y, w) for w in masks)
+            accs[f"{log.source}#{i}"] = banks if two else banks[0]
     res = fit_accumulators(accs, terms, drop_unidentifiable=drop_unidentifiable,
                            significance=significance, min_gain=min_gain)
     info = res.to_dict()
     info["train"] = [log.source for log in logs]
     # terms the data do not support: |coef| < 2 standard errors (the standard errors are already
     # optimistic for autocorrelated residuals, so these are certainly not identified)
-    info["insignificant"] = [int(k) for k in res.terms
-                             if k != 0 and abs(res.coef[k]) < 2.0 * res.stderr[k]]
-    model = BiasModel(config, tuple(res.terms), np.asarray(res.coef, np.float64), info)
+    info["insignificant"] = [int(k) for k in res.terms if k != 0 and abs(res.coef[k]) < 2.0 * res.stderr[k]
+                             and (res.coef_mode2 is None or abs(res.coef_mode2[k]) < 2.0 * res.stderr_mode2[k])]
+    model = BiasModel(config, tuple(res.terms), np.asarray(res.coef, np.float64), info,
+                      coef_mode2=None if res.coef_mode2 is None else np.asarray(res.coef_mode2, np.float64))
+    return model, res
+
+
+# candidates of the rate estimator 'auto' (estimator, n, shift), host_tools.rate
+RATE_CANDIDATES = (("diff", 8, 4), ("diffn", 16, 4), ("lsq", 32, 4), ("iir", 8, 7), ("iir", 8, 9))
+
+
+def _rate_label(est, n, shift):
+    return {"diff": "diff", "diffn": f"diffn n={n}", "lsq": f"lsq n={n}", "iir": f"iir shift={shift}"}[est]
+
+
+def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, **config_kw):
+    """Rate estimator 'auto': for every candidate (estimator, n, shift) build the config
+    (host_tools.compensate.fit_config_from_logs with ``config_kw``), fit ``terms`` with
+    cross-validation over the runs (one run: ``cv_blocks`` time blocks, see :func:`fit_logs`), and
+    keep the candidate of least cross-validated rms.  A candidate that cannot be fitted (e.g. no
+    sample past its warm-up) is skipped and reported.  Returns (model, FitResult); the model's
+    fit info holds "rate_selection": {"method", "chosen", "candidates": [{"estimator", "cv_rms" or
+    "error"}]} (written to model.json)."""
+    from host_tools.compensate import fit_config_from_logs
+
+    rows, best = [], None
+    for est, n, shift in candidates:
+        label = _rate_label(est, n, shift)
+        try:
+            cfg = fit_config_from_logs(logs, rate_estimator=est, n=n, shift=shift, **config_kw)
+            model, res = fit_logs(logs, cfg, terms, cv_blocks=cv_blocks, blocks=True, drop_unidentifiable=True)
+        except ValueError as exc:
+            rows.append({"estimator": label, "error": str(exc)})
+            continue
+        rows.append({"estimator": label, "cv_rms": res.cv["cv_rms"]})
+        if best is None or res.cv["cv_rms"] < best[0]:
+            best = (res.cv["cv_rms"], model, res, label)
+    if best is None:
+        raise ValueError("rate estimator 'auto': no candidate could be fitted: "
+                         + "; ".join(f"{r['estimator']}: {r['error']}" for r in rows))
+    _, model, res, label = best
+    model.fit["rate_selection"] = {"method": "least cross-validated rms (time blocks of one run, or runs)",
+                                   "chosen": label, "candidates": rows}
     return model, res
 
 
@@ -898,15 +1013,27 @@ def add_model_options(parser, what: str = "the model") -> None:
     `hdrg fit` and `hdrg diagnose` (its starting model)."""
     parser.add_argument("--proxy", choices=("freq", "temp"), default=None,
                         help="temperature proxy: freq (drive frequency, default when present) or temp (temp_c)")
-    parser.add_argument("--rate-estimator", default="diff", choices=("diff", "diffn", "lsq", "iir"),
-                        help=f"proxy-rate estimator of {what} (default: diff, the paper's consecutive difference)")
-    parser.add_argument("--rate-n", type=int, default=8, help="window length n of diffn/lsq [samples]")
-    parser.add_argument("--rate-shift", type=int, default=4, help="iir coefficient 2^-shift")
-    parser.add_argument("--terms", default="all",
+    from host_tools.compensate import DEFAULT_COMBINER, DEFAULT_ORDER, DEFAULT_RATE, DEFAULT_TERMS
+    from host_tools.reversal import COMBINERS, ORDERS
+
+    parser.add_argument("--rate-estimator", default=None, choices=("diff", "diffn", "lsq", "iir", "auto"),
+                        help=f"proxy-rate estimator of {what} (default: {DEFAULT_RATE['estimator']}; diff is the "
+                             f"paper's consecutive difference; auto (hdrg fit only): the candidate of least "
+                             f"cross-validated rms among diff, diffn 16, lsq 32, iir 7, iir 9, reported in model.json)")
+    parser.add_argument("--rate-n", type=int, default=None,
+                        help=f"window length n of diffn/lsq [samples] (default: {DEFAULT_RATE['n']})")
+    parser.add_argument("--rate-shift", type=int, default=None,
+                        help=f"iir coefficient 2^-shift (default: {DEFAULT_RATE['shift']})")
+    parser.add_argument("--terms", default=None,
                         help=f"terms of {what}: all (the paper's 16 terms) | auto (cross-validated selection) "
-                             f"| k0,k1,... | groups const,temp,rate,cross")
-    parser.add_argument("--combiner", choices=("pair", "trend"), default="trend",
-                        help="mode-reversal combiner (mode-reversal logs only): pair (the paper) or trend (ours, default)")
+                             f"| k0,k1,... | groups const,temp,rate,cross (default: {DEFAULT_TERMS})")
+    parser.add_argument("--order", choices=ORDERS, default=None,
+                        help=f"mode-reversal logs only: regress_first (two coefficient banks by mode, the combiner "
+                             f"pairs the residuals) or combine_first (legacy: combine, then one bank) "
+                             f"(default: {DEFAULT_ORDER})")
+    parser.add_argument("--combiner", choices=COMBINERS, default=None,
+                        help=f"mode-reversal combiner (mode-reversal logs only): pair (the paper), trend (ours) or "
+                             f"none (regress_first only: joint regression alone) (default: {DEFAULT_COMBINER})")
     parser.add_argument("--settle", type=float, default=0.0, help="settling time excluded after each exchange [s]")
     parser.add_argument("--proxy-range", default=None, help="declared proxy range LO,HI in proxy units (default: training range +10%%)")
     parser.add_argument("--rate-range", default=None, help="declared largest |d proxy/dt| [proxy units/s] (default: from data)")
@@ -926,13 +1053,19 @@ def run_cli(args) -> int:
     from host_tools.compensate import fit_config_from_logs
 
     logs = [runlog.read(p) for p in args.runs]
-    reversal = ({"combiner": args.combiner, "settle_s": args.settle}
+    reversal = ({"combiner": args.combiner, "settle_s": args.settle, "order": args.order}
                 if any(log.reversal for log in logs) else None)
-    cfg = fit_config_from_logs(logs, proxy_kind=args.proxy, rate_estimator=args.rate_estimator,
-                               n=args.rate_n, shift=args.rate_shift, proxy_range=args.proxy_range,
-                               rate_range=args.rate_range, reversal=reversal)
-    model, res = fit_logs(logs, cfg, args.terms, drop_unidentifiable=args.drop_unidentifiable,
-                          cv_blocks=args.cv_blocks)
+    kw = dict(proxy_kind=args.proxy, proxy_range=args.proxy_range, rate_range=args.rate_range, reversal=reversal)
+    if args.rate_estimator == "auto":
+        model, res = fit_auto_rate(logs, args.terms, cv_blocks=args.cv_blocks, **kw)
+        sel = model.fit["rate_selection"]
+        print(f"rate estimator auto: {sel['chosen']} (" + ", ".join(
+            f"{r['estimator']} {r['cv_rms']:.4g}" if "cv_rms" in r else f"{r['estimator']} failed"
+            for r in sel["candidates"]) + " deg/h cross-validated rms)")
+    else:
+        cfg = fit_config_from_logs(logs, rate_estimator=args.rate_estimator, n=args.rate_n, shift=args.rate_shift, **kw)
+        model, res = fit_logs(logs, cfg, args.terms, drop_unidentifiable=args.drop_unidentifiable,
+                              cv_blocks=args.cv_blocks)
     model.to_json(args.output)
     print(f"{args.output}: {len(res.terms)} terms {['k%d' % k for k in res.terms]}, n={res.n}, "
           f"rms={res.rms:.4g} deg/h, cond={res.cond:.3g}")
@@ -945,5 +1078,7 @@ def run_cli(args) -> int:
     if res.cv:
         print(f"cross-validated rms: {res.cv['cv_rms']:.4g} deg/h over {res.cv['groups']} groups")
     for k in res.terms:
-        print(f"  k{k:<2d} {TERM_NAMES[k]:>9s} = {res.coef[k]: .6g} +- {res.stderr[k]:.2g} deg/h")
+        print(f"  k{k:<2d} {TERM_NAMES[k]:>9s} = {res.coef[k]: .6g} +- {res.stderr[k]:.2g} deg/h"
+              + ("" if res.coef_mode2 is None else
+                 f"   (mode 2: {res.coef_mode2[k]: .6g} +- {res.stderr_mode2[k]:.2g})"))
     return 0

@@ -1015,6 +1015,8 @@ def configure_cli(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--set", action="append", default=[], metavar="PARAM=VALUE",
                         help="set a base parameter (e.g. tau_pkg_s=900, device=hdrg-02); repeatable")
     parser.add_argument("--list", action="store_true", help="list scenarios and effects, then exit")
+    from host_tools.sim_foreign import add_cli_options
+    add_cli_options(parser)
 
 
 def _format_list() -> str:
@@ -1028,6 +1030,9 @@ def _format_list() -> str:
 
 
 def run_cli(args) -> int:
+    if getattr(args, "family", "hdrg") == "random":
+        from host_tools.sim_foreign import run_cli_random
+        return run_cli_random(args)
     if args.list:
         print(_format_list())
         return 0

@@ -226,19 +226,27 @@ def make_model(terms=PAPER_TERMS, seed=0, reversal=None, fs=1.0, proxy=None, rat
     coef[list(terms)] = rng.normal(0, 10, len(terms))
     proxy = proxy or ProxyConfig.from_range("temp", -30.0, 70.0)
     cfg = ModelConfig(proxy, RateConfig("diff", span=rate_span, fs=fs), reversal, AuxConfig())
-    return BiasModel(cfg, terms, coef, {"rms": 0.123, "stderr": np.full(N_TERMS, np.nan), "n": np.int64(5)})
+    coef2 = None
+    if reversal is not None and reversal.order == "regress_first":
+        coef2 = np.zeros(N_TERMS)
+        coef2[list(terms)] = rng.normal(0, 10, len(terms))
+    return BiasModel(cfg, terms, coef, {"rms": 0.123, "stderr": np.full(N_TERMS, np.nan), "n": np.int64(5)},
+                     coef_mode2=coef2)
 
 
 def test_model_json_round_trip(tmp_path):
-    model = make_model(reversal=ReversalConfig("trend", 240.0, 5.0))
-    path = tmp_path / "m.json"
-    model.to_json(path)
-    back = BiasModel.from_json(path)
-    assert back.config == model.config and back.terms == model.terms
-    np.testing.assert_array_equal(back.coef, model.coef)  # bit for bit
-    assert back.fit["rms"] == 0.123 and back.fit["n"] == 5 and back.fit["stderr"] == [None] * N_TERMS
-    d = json.loads(path.read_text())
-    assert (d["format"], d["version"]) == ("hdrg-model", 1)
+    for order in ("regress_first", "combine_first"):
+        model = make_model(reversal=ReversalConfig("trend", 240.0, 5.0, order=order))
+        path = tmp_path / "m.json"
+        model.to_json(path)
+        back = BiasModel.from_json(path)
+        assert back.config == model.config and back.terms == model.terms
+        assert back.config.reversal.order == order and len(back.banks) == (2 if order == "regress_first" else 1)
+        np.testing.assert_array_equal(back.banks, model.banks)  # bit for bit
+        assert back.fit["rms"] == 0.123 and back.fit["n"] == 5 and back.fit["stderr"] == [None] * N_TERMS
+        d = json.loads(path.read_text())
+        assert (d["format"], d["version"]) == ("hdrg-model", 2)
+        assert ("coef_mode2_dph" in d) == (order == "regress_first")
     ftr = make_model(terms=(0, 1, 4))
     ftr.to_json(path)
     assert BiasModel.from_json(path).config.reversal is None
@@ -251,7 +259,7 @@ def _write(tmp_path, d, name="bad.json"):
 
 
 @pytest.mark.parametrize("change,field", [
-    (lambda d: d.update(version=2), "version"),
+    (lambda d: d.update(version=3), "version"),
     (lambda d: d.pop("version"), "version"),
     (lambda d: d.update(format="something"), "format"),
     (lambda d: d["config"]["proxy"].pop("span"), "config.proxy.span"),
@@ -273,7 +281,7 @@ def test_model_bad_json_names_file_and_field(tmp_path, change, field):
     msg = str(exc.value)
     assert str(path) in msg and f"'{field}'" in msg, msg
     if field == "version" and "version" in d:
-        assert "unsupported" in msg and "2" in msg
+        assert "unsupported" in msg and "3" in msg
 
 
 def test_model_not_json(tmp_path):
@@ -373,7 +381,7 @@ def mr_log(fs=1.0, cycles=4):
 
 def test_prepare_mode_reversal():
     log = mr_log()
-    model = make_model(reversal=ReversalConfig("pair"), rate_span=0.2)
+    model = make_model(reversal=ReversalConfig("pair", order="combine_first"), rate_span=0.2)
     prep = comp.prepare(log, model)
     c = combine(log, combiner="pair", max_stale_s=300.0, settle_s=0.0, fs_hz=1.0)
     np.testing.assert_array_equal(prep.y, c.out_dph)
@@ -400,7 +408,10 @@ def test_fit_config_from_logs():
     assert (explicit.proxy.lo, explicit.proxy.hi, explicit.rate.span) == (-40.0, 85.0, 0.5)
     mr = comp.fit_config_from_logs([mr_log()], reversal={"combiner": "trend"})
     assert mr.reversal.combiner == "trend"
-    assert comp.fit_config_from_logs([mr_log()]).reversal == ReversalConfig()
+    assert comp.fit_config_from_logs([mr_log()]).reversal == ReversalConfig(comp.DEFAULT_COMBINER, order=comp.DEFAULT_ORDER)
+    assert comp.fit_config_from_logs([mr_log()], reversal={"combiner": "trend"}).reversal.order == comp.DEFAULT_ORDER
+    legacy = comp.fit_config_from_logs([mr_log()], reversal=ReversalConfig("trend"))
+    assert legacy.reversal == ReversalConfig("trend", order="combine_first")
     with pytest.raises(ValueError, match="mix"):
         comp.fit_config_from_logs([logs[0], mr_log()])
     with pytest.raises(ValueError, match="FTR"):

@@ -1,0 +1,360 @@
+"""`hdrg bench loop`: the closed loop (host_tools.diagnose) on random FOREIGN devices
+(host_tools.sim_foreign) with undeclared effects: detection, false discovery, never worse.
+
+Runs ``i = 0 .. N-1`` (``--runs``, default 120), device seed ``S * 100000 + i`` (``--seed`` S):
+
+* every third run (i % 3 == 0) is **clean** (no effect); the others carry ONE undeclared effect,
+  the kinds of host_tools.sim_foreign.EFFECT_KINDS in turn (9 kinds), at a random strength
+  log-uniform in [STRENGTH_LO, STRENGTH_HI] (x the kind's nominal amplitude);
+* run type: mode reversal for i % 2 == 1 or for the MR-only kinds (exchange_transient,
+  imperfect_reversal), else FTR;
+* **train** on one run (4 degC/min, power-on 0, noise seed 0), **hold out** another (2 degC/min,
+  power-on 1: another damping change, noise seed 1): ``diagnose([train], [holdout])`` with its
+  defaults (single training run: CV over time blocks; every step confirmed on the held-out run).
+
+Per run the record holds the verdict, every step (effect, parameters, held-out before/after,
+confirmed), and ``effect_ratio``: the held-out error of the base model (16 terms, fitted on the
+training run) on the run WITH the effect over that on the same run without it (same device,
+power-ons and noise: the foreign simulator draws the noise independently of the effects).
+``effect_ratio >= 2`` means that modelling the true effect perfectly would halve the held-out
+error: the runs where the loop must find it.  Error = std of 100-s averages of the compensated
+output (diagnose.error_stats).
+
+Summary (the targets of issue #11):
+
+* ``detection``: among effect runs with effect_ratio >= 2, the fraction whose CONFIRMED steps
+  name the true family (aux: any aux_* column);
+* ``false_discovery``: among clean runs, the fraction with verdict "effect found"; also split by
+  run type (``mr_control``: clean MR runs) and ``structural_only`` (clean runs whose confirmed
+  steps are all structural, verdict "model structure improved": another rate estimator or
+  regress-then-reverse, not an effect);
+* ``clean_found_not_generalizing``: clean runs with "effect found" whose final model is not
+  better than the base model on an independent THIRD run (3 degC/min, power-on 2, noise 2):
+  a found "effect" that does not generalize is a false discovery in the strict sense; one that
+  does is physics of the device the 16 terms lack (the foreign devices' lagged thermal nodes);
+* ``worse_confirmed``: confirmed steps whose held-out error went UP (target 0);
+* ``found_without_drop``: "effect found" runs whose final held-out error is not below the base
+  model's (target 0).
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+import warnings
+
+import numpy as np
+
+from host_tools.compensate import fit_config_from_logs
+from host_tools.diagnose import _score, diagnose, error_stats
+from host_tools.fit import fit_logs
+from host_tools.sim_foreign import EFFECTS, EFFECT_KINDS, foreign_device, simulate_foreign
+
+SEED_STRIDE = 100000
+STRENGTH_LO, STRENGTH_HI = 1.0, 10.0
+MATTERS_RATIO = 2.0
+
+
+def plan(n_runs: int, seed: int = 0) -> list:
+    """The runs of the benchmark: dicts {i, device, effect (None: clean), strength, reversal}."""
+    rng = np.random.default_rng([seed, 7])
+    out = []
+    k = 0
+    for i in range(n_runs):
+        strength = float(math.exp(rng.uniform(math.log(STRENGTH_LO), math.log(STRENGTH_HI))))
+        if i % 3 == 0:
+            effect = None
+        else:
+            effect = EFFECT_KINDS[k % len(EFFECT_KINDS)]
+            k += 1
+        reversal = bool(i % 2 == 1 or (effect is not None and EFFECTS[effect].runs == "mr"))
+        out.append({"i": i, "device": seed * SEED_STRIDE + i, "effect": effect,
+                    "strength": strength if effect else 0.0, "reversal": reversal})
+    return out
+
+
+def _named(kind: str, family: str) -> bool:
+    return family == kind or (kind == "aux" and family.startswith("aux_"))
+
+
+def _base_model(train):
+    """The loop's starting model: 16 terms, diff rate estimator, trend combiner for MR."""
+    cfg = fit_config_from_logs([train], reversal={"combiner": "trend", "settle_s": 0.0} if train.reversal else None)
+    return fit_logs([train], cfg, "all", drop_unidentifiable=True)[0]
+
+
+def _base_error(train, hold) -> float:
+    return _score(error_stats([hold], _base_model(train)))[0]
+
+
+def run_one(spec: dict, duration_s=None, n_surrogates=None) -> dict:
+    """One benchmark run (module doc): the record."""
+    dev = foreign_device(spec["device"])
+    eff, rev, st = spec["effect"], spec["reversal"], spec["strength"]
+    t0 = time.time()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        train = simulate_foreign(dev, 4.0, rev, 0, 0, duration_s=duration_s, effect=eff, strength=st or 1.0)
+        hold = simulate_foreign(dev, 2.0, rev, 1, 1, duration_s=duration_s, effect=eff, strength=st or 1.0)
+        kw = {} if n_surrogates is None else {"n_surrogates": n_surrogates}
+        rep, model = diagnose([train], [hold], plots=False, **kw)
+        third = simulate_foreign(dev, 3.0, rev, 2, 2, duration_s=duration_s, effect=eff, strength=st or 1.0)
+        base3 = _score(error_stats([third], _base_model(train)))[0]
+        final3 = _score(error_stats([third], model))[0]
+        ratio = None
+        if eff is not None:
+            ctrain = simulate_foreign(dev, 4.0, rev, 0, 0, duration_s=duration_s)
+            chold = simulate_foreign(dev, 2.0, rev, 1, 1, duration_s=duration_s)
+            ratio = _score(rep["baseline"]["holdout"])[0] / _base_error(ctrain, chold)
+    steps = [{"effect": it["effect"], "params": it["params"], "confirmed": it["confirmed"],
+              "before": _score(it["before"])[0], "after": _score(it["after"])[0]} for it in rep["iterations"]]
+    return {**spec, "verdict": rep["verdict"], "steps": steps,
+            "base": _score(rep["baseline"]["holdout"])[0], "final": _score(rep["final"])[0],
+            "third_base": base3, "third_final": final3,
+            "effect_ratio": ratio, "named": bool(eff and any(s["confirmed"] and _named(eff, s["effect"])
+                                                           for s in steps)),
+            "artifacts": [a["period_s"] for a in (rep["artifacts"] or {}).get("lines", [])],
+            "seconds": round(time.time() - t0, 2)}
+
+
+def _frac(num, den):
+    return {"n": den, "k": num, "rate": (num / den) if den else None}
+
+
+def summarize(records: list) -> dict:
+    """The summary of module doc from the records."""
+    matters = [r for r in records if r["effect"] and r["effect_ratio"] is not None and r["effect_ratio"] >= MATTERS_RATIO]
+    clean = [r for r in records if not r["effect"]]
+    found = [r for r in records if r["verdict"] == "effect found"]
+    structural = [r for r in records if r["verdict"] == "model structure improved"]
+    confirmed = [s for r in records for s in r["steps"] if s["confirmed"]]
+    struct = [r for r in clean if r["verdict"] == "model structure improved"]
+    per_kind = {}
+    for kind in EFFECT_KINDS:
+        rs = [r for r in matters if r["effect"] == kind]
+        per_kind[kind] = _frac(sum(r["named"] for r in rs), len(rs))
+    return {"runs": len(records), "effect_runs": sum(1 for r in records if r["effect"]),
+            "detection": _frac(sum(r["named"] for r in matters), len(matters)), "detection_per_kind": per_kind,
+            "false_discovery": _frac(sum(r["verdict"] == "effect found" for r in clean), len(clean)),
+            "false_discovery_ftr": _frac(sum(r["verdict"] == "effect found" for r in clean if not r["reversal"]),
+                                         sum(1 for r in clean if not r["reversal"])),
+            "mr_control": _frac(sum(r["verdict"] == "effect found" for r in clean if r["reversal"]),
+                                sum(1 for r in clean if r["reversal"])),
+            "structural_only": len(struct),
+            "clean_found_not_generalizing": sum(1 for r in clean if r["verdict"] == "effect found"
+                                                and not r["third_final"] < r["third_base"]),
+            "clean_found_third_run_gain": [round(r["third_base"] / r["third_final"], 3) for r in clean
+                                           if r["verdict"] == "effect found"],
+            "found_third_run_worse": sum(1 for r in found if not r["third_final"] < r["third_base"]),
+            "confirmed_steps": len(confirmed),
+            "worse_confirmed": sum(1 for s in confirmed if not s["after"] < s["before"]),
+            "found_without_drop": sum(1 for r in found + structural if not r["final"] < r["base"]),
+            "never_worse": sum(1 for r in records if r["final"] > r["base"] * (1 + 1e-12)) == 0}
+
+
+def run_benchmark(n_runs: int, seed: int = 0, duration_s=None, n_surrogates=None, progress=None,
+                  shard=(0, 1), json_path=None) -> dict:
+    """The benchmark (module doc); ``shard`` (k, m): only the runs with i % m == k; with
+    ``json_path`` the result so far is written after every run."""
+    records = []
+    specs = [sp for sp in plan(n_runs, seed) if sp["i"] % shard[1] == shard[0]]
+    for spec in specs:
+        rec = run_one(spec, duration_s, n_surrogates)
+        records.append(rec)
+        if json_path:
+            with open(json_path, "w", encoding="utf-8") as fh:
+                json.dump({"summary": summarize(records), "records": records}, fh, indent=1)
+        if progress:
+            progress(f"[{len(records)}/{len(specs)}] device {rec['device']} {rec['effect'] or 'clean'} "
+                     f"{'MR' if rec['reversal'] else 'FTR'} x{rec['strength']:.2f}: {rec['verdict']} "
+                     f"{[(s['effect'], s['confirmed']) for s in rec['steps']]} {rec['base']:.3g} -> {rec['final']:.3g}"
+                     f" (ratio {rec['effect_ratio'] if rec['effect_ratio'] is None else round(rec['effect_ratio'], 2)},"
+                     f" {rec['seconds']} s)")
+    return {"config": {"runs": n_runs, "seed": seed, "duration_s": duration_s, "n_surrogates": n_surrogates,
+                       "train": "4 degC/min, power-on 0, noise 0", "holdout": "2 degC/min, power-on 1, noise 1",
+                       "strength": [STRENGTH_LO, STRENGTH_HI], "matters_ratio": MATTERS_RATIO},
+            "summary": summarize(records), "records": records}
+
+
+def configure_cli(parser) -> None:
+    parser.add_argument("--runs", type=int, default=120, help="runs (a third clean; default 120)")
+    parser.add_argument("--seed", type=int, default=0, help="benchmark seed (devices S*100000 + i)")
+    parser.add_argument("--shard", default="0/1", metavar="K/M", help="only runs i with i %% M == K (parallel parts)")
+    parser.add_argument("--merge", nargs="+", default=None, metavar="JSON",
+                        help="instead: summarize the records of these --json files together")
+    parser.add_argument("--duration", type=float, default=None, help="cut every run to this many seconds")
+    parser.add_argument("--json", default=None, metavar="FILE", help="write records and summary to FILE")
+    parser.add_argument("--measured", default=None, metavar="DIR",
+                        help="instead: run the loop on the measured logs (held out by leg and by blocks), "
+                             "figures and measured.json into DIR")
+
+
+def _line(name, f):
+    rate = "n/a" if f["rate"] is None else f"{100 * f['rate']:.1f} %"
+    return f"  {name:<28s} {f['k']:>4d} / {f['n']:<4d} {rate}"
+
+
+def run_cli(args) -> int:
+    if args.measured:
+        import os
+        res = measured_study(args.measured, progress=lambda m: print(m, file=sys.stderr, flush=True))
+        with open(os.path.join(args.measured, "measured.json"), "w", encoding="utf-8") as fh:
+            json.dump(res, fh, indent=1, default=float)
+            fh.write("\n")
+        for key, r in res.items():
+            b, f = r["base"], r["final"]
+            print(f"{key:24s} {r['verdict']:30s} held-out std 1 s {b['std_dph']:.4g} -> {f['std_dph']:.4g}, "
+                  f"100 s {b['std100_dph'] if b['std100_dph'] is None else round(b['std100_dph'], 3)} -> "
+                  f"{f['std100_dph'] if f['std100_dph'] is None else round(f['std100_dph'], 3)} deg/h; {r['detail']}")
+        return 0
+    if args.merge:
+        records = []
+        for path in args.merge:
+            with open(path, encoding="utf-8") as fh:
+                records += json.load(fh)["records"]
+        res = {"summary": summarize(sorted(records, key=lambda r: r["i"])), "records": records}
+    else:
+        if args.runs < 1:
+            raise ValueError("--runs must be >= 1")
+        k, m = (int(x) for x in args.shard.split("/"))
+        if not 0 <= k < m:
+            raise ValueError(f"--shard K/M needs 0 <= K < M, not {args.shard}")
+        res = run_benchmark(args.runs, args.seed, args.duration, shard=(k, m), json_path=args.json,
+                            progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+    s = res["summary"]
+    print(f"hdrg bench loop: {s['runs']} foreign runs (seed {args.seed}), {s['effect_runs']} with an undeclared effect")
+    print(_line("  clean runs", {"k": s["runs"] - s["effect_runs"], "n": s["runs"], "rate": None}))
+    print(_line("detection (ratio >= 2)", s["detection"]))
+    for kind, f in s["detection_per_kind"].items():
+        print(_line(f"  {kind}", f))
+    print(_line("false discovery (clean)", s["false_discovery"]))
+    print(_line("  FTR clean", s["false_discovery_ftr"]))
+    print(_line("  MR control", s["mr_control"]))
+    print(f"  clean runs with 'model structure improved' (rate estimator / regress-then-reverse): {s['structural_only']}")
+    print(f"  clean runs with 'effect found' that do NOT improve an independent third run: "
+          f"{s['clean_found_not_generalizing']}; their third-run gains (base/final): {s['clean_found_third_run_gain']}")
+    print(f"  'effect found' runs worse on the third run: {s['found_third_run_worse']}")
+    print(f"  confirmed steps {s['confirmed_steps']}, held-out-worse confirmed {s['worse_confirmed']}, "
+          f"'effect found' without a held-out drop {s['found_without_drop']}, never worse: {s['never_worse']}")
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as fh:
+            json.dump(res, fh, indent=1)
+            fh.write("\n")
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# measured data (`hdrg bench loop --measured DIR`)
+# ---------------------------------------------------------------------------------------------
+
+MEASURED = {"tofupilot-x": "tofupilot-imu-thermal/tofupilot-imu-x.csv",
+            "tofupilot-y": "tofupilot-imu-thermal/tofupilot-imu-y.csv",
+            "psim-x": "psim-tvac-lsm6dsm/psim-tvac-x.csv", "psim-y": "psim-tvac-lsm6dsm/psim-tvac-y.csv"}
+MEASURED_ROOT = "/work/shared/data/measured"
+SPLIT_BLOCKS = 8
+
+
+def splits(log) -> dict:
+    """The held-out splits of one measured log: ``cool->heat`` / ``heat->cool`` (train on the
+    samples where the smoothed temperature falls, hold out those where it rises, and the
+    reverse; only when both legs span >= 20 degC) and ``blocks`` (SPLIT_BLOCKS contiguous time
+    blocks, or the bursts of a bursty log: even ones train, odd ones held out)."""
+    t = np.asarray(log.t_s)
+    temp = np.asarray(log["temp_c"], np.float64)
+    out = {}
+    if len(log.segments) == 1:
+        k = max(1, int(round(60.0 * log.sample_rate_hz)))          # 60-s moving mean
+        sm = np.convolve(temp, np.ones(k) / k, mode="same")
+        rising = np.gradient(sm) > 0
+        legs = {"cool": ~rising, "heat": rising}
+        if all(np.ptp(temp[m]) >= 20.0 for m in legs.values()):
+            out["cool->heat"] = (legs["cool"], legs["heat"])
+            out["heat->cool"] = (legs["heat"], legs["cool"])
+        block = (np.arange(len(t)) * SPLIT_BLOCKS) // len(t)
+    else:
+        block = np.searchsorted(log.segments, np.arange(len(t)), side="right") - 1
+    out["blocks"] = (block % 2 == 0, block % 2 == 1)
+    return out
+
+
+def measured_study(out_dir: str, root: str = MEASURED_ROOT, progress=None) -> dict:
+    """Run the loop on every measured log and split (module doc of diagnose; default options):
+    per case the verdict, the steps and the held-out error (std of 1-s and 100-s averages, deg/h)
+    of the base and final models; figures (held-out Allan deviation and residual vs time, base
+    and final) in ``out_dir``."""
+    import os
+
+    from host_tools import runlog
+    os.makedirs(out_dir, exist_ok=True)
+    results = {}
+    for name, rel in MEASURED.items():
+        path = os.path.join(root, rel)
+        if not os.path.exists(path):
+            continue
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            log = runlog.read(path)
+        for split, (tr, ho) in splits(log).items():
+            key = f"{name} {split}"
+            if progress:
+                progress(f"measured: {key}")
+            train, hold = log.select(tr), log.select(ho)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                rep, model = diagnose([train], [hold], plots=False)
+            base_model = _measured_base(train)
+            fig = _measured_figure(key, hold, base_model, model, out_dir)
+            results[key] = {"verdict": rep["verdict"], "detail": rep["verdict_detail"],
+                            "base": rep["baseline"]["holdout"], "final": rep["final"],
+                            "noise_floor": rep["noise_floor"],
+                            "steps": [{"effect": it["effect"], "params": it["params"], "confirmed": it["confirmed"],
+                                       "cv_gain": it["cv_gain"], "threshold": it["threshold"],
+                                       "before": it["before"], "after": it["after"]} for it in rep["iterations"]],
+                            "stopped": (rep["stopped"] or {}).get("reason"),
+                            "ranking": (rep["stopped"] or {}).get("ranking", [])[:5],
+                            "noise_model": rep["characterization"]["noise_models"][0],
+                            "figure": fig}
+    return results
+
+
+def _measured_base(train):
+    cfg = fit_config_from_logs([train])
+    return fit_logs([train], cfg, "all", drop_unidentifiable=True)[0]
+
+
+def _measured_figure(key, hold, base_model, final_model, out_dir) -> str:
+    import os
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from host_tools import metrics
+    from host_tools.compensate import compensate
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for label, m, style in (("base model (16 terms)", base_model, "--"), ("after the loop", final_model, "-")):
+        out = compensate(hold, m)
+        v = np.asarray(out["valid"]) == 1
+        a = metrics.allan(out.rate_dph, hold.t_s, v)
+        if a["tau_s"]:
+            a1.loglog(a["tau_s"], a["adev_dph"], style, label=label)
+        tt, yy = hold.t_s[v] / 60.0, np.asarray(out.rate_dph)[v]
+        brk = np.flatnonzero(np.diff(tt) > 5.0 / 60.0) + 1         # no line across gaps (> 5 s)
+        a2.plot(np.insert(tt, brk, np.nan), np.insert(yy, brk, np.nan), style, lw=0.6, label=label)
+    a1.axvline(1.0, color="0.6", lw=0.8)
+    a1.axvline(100.0, color="0.6", lw=0.8)
+    a1.set_xlabel("averaging time tau [s]")
+    a1.set_ylabel("Allan deviation of the held-out output [deg/h]")
+    a1.grid(True, which="both", alpha=0.3)
+    a1.legend(fontsize=8)
+    a2.set_xlabel("time since start [min]")
+    a2.set_ylabel("compensated held-out output [deg/h]")
+    a2.grid(True, alpha=0.3)
+    a2.legend(fontsize=8)
+    fig.suptitle(f"{key}: held-out samples", fontsize=10)
+    fig.tight_layout()
+    name = key.replace(" ", "_").replace(">", "").replace("-", "_") + ".png"
+    fig.savefig(os.path.join(out_dir, name), dpi=90)
+    plt.close(fig)
+    return name

@@ -1,0 +1,88 @@
+"""`hdrg bench accuracy` (host_tools.bench_accuracy) on a fast subset: 4 foreign devices, short
+runs.  Structure and sanity only; the 50-device table is measured with the command (docs/ACCURACY.md)."""
+import json
+
+import numpy as np
+import pytest
+
+from host_tools import bench, bench_accuracy as ba, cli
+from host_tools.sim_foreign import foreign_device, simulate_foreign
+
+PIPES = ["ftr/raw", "ftr/diff", "ftr/iir9", "mr-trend/raw", "mr-trend/diff", "mr-pair/diff"]
+DUR = 4000.0
+
+
+@pytest.fixture(scope="module")
+def result():
+    return ba.run_benchmark(4, seed=0, patterns=PIPES, duration_s=DUR)
+
+
+def test_structure_and_sanity(result):
+    recs, summ = result["records"], result["summary"]
+    assert [r["seed"] for r in recs] == [0, 1, 2, 3]
+    assert list(summ) == PIPES
+    for r in recs:
+        assert set(r["ratio"]) == set(PIPES) and not r["errors"]
+        assert all(np.isfinite(v) and v > 0 for v in r["ratio"].values())
+        for kind, fl in r["floor"].items():
+            dev = foreign_device(r["seed"])
+            assert 0.5 * dev.noise["white_dph"] < fl < 3.0 * dev.noise["white_dph"] + 0.2
+        for name, std in r["std"].items():
+            assert std / r["floor"]["mr" if name.startswith("mr") else "ftr"] == pytest.approx(r["ratio"][name])
+    for row in summ.values():
+        a = row["all"]
+        assert a["n"] == 4 and a["failed"] == 0 and a["median"] <= a["p90"]
+    # a clearly bad option (no model) against a good one
+    assert summ["ftr/raw"]["all"]["median"] > 3 * summ["ftr/diff"]["all"]["median"]
+    assert summ["mr-trend/raw"]["all"]["median"] > 1.5 * summ["mr-trend/diff"]["all"]["median"]
+    assert result["config"]["duration_s"] == DUR
+
+
+def test_floor_run_has_no_thermal_bias():
+    dev = foreign_device(2)
+    for reversal in (False, True):
+        fl = simulate_foreign(dev, 2.0, reversal, 1, 1, DUR, thermal=False)
+        run = simulate_foreign(dev, 2.0, reversal, 1, 1, DUR)
+        m = fl.mode
+        ok = m != 3
+        c = np.where(m == 2, -1.0, 1.0) * fl.rate_dph
+        assert abs(np.corrcoef(c[ok], fl["temp_c"][ok])[0, 1]) < 0.3
+        assert ba.floor_of(fl) < 0.2 * np.std((np.where(m == 2, -1.0, 1.0) * run.rate_dph)[ok])
+
+
+def test_damping_change_subset_is_defined_by_the_power_on_change(result):
+    for r in result["records"]:
+        dev = foreign_device(r["seed"])
+        assert (r["damping_change_dph"] == 0.0) == (dev.damping_change(0)[0] == dev.damping_change(1)[0])
+    big = [r for r in result["records"] if r["damping_change_dph"] > ba.DAMPING_CHANGE_DPH]
+    assert result["summary"]["ftr/diff"]["damping_change"]["n"] == len(big)
+
+
+def test_options_and_errors():
+    names = [o.name for o in ba.all_options()]
+    assert "ftr/diff" in names and "mr-trend/iir9" in names and "mr-pair/lsq32" in names
+    assert any(n.startswith("rf-") for n in names) == ba.has_order()
+    assert [o.name for o in ba.select_options(["ftr/iir*"])] == ["ftr/iir4", "ftr/iir7", "ftr/iir9"]
+    with pytest.raises(ValueError, match="matches no option; known: ftr/raw"):
+        ba.select_options(["ftr/kalman"])
+    for kw, match in (({"n_devices": 0}, "--devices"), ({"seed": -1}, "--seed"), ({"holdout_rate": 0.0}, "--holdout-rate")):
+        with pytest.raises(ValueError, match=match):
+            ba.run_benchmark(**{"n_devices": 1, **kw})
+
+
+def test_cli(tmp_path, capsys):
+    out = tmp_path / "b.json"
+    assert cli.main(["bench", "accuracy", "--devices", "1", "--duration", "2500", "--pipelines", "ftr/diff",
+                     "ftr/raw", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "| ftr/diff |" in text and "| ftr/raw |" in text
+    data = json.loads(out.read_text(), parse_constant=lambda c: pytest.fail(f"non-strict JSON {c}"))
+    assert data["records"][0]["seed"] == 0 and set(data["summary"]) == {"ftr/diff", "ftr/raw"}
+    assert cli.main(["bench", "accuracy", "--devices", "1", "--pipelines", "nope/*"]) == 2
+    assert "matches no option" in capsys.readouterr().err
+
+
+def test_bench_registry_offers_only_importable_benchmarks(monkeypatch):
+    monkeypatch.setitem(bench.BENCHMARKS, "ghost", "host_tools.no_such_bench_module")
+    avail = bench.available()
+    assert "accuracy" in avail and "ghost" not in avail

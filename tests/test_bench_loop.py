@@ -1,0 +1,73 @@
+"""`hdrg bench loop` (host_tools.bench_loop) on a fast subset: 3 foreign runs cut to 3000 s.
+Structure and the never-worse invariants only; the 120-run numbers are measured with the command
+(docs/LOOP.md)."""
+import json
+
+import pytest
+
+from host_tools import bench, bench_loop as bl, cli
+from host_tools.sim_foreign import EFFECT_KINDS
+
+
+def test_plan_has_a_third_clean_runs_and_every_kind():
+    p = bl.plan(120, seed=0)
+    assert len(p) == 120 and sum(r["effect"] is None for r in p) == 40
+    kinds = {r["effect"] for r in p if r["effect"]}
+    assert kinds == set(EFFECT_KINDS) and len(kinds) >= 8
+    for r in p:
+        if r["effect"] in ("exchange_transient", "imperfect_reversal"):
+            assert r["reversal"]
+        if r["effect"]:
+            assert bl.STRENGTH_LO <= r["strength"] <= bl.STRENGTH_HI
+    assert bl.plan(120, seed=0) == p and bl.plan(120, seed=1) != p
+
+
+@pytest.fixture(scope="module")
+def result():
+    return bl.run_benchmark(3, seed=0, duration_s=3000.0, n_surrogates=9)
+
+
+def test_fast_subset_structure_and_never_worse(result):
+    recs, s = result["records"], result["summary"]
+    assert [r["i"] for r in recs] == [0, 1, 2] and recs[0]["effect"] is None
+    for r in recs:
+        assert r["verdict"] in ("effect found", "model structure improved", "no confirmed effect",
+                                "no significant missing effect")
+        assert r["final"] <= r["base"] * (1 + 1e-12)          # never worse on the held-out run
+        for st in r["steps"]:
+            if st["confirmed"]:
+                assert st["after"] <= 0.95 * st["before"]
+        if r["effect"]:
+            assert r["effect_ratio"] > 0
+    assert s["runs"] == 3 and s["worse_confirmed"] == 0 and s["found_without_drop"] == 0 and s["never_worse"]
+    assert s["false_discovery"]["n"] == 1
+
+
+def test_cli_is_registered_and_merges_shards(result, tmp_path, capsys):
+    assert bench.available()["loop"] == "host_tools.bench_loop"
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    a.write_text(json.dumps({"records": result["records"][:1]}))
+    b.write_text(json.dumps({"records": result["records"][1:]}))
+    assert cli.main(["bench", "loop", "--merge", str(a), str(b), "--json", str(tmp_path / "m.json")]) == 0
+    out = capsys.readouterr().out
+    assert "detection" in out and "false discovery" in out and "held-out-worse confirmed 0" in out
+    assert json.loads((tmp_path / "m.json").read_text())["summary"]["runs"] == 3
+
+
+def test_measured_splits_are_disjoint_and_cover_both_legs():
+    import numpy as np
+
+    import os
+
+    from host_tools import runlog
+    path = f"{bl.MEASURED_ROOT}/{bl.MEASURED['tofupilot-x']}"
+    if not os.path.exists(path):
+        pytest.skip(f"measured data not here: {path}")
+    log = runlog.read(path)
+    sp = bl.splits(log)
+    assert set(sp) == {"cool->heat", "heat->cool", "blocks"}
+    for tr, ho in sp.values():
+        assert not np.any(tr & ho) and np.all(tr | ho)
+    temp = np.asarray(log["temp_c"])
+    cool, heat = sp["cool->heat"]
+    assert temp[heat].max() > 70 and temp[cool].min() < -15

@@ -1,0 +1,225 @@
+"""The foreign simulator family (host_tools.sim_foreign): determinism, sign convention, the
+noise-only floor run, every effect kind, CLI and bad arguments."""
+import copy
+import json
+
+import numpy as np
+import pytest
+
+from host_tools import cli, runlog
+from host_tools.sim_foreign import (EFFECT_KINDS, EFFECTS, G0, T_REF_C, T_SCALE_C, foreign_device,
+                                    node_temperatures, simulate_foreign)
+
+DUR = 3000.0
+
+
+def _run(dev, reversal=True, **kw):
+    kw.setdefault("duration_s", DUR)
+    return simulate_foreign(dev, kw.pop("rate", 4.0), reversal, kw.pop("power_on", 0), kw.pop("noise_seed", 0), **kw)
+
+
+def test_determinism_and_device_summary():
+    a, b = foreign_device(11), foreign_device(11)
+    assert a.to_dict() == b.to_dict()
+    assert json.loads(a.to_json())["seed"] == 11
+    assert "resonator" in a.describe()
+    assert foreign_device(12).to_dict() != a.to_dict()
+    r1, r2 = _run(a), _run(b)
+    for col in r1.columns:
+        np.testing.assert_array_equal(r1[col], r2[col])
+    # another noise seed: same physics, different noise; another power-on: different damping change
+    r3 = _run(a, noise_seed=1)
+    assert not np.array_equal(r1.rate_dph, r3.rate_dph)
+    assert a.damping_change(0) != a.damping_change(1)
+
+
+def test_structure_is_randomized_within_the_documented_ranges():
+    devs = [foreign_device(s) for s in range(40)]
+    assert {len(d.nodes) for d in devs} == {2, 3, 4}
+    assert all(60 <= n["tau_s"] <= 1500 for d in devs for n in d.nodes)
+    assert all(d.sensor_node != d.resonator_node for d in devs)
+    assert any(d.damping_node != d.resonator_node for d in devs) and any(d.damping_node == d.resonator_node for d in devs)
+    assert all(6e3 <= d.drive["f0_hz"] <= 30e3 for d in devs)
+    assert any(n["parent"] >= 0 for d in devs for n in d.nodes[1:])      # series chains
+    assert any(n["parent"] < 0 for d in devs for n in d.nodes[1:])       # parallel branches
+
+
+def _only(dev, keep):
+    """A copy of ``dev`` with every bias zeroed except ``keep`` ('damping' or 'common')."""
+    d = copy.deepcopy(dev)
+    d.exchange.update(tail_amp_dph=0.0, ring_amp_dph=0.0)
+    if keep != "damping":
+        d.damping.update(c0=0.0, c1=0.0, c2=0.0, c3=0.0, change_offset_max_dph=0.0)
+    if keep != "common":
+        d.common.update(e1=0.0, e2=0.0, e3=0.0)
+    return d
+
+
+def test_mode2_sign_convention():
+    dev = foreign_device(5)
+    for keep in ("damping", "common"):
+        d = _only(dev, keep)
+        run, floor = _run(d), _run(d, thermal=False)
+        m = run.mode
+        diff = run.rate_dph - floor.rate_dph        # the bias alone (same noise)
+        t = run.t_s
+        temps = node_temperatures(d, t, np.interp(t, *_profile(d).T))
+        if keep == "damping":
+            y = (temps[d.damping_node] - T_REF_C) / T_SCALE_C
+            c = d.damping
+            sc, off = d.damping_change(0)
+            expect = (1 + sc) * (c["c0"] + c["c1"] * y + c["c2"] * y ** 2 + c["c3"] * y ** 3) + off
+            np.testing.assert_allclose(diff, expect, atol=1e-9)      # same sign in modes 1, 2 and 3
+        else:
+            te = temps[d.common_node]
+            y = (te - T_REF_C) / T_SCALE_C
+            e = d.common
+            b_e = e["e1"] * y + e["e2"] * y ** 2 + e["e3"] * np.tanh((te - e["tk_c"]) / e["w_c"])
+            s = np.where(m == 2, -1.0, np.where(m == 3, 0.0, 1.0))
+            np.testing.assert_allclose(diff, s * b_e, atol=1e-9)       # flips in mode 2, absent in mode 3
+            assert np.abs(b_e).max() > 1.0
+    # the true rate flips too: the floor run's c = s * rate averages to Omega in both modes
+    fl = _run(dev, thermal=False, duration_s=20000.0)
+    m = fl.mode
+    for k, s in ((1, 1.0), (2, -1.0)):
+        assert abs(np.mean(s * fl.rate_dph[m == k]) - dev.omega_dph) < 0.2
+
+
+def _profile(dev):
+    from host_tools.sim_foreign import chamber_profile
+    return chamber_profile(dev, 4.0)
+
+
+@pytest.mark.parametrize("reversal", [False, True])
+def test_floor_run_has_no_bias_and_the_same_noise(reversal):
+    dev = foreign_device(3)
+    run, floor = _run(dev, reversal, duration_s=None), _run(dev, reversal, duration_s=None, thermal=False)
+    np.testing.assert_array_equal(run.columns["freq_hz"], floor.columns["freq_hz"])
+    np.testing.assert_array_equal(run.columns["temp_c"], floor.columns["temp_c"])
+    assert floor.metadata["thermal"] == "off"
+    m = floor.mode
+    ok = m != 3
+    s = np.where(m == 2, -1.0, 1.0)
+    c = (s * floor.rate_dph)[ok]
+    # no temperature dependence: the bias run's c follows temperature strongly, the floor's not
+    temp = floor["temp_c"][ok]
+    r_floor = abs(np.corrcoef(c, temp)[0, 1])
+    r_run = abs(np.corrcoef((s * run.rate_dph)[ok] if not reversal else run.rate_dph[ok], temp)[0, 1])
+    assert r_floor < 0.3 < r_run
+    # effects and the power-on change are zeroed as well: the same floor
+    kinds = [k for k in EFFECT_KINDS if reversal or EFFECTS[k].runs != "mr"]
+    other = _run(dev, reversal, duration_s=None, thermal=False, effect=kinds, strength=3.0, power_on=4)
+    np.testing.assert_array_equal(other.rate_dph, floor.rate_dph)
+    # 1-s floor within the documented white-noise range (plus flicker/rrw)
+    assert 0.08 < np.std(np.diff(c)) / np.sqrt(2) < 0.6
+
+
+def _effect_diff(dev, name, reversal=True, strength=1.0, **kw):
+    base = _run(dev, reversal, **kw)
+    with_e = _run(dev, reversal, effect=name, strength=strength, **kw)
+    for col in base.columns:
+        if col != "rate_dph":
+            np.testing.assert_array_equal(base[col], with_e[col])   # effects touch rate_dph only
+    return base, with_e.rate_dph - base.rate_dph
+
+
+@pytest.mark.parametrize("name", EFFECT_KINDS)
+def test_every_effect_changes_the_output_only_as_documented(name):
+    dev = foreign_device(7)
+    p = dev.effects[name]
+    base, d = _effect_diff(dev, name, duration_s=6000.0)
+    m, t = base.mode, base.t_s
+    s = np.where(m == 2, -1.0, np.where(m == 3, 0.0, 1.0))
+    assert np.abs(d).max() > 0.1
+    # linear in strength, zero at strength 0
+    _, d2 = _effect_diff(dev, name, strength=2.5, duration_s=6000.0)
+    np.testing.assert_allclose(d2, 2.5 * d, atol=1e-9)
+    _, d0 = _effect_diff(dev, name, strength=0.0, duration_s=6000.0)
+    assert np.abs(d0).max() < 1e-12
+    # un-flip the flipping kinds: the effect's own term
+    ok = m != 3
+    term = np.where(ok, d * np.where(s == 0, 1.0, s), 0.0) if EFFECTS[name].flips else d
+    if EFFECTS[name].flips:
+        assert np.abs(d[m == 3]).max() < 1e-12          # s = 0 in an exchange
+    if name == "turn_on":
+        np.testing.assert_allclose(term[ok], (p["amp_dph"] * np.exp(-t / p["tau_s"]))[ok], atol=1e-9)
+    elif name == "exchange_transient":
+        assert np.abs(d[m == 3]).max() == 0.0
+        first = np.flatnonzero((m[1:] != 3) & (m[:-1] == 3)) + 1
+        assert np.allclose(d[first], p["amp_dph"])     # non-flipping: same sign entering mode 1 and 2
+        assert np.abs(d[first + 100]).max() < np.abs(d[first]).max()
+    elif name == "imperfect_reversal":
+        assert np.abs(d[m != 2]).max() == 0.0 and np.abs(d[m == 2]).min() > 0
+    elif name == "aging":
+        np.testing.assert_allclose(term[ok], (p["amp_dph"] * (1 - np.exp(-t / p["tau_s"])))[ok], atol=1e-9)
+    elif name == "periodic":
+        np.testing.assert_allclose(term[ok], (p["amp_dph"] * np.sin(2 * np.pi * t / p["period_s"] + p["phase_rad"]))[ok],
+                                   atol=1e-9)
+    elif name == "aux":       # exactly linear in the logged aux columns
+        X = np.column_stack([base["aux_vdd"], base["aux_acc_x"], base["aux_acc_y"], base["aux_acc_z"], np.ones(len(t))])
+        coef, *_ = np.linalg.lstsq(X[ok], term[ok], rcond=None)
+        assert np.abs(X[ok] @ coef - term[ok]).max() < 1e-6
+        np.testing.assert_allclose(coef[:4], [p["kv_dph_per_v"]] + [g / G0 for g in p["g_dph_per_g"]], rtol=1e-6)
+    elif name == "board_temp":  # follows the temp_c sensor (noise/quantization of the sensor aside)
+        X = np.column_stack([base["temp_c"] ** k for k in range(3)])
+        coef, *_ = np.linalg.lstsq(X[ok], term[ok], rcond=None)
+        assert np.std(X[ok] @ coef - term[ok]) < 0.05 * np.std(term[ok])
+    elif name == "proxy_high_order":  # a quartic function of the proxy (drive frequency)
+        f = base["freq_hz"]
+        x = (f - f.mean()) / f.std()
+        X = np.column_stack([x ** k for k in range(5)])
+        coef, *_ = np.linalg.lstsq(X[ok], term[ok], rcond=None)
+        assert np.std(X[ok] @ coef - term[ok]) < 0.02 * np.std(term[ok])
+    elif name == "thermal_lag":  # NOT a function of the proxy: hysteresis between the legs
+        f = base["freq_hz"]
+        x = (f - f.mean()) / f.std()
+        X = np.column_stack([x ** k for k in range(6)])
+        coef, *_ = np.linalg.lstsq(X[ok], term[ok], rcond=None)
+        assert np.std(X[ok] @ coef - term[ok]) > 0.05 * np.std(term[ok])
+
+
+def test_mr_only_effects_refuse_ftr_runs():
+    dev = foreign_device(1)
+    for name in EFFECT_KINDS:
+        if EFFECTS[name].runs == "mr":
+            with pytest.raises(ValueError, match="mode-reversal runs only"):
+                _run(dev, False, effect=name)
+        else:
+            _run(dev, False, effect=name, duration_s=100.0)
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"effect": "wobble"}, "unknown effect 'wobble'"),
+    ({"strength": -1.0}, "strength"),
+    ({"strength": float("nan")}, "strength"),
+    ({"rate": 0.0}, "chamber rate"),
+    ({"power_on": 1.5}, "power_on"),
+    ({"noise_seed": -2}, "noise_seed"),
+    ({"duration_s": 1.0}, "duration_s"),
+])
+def test_bad_arguments(kw, match):
+    with pytest.raises(ValueError, match=match):
+        _run(foreign_device(0), **kw)
+    with pytest.raises(ValueError, match="seed"):
+        foreign_device(-1)
+
+
+def test_cli(tmp_path, capsys):
+    out = tmp_path / "r.csv"
+    assert cli.main(["simulate", "--family", "random", "--seed", "4", "--chamber-rate", "5", "--reversal", "off",
+                     "--duration", "600", "--effect", "periodic", "--strength", "2", "-o", str(out)]) == 0
+    log = runlog.read(out)
+    assert len(log) == 601 and not log.reversal and log.metadata["family"] == "random"
+    assert "periodic" not in json.dumps(log.metadata)                    # undeclared
+    ref = simulate_foreign(4, 5.0, False, 0, 0, 600.0, effect="periodic", strength=2.0)
+    np.testing.assert_allclose(log.rate_dph, ref.rate_dph, rtol=1e-6, atol=1e-4)
+    capsys.readouterr()
+    assert cli.main(["simulate", "--family", "random", "--seed", "4", "--describe"]) == 0
+    assert json.loads(capsys.readouterr().out) == foreign_device(4).to_dict()
+    for argv, msg in ((["--effect", "wobble"], "unknown effect"), (["--rate", "2"], "--chamber-rate"),
+                      (["--scenario", "static"], "belongs to the hdrg family"), (["--seed", "-3"], "seed")):
+        assert cli.main(["simulate", "--family", "random", "-o", str(out)] + argv) == 2
+        assert msg in capsys.readouterr().err
+    # the default family is still the calibrated simulator
+    assert cli.main(["simulate", "--scenario", "static", "--duration", "10", "-o", str(out)]) == 0
+    assert "family" not in runlog.read(out).metadata
