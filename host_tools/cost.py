@@ -57,10 +57,11 @@ STAGES = {
     "proxy": ("proxy_u", "pword", "s32"),
     "rate": ("rate_step", "hist_back", "rate_reset"),
     "combiner": ("comb_step", "comb_restart"),
-    "evaluator": ("hdrg_evaluate",),
+    "evaluator": ("hdrg_evaluate", "hdrg_evaluate_bank"),
     "aux": ("aux_step", "aux_norm", "hdrg_rhuw", "hdrg_sin_q30"),
     "step": ("hdrg_step_aux", "hdrg_step"),
-    "table parser": ("hdrg_table_parse", "check_fields", "parse_aux", "check_horner", "hdrg_crc32_words",
+    "table parser": ("hdrg_table_parse", "check_fields", "parse_aux", "check_horner", "check_horner_bank",
+                     "hdrg_crc32_words",
                      "hdrg_word_name", "hdrg_error_name", "hdrg_init", "hdrg_reset"),
 }
 PRIMITIVES = ("hdrg_asr", "hdrg_rhu", "hdrg_mul_rhu", "hdrg_floor_div", "hdrg_div_round", "hdrg_div_round_scaled",
