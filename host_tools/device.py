@@ -227,7 +227,7 @@ def identity_table(log):
     from host_tools.model import BiasModel
     from host_tools.quantize import quantize
 
-    cfg = fit_config_from_logs([log], reversal={"combiner": "pair"} if log.reversal else None)
+    cfg = fit_config_from_logs([log], reversal={"combiner": "pair", "order": "combine_first"} if log.reversal else None)
     model = BiasModel(cfg, (), np.zeros(N_TERMS), source="identity table (all coefficients 0)")
     ex = float(log.metadata.get("exchange_s", 30.0))
     dw = float(log.metadata.get("dwell_s", 120.0))

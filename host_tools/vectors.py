@@ -894,7 +894,7 @@ def e2e_model(log, reversal=None):
     cfg = ModelConfig(ProxyConfig(cfg0.proxy.kind, _round_sig(cfg0.proxy.ref), _round_sig(cfg0.proxy.span)),
                       RateConfig(cfg0.rate.estimator, cfg0.rate.n, cfg0.rate.shift, _round_sig(cfg0.rate.span),
                                  cfg0.rate.fs), cfg0.reversal, cfg0.aux)
-    fitted, _ = fit_logs([log], cfg)
+    fitted, _ = fit_logs([log], cfg, terms="all")            # pinned: the default became "auto"
     coef = np.array([_round_sig(c) for c in fitted.coef], np.float64)
     coef2 = None if fitted.coef_mode2 is None else np.array([_round_sig(c) for c in fitted.coef_mode2], np.float64)
     model = BiasModel(cfg, fitted.terms, coef, source=f"<vectors e2e {log.source}>", coef_mode2=coef2)

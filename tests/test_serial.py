@@ -46,7 +46,7 @@ def run():
     """A mode-reversal simulation, a model with non-zero coefficients and its table, and a second
     table (another model) for uploads."""
     log = sim.simulate(SCENARIO, seed=SEED, duration_s=DURATION)
-    cfg = fit_config_from_logs([log], reversal={"combiner": "pair"})
+    cfg = fit_config_from_logs([log], reversal={"combiner": "pair", "order": "combine_first"})
     coef = np.zeros(17)
     coef[[0, 1, 2, 4, 8]] = [120.0, -35.0, 4.0, 2.5, -1.25]
     model = BiasModel(cfg, (0, 1, 2, 4, 8), coef, source="test model")
