@@ -36,6 +36,7 @@ COMMANDS = {
     "device": ("host_tools.link.device", "virtual gyroscope controller on a pseudo-terminal or a pyserial URL"),
     "demo": ("host_tools.demo", "simulate -> fit -> compensate -> report on embedded defaults"),
     "bench": ("host_tools.bench", "measurement benchmarks: accuracy on random foreign devices, the closed loop"),
+    "cost": ("host_tools.cost", "build and run the pipeline on Cortex-M4/M7 (QEMU), iCE40/7-series (Yosys) or the host: cycles, size"),
 }
 
 

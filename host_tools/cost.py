@@ -1,0 +1,723 @@
+"""`hdrg cost`: what the fixed-point pipeline costs on the targets it is built for, measured by
+building and running it (docs/COST.md).
+
+* ``cortex-m4`` / ``cortex-m7``: the C twin (firmware_ref/c) cross-compiled with Debian's
+  arm-none-eabi-gcc (``-mcpu=... -mthumb -mfloat-abi=soft``, -O2 and -Os) and newlib/rdimon
+  semihosting (firmware_ref/c/arm: startup, linker script), run on QEMU (``mps2-an386``: M4,
+  ``mps2-an500``: M7; ``-semihosting``: stdin/stdout/exit of the driver go to the host), so that
+  ``hdrg vectors check-impl`` runs every vector set on the 32-bit target (``bit_exact``).  A build
+  with ``-DHDRG_BREAK_ROUNDING`` must fail that check (``broken_build_caught``).
+  Instructions per sample: QEMU executes one instruction per translation block (``-singlestep``)
+  and logs every executed one (``-d exec,nochain``, filtered to the library, libgcc and the
+  return site); a sample is the window from the entry of ``hdrg_step_aux`` to the return to the
+  driver (callees and libgcc helpers included).  Cycles: a per-instruction model of the Cortex-M4
+  TRM (r0p1, table 3-1) over that executed stream (``M4_MODEL`` below; nominal and low/high).
+  Per stage: the same trace of a ``-fno-inline`` build, each instruction attributed to the stage
+  of its function (``STAGES``; primitives and libgcc helpers to the calling stage).
+  Code bytes: per function (``nm``) of the library object; ``code_bytes`` is the per-sample path
+  (functions reachable from ``hdrg_step_aux`` in GCC's call graph, ``-fcallgraph-info=su``, plus
+  the libgcc helpers they call); stack: the worst path of that graph over ``-fstack-usage``.
+* ``host``: the same C twin with the host gcc, check-impl, and ns/sample of the driver's ``BENCH``.
+
+Nothing is copied from a table: every figure comes from the build and the run of this call.
+"""
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import re
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+from host_tools import vectors as V
+
+ROOT = Path(__file__).resolve().parent.parent
+C_DIR = ROOT / "firmware_ref" / "c"
+ARM_DIR = C_DIR / "arm"
+TARGETS = ("cortex-m4", "cortex-m7", "ice40", "xc7", "host")
+# tool -> the Debian package that ships it
+PACKAGES = {"arm-none-eabi-gcc": "gcc-arm-none-eabi", "arm-none-eabi-nm": "binutils-arm-none-eabi",
+            "arm-none-eabi-objdump": "binutils-arm-none-eabi", "arm-none-eabi-size": "binutils-arm-none-eabi",
+            "qemu-system-arm": "qemu-system-arm", "gcc": "gcc", "yosys": "yosys", "nextpnr-ice40": "nextpnr-ice40",
+            "iverilog": "iverilog", "vvp": "iverilog", "verilator": "verilator"}
+NEWLIB_SPECS = Path("/usr/lib/arm-none-eabi/newlib/rdimon.specs")
+MCU = {"cortex-m4": ("cortex-m4", "mps2-an386"), "cortex-m7": ("cortex-m7", "mps2-an500")}
+ARM_FLAGS = ("-std=c99", "-mthumb", "-mfloat-abi=soft", "-Wall", "-Wextra", "-Werror",
+             # Debian's arm-none-eabi-gcc finds its own freestanding stdint.h before newlib's, which
+             # then lacks the PRId64 macros: put newlib's headers first
+             "-isystem", "/usr/include/newlib")
+STEP = "hdrg_step_aux"                  # the per-sample entry point
+TRACE_SAMPLES = 300                     # samples per traced case (the first ones: power-on, warm-up, reversals)
+# function -> stage (the -fno-inline build); primitives are charged to the stage that calls them
+STAGES = {
+    "sequencer": ("timer_step", "next_state", "state_length"),
+    "proxy": ("proxy_u", "pword", "s32"),
+    "rate": ("rate_step", "hist_back", "rate_reset"),
+    "combiner": ("comb_step", "comb_restart"),
+    "evaluator": ("hdrg_evaluate", "hdrg_evaluate_bank"),
+    "aux": ("aux_step", "aux_norm", "hdrg_rhuw", "hdrg_sin_q30"),
+    "step": ("hdrg_step_aux", "hdrg_step"),
+    "table parser": ("hdrg_table_parse", "check_fields", "parse_aux", "check_horner", "check_horner_bank",
+                     "hdrg_crc32_words",
+                     "hdrg_word_name", "hdrg_error_name", "hdrg_init", "hdrg_reset"),
+}
+PRIMITIVES = ("hdrg_asr", "hdrg_rhu", "hdrg_mul_rhu", "hdrg_floor_div", "hdrg_div_round", "hdrg_div_round_scaled",
+              "hdrg_clamp", "hdrg_sat_signed", "abs64", "I64")
+STAGE_OF = {f: s for s, fs in STAGES.items() for f in fs}
+
+
+class CostError(ValueError):
+    """A target that cannot be measured: a missing tool, a failed build or run."""
+
+
+def need(tool: str) -> str:
+    """The path of ``tool`` or a CostError naming the Debian package to install."""
+    path = shutil.which(tool)
+    if path is None:
+        pkg = PACKAGES.get(tool, tool)
+        raise CostError(f"{tool} not found: install the Debian package {pkg} (apt-get install -y {pkg})")
+    return path
+
+
+def tool_version(tool: str, arg: str = "--version") -> str:
+    pr = subprocess.run([need(tool), arg], capture_output=True, text=True)
+    text = (pr.stdout or pr.stderr).strip().splitlines()
+    return text[0].strip() if text else "?"
+
+
+def _run(argv, cwd=None, what="command", **kw):
+    pr = subprocess.run([str(a) for a in argv], cwd=cwd, capture_output=True, text=True, **kw)
+    if pr.returncode != 0:
+        raise CostError(f"{what} failed ({' '.join(map(str, argv))[:300]}):\n{(pr.stderr or pr.stdout)[-2000:]}")
+    return pr.stdout
+
+
+# -- MCU: build ----------------------------------------------------------------------------------------
+
+def build_mcu(target: str, opt: str, out: Path, defines=(), noinline: bool = False) -> dict:
+    """Compile the library, the driver and the startup for ``target``, link with newlib/rdimon.
+    Returns the paths: ``elf``, ``lib`` (hdrg_fw.o), ``ci`` (call graph with stack use), ``map``."""
+    need("arm-none-eabi-gcc")
+    if not NEWLIB_SPECS.is_file():
+        raise CostError(f"{NEWLIB_SPECS} not found: install the Debian package libnewlib-arm-none-eabi "
+                        f"(apt-get install -y libnewlib-arm-none-eabi)")
+    cpu, _ = MCU[target]
+    out.mkdir(parents=True, exist_ok=True)
+    cc = ["arm-none-eabi-gcc", f"-mcpu={cpu}", opt, *ARM_FLAGS, *(f"-D{d}" for d in defines)]
+    if noinline:
+        cc.append("-fno-inline")
+    lib, drv, start = out / "hdrg_fw.o", out / "hdrg_fw_main.o", out / "startup.o"
+    _run(cc + ["-fcallgraph-info=su", "-c", C_DIR / "hdrg_fw.c", "-o", lib], cwd=out, what="arm-none-eabi-gcc")
+    _run(cc + ["-c", C_DIR / "hdrg_fw_main.c", "-o", drv], what="arm-none-eabi-gcc")
+    _run(cc + ["-c", ARM_DIR / "startup.c", "-o", start], what="arm-none-eabi-gcc")
+    elf, mp = out / "hdrg_fw.elf", out / "hdrg_fw.map"
+    _run(cc + ["--specs=rdimon.specs", "-nostartfiles", "-T", ARM_DIR / "link.ld", f"-Wl,-Map={mp}",
+               lib, drv, start, "-o", elf], what="arm-none-eabi-gcc (link)")
+    return {"elf": elf, "lib": lib, "ci": out / "hdrg_fw.ci", "map": mp}
+
+
+def qemu_argv(target: str, elf: Path, extra=()) -> list:
+    """The QEMU command line that runs the driver with stdin/stdout through semihosting."""
+    return [need("qemu-system-arm"), "-M", MCU[target][1], "-nographic", "-monitor", "none", "-serial", "none",
+            "-semihosting-config", "enable=on,target=native", *extra, "-kernel", str(elf)]
+
+
+# -- MCU: sizes, call graph, stack ------------------------------------------------------------------------
+
+def symbols(obj: Path) -> dict:
+    """name -> (address, size in bytes) of the function symbols (Thumb bit cleared)."""
+    out = {}
+    for line in _run([need("arm-none-eabi-nm"), "-S", obj], what="nm").splitlines():
+        p = line.split()
+        if len(p) == 4 and p[2] in "tTwW":
+            out[p[3]] = (int(p[0], 16) & ~1, int(p[1], 16))
+    return out
+
+
+def section_sizes(obj: Path) -> dict:
+    """text, data, bss bytes of an object (arm-none-eabi-size, Berkeley format)."""
+    line = _run([need("arm-none-eabi-size"), obj], what="size").splitlines()[1].split()
+    return {"text": int(line[0]), "data": int(line[1]), "bss": int(line[2])}
+
+
+def call_graph(ci: Path) -> tuple:
+    """GCC's -fcallgraph-info=su file -> ({function: static stack bytes or None}, {function: set(callees)},
+    [functions whose stack use is dynamic])."""
+    stack, edges, dynamic = {}, collections.defaultdict(set), []
+    for line in ci.read_text().splitlines():
+        m = re.match(r'node: \{ title: "(?:[^"]*:)?([^":]+)" label: "([^"]*)"', line)
+        if m:
+            s = re.search(r"\\n(\d+) bytes \(([^)]*)\)", m.group(2))
+            stack[m.group(1)] = int(s.group(1)) if s else None
+            if s and "dynamic" in s.group(2):
+                dynamic.append(m.group(1))
+            continue
+        m = re.match(r'edge: \{ sourcename: "(?:[^"]*:)?([^":]+)" targetname: "(?:[^"]*:)?([^":]+)"', line)
+        if m:
+            edges[m.group(1)].add(m.group(2))
+    return stack, edges, dynamic
+
+
+def reachable(edges: dict, root: str) -> set:
+    seen, todo = set(), [root]
+    while todo:
+        f = todo.pop()
+        if f not in seen:
+            seen.add(f)
+            todo.extend(edges.get(f, ()))
+    return seen
+
+
+def worst_stack(stack: dict, edges: dict, root: str) -> tuple:
+    """(bytes, path) of the deepest call path from ``root``; functions outside the object (libgcc,
+    memset) count 0 and are listed in the path with '?'."""
+    def go(f, seen):
+        own = stack.get(f)
+        best = (0, [])
+        for g in edges.get(f, ()):
+            if g not in seen:
+                best = max(best, go(g, seen | {g}), key=lambda x: (x[0], len(x[1])))
+        return (own or 0) + best[0], [f if own is not None else f + "?"] + best[1]
+    return go(root, {root})
+
+
+def elf_functions(elf: Path) -> tuple:
+    """From the linked ELF's disassembly: ({function: bytes}, {function: set of functions it branches
+    or calls to}); a function spans from its label to the next one (libgcc's assembler helpers have no
+    symbol size)."""
+    starts, edges, cur = [], collections.defaultdict(set), None
+    for line in _run([need("arm-none-eabi-objdump"), "-d", elf], what="objdump").splitlines():
+        m = re.match(r"([0-9a-f]+) <([^>]+)>:$", line)
+        if m:
+            cur = m.group(2)
+            starts.append((int(m.group(1), 16), cur))
+            continue
+        m = re.search(r"\t(b\S*|cbn?z)\s.*<([^>+]+)(\+0x[0-9a-f]+)?>", line)
+        if m and cur and m.group(2) != cur:
+            edges[cur].add(m.group(2))
+    end = max(a + s for a, s in symbols(elf).values())
+    sizes = {n: (starts[i + 1][0] if i + 1 < len(starts) else end) - a for i, (a, n) in enumerate(starts)}
+    return sizes, edges
+
+
+def mcu_sizes(b: dict) -> dict:
+    """Code bytes of the library object and of the per-sample path (every function of the linked ELF
+    reachable from hdrg_step_aux, libgcc helpers included); worst stack of a sample and of a table
+    load (GCC's call graph and stack use; libgcc helpers are not in it)."""
+    lib_syms = symbols(b["lib"])
+    stack, edges, dynamic = call_graph(b["ci"])
+    fsizes, fedges = elf_functions(b["elf"])
+    step_code = {f: fsizes[f] for f in sorted(reachable(fedges, STEP))}
+    s_bytes, s_path = worst_stack(stack, edges, STEP)
+    p_bytes, p_path = worst_stack(stack, edges, "hdrg_init")
+    return {"library": section_sizes(b["lib"]), "functions": {f: s for f, (_, s) in sorted(lib_syms.items())},
+            "step_functions": step_code, "code_bytes": sum(step_code.values()),
+            "stack_step_bytes": s_bytes, "stack_step_path": s_path, "stack_init_bytes": p_bytes,
+            "stack_init_path": p_path, "stack_dynamic": dynamic}
+
+
+# -- MCU: instruction trace and cycle model ------------------------------------------------------------
+
+def disassembly(elf: Path) -> dict:
+    """address -> (mnemonic, operands, size in bytes) of every instruction in the ELF."""
+    out = {}
+    for line in _run([need("arm-none-eabi-objdump"), "-d", elf], what="objdump").splitlines():
+        m = re.match(r"\s*([0-9a-f]+):\t([0-9a-f ]+?)\s*\t(\S+)\s*(.*)$", line)
+        if m:
+            size = 2 * len(m.group(2).split())
+            out[int(m.group(1), 16)] = (m.group(3), m.group(4), size)
+    return out
+
+
+def _text_ranges(b: dict, elf_syms: dict) -> list:
+    """[lo, hi) of the code a sample may execute: the library's functions, libgcc and mem*."""
+    lib = set(symbols(b["lib"]))
+    ranges = [elf_syms[f] for f in lib if f in elf_syms]
+    for line in b["map"].read_text().splitlines():
+        m = re.match(r"\s*\.text\S*\s+0x([0-9a-f]+)\s+0x([0-9a-f]+)\s+\S*(libgcc\.a|lib_a-mem(set|cpy|move))", line)
+        if m:
+            ranges.append((int(m.group(1), 16), int(m.group(2), 16)))
+    return [(a, a + s) for a, s in ranges if s]
+
+
+def _merge(ranges):
+    out = []
+    for lo, hi in sorted(ranges):
+        if out and lo <= out[-1][1]:
+            out[-1][1] = max(out[-1][1], hi)
+        else:
+            out.append([lo, hi])
+    return out
+
+
+def case_requests(set_name: str, cases=None, n: int = TRACE_SAMPLES) -> str:
+    """The protocol requests of the first ``n`` samples of each case (all cases by default) of a
+    committed pipeline vector set."""
+    manifest = V.read_manifest(V.DEFAULT_DIR)
+    meta = manifest["sets"][set_name]
+    vs = V._load_set(V.DEFAULT_DIR, set_name, meta)
+    reqs = V._requests(vs, None)
+    lines, k = [], 0
+    for ci, case in enumerate(vs.cases):
+        lo, hi = case["rows"]
+        table_req = reqs[k]
+        body = reqs[k + 1:k + 1 + hi - lo]
+        k += 1 + hi - lo
+        if cases is None or ci in cases:
+            lines.append(table_req[0])
+            lines.extend(r[0] for r in body[:n])
+    return "\n".join(lines) + "\nQUIT\n"
+
+
+def trace_samples(target: str, b: dict, requests: str, workdir: Path) -> list:
+    """Run the driver on QEMU one instruction per block with the exec log; returns, per sample,
+    the list of executed addresses from the entry of hdrg_step_aux to the return to the driver."""
+    elf_syms = symbols(b["elf"])
+    entry = elf_syms[STEP][0]
+    dis = disassembly(b["elf"])
+    rets = sorted(a + s for a, (mn, ops, s) in dis.items() if mn.startswith("bl") and f"<{STEP}>" in ops)
+    ranges = _merge(_text_ranges(b, elf_syms) + [(r, r + 2) for r in rets])
+    log = workdir / "exec.log"
+    filt = ",".join(f"0x{lo:x}..0x{hi - 1:x}" for lo, hi in ranges)
+    pr = subprocess.run(qemu_argv(target, b["elf"], ["-singlestep", "-d", "exec,nochain", "-D", str(log),
+                                                     "-dfilter", filt]),
+                        input=requests.encode(), capture_output=True, timeout=1200)
+    if pr.returncode not in (0, 1) or b"ERR" in pr.stdout:
+        raise CostError(f"traced run failed (status {pr.returncode}): {pr.stdout[-300:]!r} {pr.stderr[-300:]!r}")
+    samples, cur = [], None
+    retset = set(rets)
+    with open(log) as fh:
+        for line in fh:
+            if not line.startswith("Trace"):
+                continue
+            pc = int(line.split("[", 1)[1].split("/", 2)[1], 16)
+            if cur is None:
+                if pc == entry:
+                    cur = [pc]
+            elif pc in retset:
+                samples.append(cur)
+                cur = None
+            else:
+                cur.append(pc)
+    log.unlink()
+    if not samples:
+        raise CostError("the exec trace holds no sample (QEMU log format changed?)")
+    return samples
+
+
+# Cortex-M4 TRM r0p1 table 3-1 (cycles; P = pipeline refill of a taken branch, 1..3; N = registers)
+M4_MODEL = {"nominal": {"P": 2, "div": 7}, "low": {"P": 1, "div": 2}, "high": {"P": 3, "div": 12}}
+_LOADS = re.compile(r"^(ldr|str)(b|h|sb|sh|ex|exb|exh)?(\.w|\.n)?$")
+
+
+def cycles_m4(stream: list, dis: dict, P: int, div: int) -> int:
+    """Cycles of an executed instruction stream on the Cortex-M4 model: data processing, multiply
+    (incl. 32x32->64 UMULL/SMLAL...) and a not-taken branch 1; DIV ``div``; single LDR/STR 2, or 1 right
+    after another single load/store (pipelined); LDRD/STRD 3; LDM/STM/PUSH/POP 1 + N (+P with pc);
+    a taken branch (next address != this + size), BL, BX, TBB/TBH 1 + P (TB 2 + P)."""
+    total, prev_ls = 0, False
+    for i, pc in enumerate(stream):
+        mn, ops, size = dis[pc]
+        base = mn.split(".")[0]
+        nxt = stream[i + 1] if i + 1 < len(stream) else None
+        taken = nxt is not None and nxt != pc + size
+        ls = bool(_LOADS.match(mn))
+        if base in ("sdiv", "udiv"):
+            c = div
+        elif ls:
+            c = 1 if prev_ls else 2
+            if "pc" in ops.split(",")[0]:
+                c += P
+        elif base in ("ldrd", "strd"):
+            c = 3
+        elif base.startswith(("ldm", "stm", "push", "pop")):
+            regs = ops[ops.find("{") + 1:ops.find("}")]
+            n = sum((int(b.split("-")[1][1:]) - int(b.split("-")[0][1:]) + 1) if "-" in b and b.strip()[0] == "r"
+                    else 1 for b in regs.split(","))
+            c = 1 + n + (P if "pc" in regs else 0)
+        elif base in ("tbb", "tbh"):
+            c = 2 + P
+        elif base.startswith("b") and base not in ("bic", "bics", "bfi", "bfc") or base in ("cbz", "cbnz"):
+            c = 1 + P if (taken or base in ("bl", "blx", "bx")) else 1
+        else:
+            c = 1
+        prev_ls = ls
+        total += c
+    return total
+
+
+def stage_counts(samples: list, dis_syms: list) -> dict:
+    """Instructions per stage, summed over the samples: each address -> its function -> STAGE_OF;
+    primitives and functions outside the library (libgcc) are charged to the last stage seen."""
+    import bisect
+    starts = [a for a, _, _ in dis_syms]
+    counts = collections.Counter()
+    for s in samples:
+        stage = "step"
+        for pc in s:
+            k = bisect.bisect_right(starts, pc) - 1
+            a, size, name = dis_syms[k] if k >= 0 else (0, 0, "?")
+            name = name.split(".")[0]            # rate_step.constprop.0 -> rate_step
+            if pc >= a + size or name in PRIMITIVES or name.startswith("__") or name in ("memset", "memcpy"):
+                pass
+            elif name in STAGE_OF:
+                stage = STAGE_OF[name]
+            else:
+                stage = f"other ({name})"
+            counts[stage] += 1
+    return counts
+
+
+def _stats(xs):
+    xs = sorted(xs)
+    return {"mean": round(sum(xs) / len(xs), 1), "median": xs[len(xs) // 2], "max": xs[-1], "min": xs[0]}
+
+
+def measure_mcu(target: str, work: Path, log=print) -> dict:
+    """Build -O2, -Os, the broken build and a -fno-inline build; check-impl on QEMU; trace."""
+    cpu, machine = MCU[target]
+    res = {"target": target, "cpu": cpu, "machine": machine,
+           "tools": {"gcc": tool_version("arm-none-eabi-gcc"), "qemu": tool_version("qemu-system-arm"),
+                     "binutils": tool_version("arm-none-eabi-objdump")}}
+    builds = {}
+    for opt in ("-O2", "-Os"):
+        builds[opt] = b = build_mcu(target, opt, work / f"{target}{opt}")
+        rep = V.check_impl(qemu_argv(target, b["elf"]), log=lambda s: log(f"  {opt}: {s}"))
+        sizes = mcu_sizes(b)
+        res[opt] = {"bit_exact": rep["mismatches"] == 0, "vectors": sum(s["rows"] for s in rep["sets"].values()),
+                    "first_mismatch": rep["first"], **sizes}
+    bad = build_mcu(target, "-O2", work / f"{target}-broken", defines=("HDRG_BREAK_ROUNDING",))
+    rep = V.check_impl(qemu_argv(target, bad["elf"]), names=["primitives"], log=lambda s: None)
+    res["broken_build_caught"] = rep["mismatches"] > 0
+    # instruction trace: e2e (17 terms, mode reversal, Z word) and the aux set's simulated case
+    manifest = V.read_manifest(V.DEFAULT_DIR)
+    aux_last = len(manifest["sets"]["aux"]["cases"]) - 1
+    workloads = {"e2e": case_requests("e2e"), "aux-sim": case_requests("aux", [aux_last])}
+    ni = build_mcu(target, "-O2", work / f"{target}-noinline", noinline=True)
+    ni_syms = sorted((a, s, n) for n, (a, s) in symbols(ni["elf"]).items())
+    for opt, b in builds.items():
+        dis = disassembly(b["elf"])
+        res[opt]["per_sample"] = {}
+        for wname, reqs in workloads.items():
+            samples = trace_samples(target, b, reqs, work)
+            cyc = {k: _stats([cycles_m4(s, dis, **m) for s in samples]) for k, m in M4_MODEL.items()}
+            res[opt]["per_sample"][wname] = {"samples": len(samples), "instructions": _stats([len(s) for s in samples]),
+                                             "cycles_m4_model": cyc}
+    res["per_stage"] = {}
+    for wname, reqs in workloads.items():
+        samples = trace_samples(target, ni, reqs, work)
+        counts = stage_counts(samples, ni_syms)
+        res["per_stage"][wname] = {"samples": len(samples), "instructions_mean_noinline":
+                                   {k: round(v / len(samples), 1) for k, v in counts.most_common()},
+                                   "total_mean_noinline": round(sum(len(s) for s in samples) / len(samples), 1)}
+    ni_sizes = symbols(ni["lib"])
+    per_stage_code = collections.Counter()
+    for f, (_, s) in ni_sizes.items():
+        f = f.split(".")[0]
+        per_stage_code[STAGE_OF.get(f, "primitives" if f in PRIMITIVES else f"other ({f})")] += s
+    res["code_bytes_per_stage_noinline"] = dict(per_stage_code.most_common())
+    ps = res["-O2"]["per_sample"]["e2e"]
+    res.update({"bit_exact": res["-O2"]["bit_exact"] and res["-Os"]["bit_exact"],
+                "instructions_per_sample": ps["instructions"]["mean"],
+                "cycles_per_sample": ps["cycles_m4_model"]["nominal"]["mean"],
+                "code_bytes": res["-Os"]["code_bytes"], "code_bytes_O2": res["-O2"]["code_bytes"],
+                "stack_bytes": res["-O2"]["stack_step_bytes"],
+                "cycle_model": "Cortex-M4 TRM table 3-1 per-instruction model over the executed stream"
+                               + (" (M7 is dual-issue: an upper bound there)" if target == "cortex-m7" else "")})
+    return res
+
+
+# -- host ----------------------------------------------------------------------------------------------
+
+def measure_host(work: Path, log=print) -> dict:
+    gcc = need("gcc")
+    work.mkdir(parents=True, exist_ok=True)
+    exe = work / "hdrg_fw"
+    _run([gcc, "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-c", C_DIR / "hdrg_fw.c", "-o", work / "hdrg_fw.o"],
+         what="gcc")
+    _run([gcc, "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-o", exe, work / "hdrg_fw.o",
+          C_DIR / "hdrg_fw_main.c"], what="gcc")
+    rep = V.check_impl([str(exe)], log=lambda s: log(f"  {s}"))
+    # BENCH on the e2e inputs (binary records), best of 5 passes
+    reqs = [r for r in case_requests("e2e", n=10 ** 9).splitlines() if r.startswith(("S ", "TABLE"))]
+    table = next(r for r in reqs if r.startswith("TABLE"))
+    import numpy as np
+    rows = np.array([[int(x) for x in r.split()[1:7]] for r in reqs if r.startswith("S ")][:2400], np.int64)
+    data = (table + f"\nBENCH {len(rows)} 5\n").encode() + rows.astype("<i8").tobytes() + b"QUIT\n"
+    out = subprocess.run([str(exe)], input=data, capture_output=True).stdout.decode().split()
+    ns = int(out[out.index("BENCH") + 2]) / len(rows)
+    return {"target": "host", "tools": {"gcc": tool_version("gcc")}, "bit_exact": rep["mismatches"] == 0,
+            "vectors": sum(s["rows"] for s in rep["sets"].values()), "ns_per_sample": round(ns, 1),
+            "cycles_per_sample": None, "code_bytes": section_sizes_host(work / "hdrg_fw.o")}
+
+
+def section_sizes_host(obj: Path) -> int:
+    line = _run(["size", obj], what="size").splitlines()[1].split()
+    return int(line[0])
+
+
+# -- FPGA: the time-multiplexed evaluator ------------------------------------------------------------
+
+HDL = V.DEFAULT_DIR / "hdl"
+TM_SOURCES = (HDL / "tb_eval_tm.v", HDL / "hdrg_eval_tm.v")
+TM_TOP, TM_PNR_TOP = "hdrg_eval_tm", "hdrg_eval_tm_pnr"
+FMAX_GOAL_MHZ = 24.0
+# Yosys cell -> resource, per family
+CELLS = {"ice40": {"luts": ("SB_LUT4",), "ffs": ("SB_DFF",), "dsps": ("SB_MAC16",), "brams": ("SB_RAM40_4K",),
+                   "carries": ("SB_CARRY",)},
+         "xc7": {"luts": ("LUT1", "LUT2", "LUT3", "LUT4", "LUT5", "LUT6"), "ffs": ("FD",), "dsps": ("DSP48E1",),
+                 "brams": ("RAMB18E1", "RAMB36E1"), "lutrams": ("RAM32M", "RAM64M", "RAM32X1D", "RAM64X1D"),
+                 "carries": ("CARRY4",)}}
+
+
+def _evaluator_meta():
+    meta = V.read_manifest(V.DEFAULT_DIR)["sets"]["evaluator"]
+    return meta, len(meta["tables"])
+
+
+def _tb_result(out: str, what: str) -> dict:
+    m = re.search(r"^RESULT vectors=(\d+) mismatches=(\d+) cycles=(-?\d+)$", out, re.M)
+    if not m or "ERROR" in out:
+        raise CostError(f"{what}: no RESULT line:\n{out[-1500:]}")
+    return {"vectors": int(m.group(1)), "mismatches": int(m.group(2)), "cycles": int(m.group(3))}
+
+
+def record_positions(meta: dict) -> tuple:
+    """(record bits, {field: LSB position}) of a set's $readmemh record (manifest "mem_record", MSB first)."""
+    rec = sum(f["bits"] for f in meta["mem_record"])
+    pos, top = {}, rec
+    for f in meta["mem_record"]:
+        top -= f["bits"]
+        pos[f["name"]] = top
+    return rec, pos
+
+
+def _offsets_file(meta: dict, work: Path, name: str, per_case: bool) -> tuple:
+    """A file of table start words (one per table, or per case: the case's table) and the number of
+    table words."""
+    n_words = len((V.DEFAULT_DIR / meta["tables_mem"]).read_text().split())
+    offsets = meta.get("table_offsets") or [k * meta["table_words"] for k in range(len(meta["tables"]))]
+    rows = [offsets[c["table"]] for c in meta["cases"]] if per_case else offsets
+    path = work / f"{name}.offsets.mem"
+    path.write_text("".join(f"{o:08x}\n" for o in rows))
+    return path, len(rows), n_words
+
+
+def _eval_tb_args(work: Path) -> tuple:
+    """(parameters, plusargs) of tb_eval_tm for the committed evaluator set."""
+    meta = V.read_manifest(V.DEFAULT_DIR)["sets"]["evaluator"]
+    rec, pos = record_positions(meta)
+    work.mkdir(parents=True, exist_ok=True)
+    off, n_tab, n_words = _offsets_file(meta, work, "evaluator", per_case=False)
+    params = {"REC": rec, "P_CASE": pos["case"], "P_U": pos["u"], "P_V": pos["v"], "P_Z": pos["z"], "P_B": pos["b"],
+              "P_ZC": pos["zclamped"], "HAS_BANK": int("bank" in pos), "P_BANK": pos.get("bank", 0)}
+    plus = [f"+vectors={V.DEFAULT_DIR / meta['mem']}", f"+tables={V.DEFAULT_DIR / meta['tables_mem']}",
+            f"+offsets={off}", f"+n_vec={meta['rows']}", f"+n_tab={n_tab}", f"+n_words={n_words}"]
+    return params, plus
+
+
+def rtl_check_icarus(work: Path, defines=()) -> dict:
+    """The time-multiplexed evaluator's testbench under Icarus on the evaluator vectors."""
+    params, plus = _eval_tb_args(work)
+    exe = work / ("tb_eval_tm" + "".join("_" + d for d in defines))
+    _run([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines),
+          *(f"-Ptb_eval_tm.{k}={v}" for k, v in params.items()), "-o", exe, *TM_SOURCES], what="iverilog")
+    out = _run([need("vvp"), "-n", exe, *plus], what="vvp", timeout=900)
+    return _tb_result(out, "icarus")
+
+
+def rtl_check_verilator(work: Path) -> dict:
+    """The same testbench compiled by Verilator 5 (--binary)."""
+    params, plus = _eval_tb_args(work)
+    obj = work / "verilator"
+    _run([need("verilator"), "--binary", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_eval_tm",
+          *(f"-G{k}={v}" for k, v in params.items()), "-Mdir", obj, *TM_SOURCES], what="verilator", timeout=900)
+    out = _run([obj / "Vtb_eval_tm", *plus], what="verilator run", timeout=900)
+    return _tb_result(out, "verilator")
+
+
+FRONT_SOURCES = (HDL / "tb_front.v", HDL / "hdrg_front.v")
+
+
+def front_params(set_name: str, work: Path) -> tuple:
+    """(testbench parameters, plusargs) of tb_front for a pipeline vector set: the LSB position of
+    each field in the set's $readmemh record and a file of each case's table start word."""
+    meta = V.read_manifest(V.DEFAULT_DIR)["sets"][set_name]
+    rec, pos = record_positions(meta)
+    off_file, n_cases, n_words = _offsets_file(meta, work, set_name, per_case=True)
+    params = {"REC": rec, "P_CASE": pos["case"], "P_F": pos["F"], "P_T": pos["T"], "P_RESTART": pos["RESTART"],
+              "P_U": pos["u"], "P_V": pos["v"], "P_S": pos["s"], "P_FLAGS": pos["flags"]}
+    plus = [f"+vectors={V.DEFAULT_DIR / meta['mem']}", f"+tables={V.DEFAULT_DIR / meta['tables_mem']}",
+            f"+offsets={off_file}", f"+n_vec={meta['rows']}", f"+n_words={n_words}", f"+n_tab={n_cases}"]
+    return params, plus
+
+
+def rtl_front_check(set_name: str, work: Path, simulator: str = "icarus", defines=()) -> dict:
+    """hdrg_front (proxy + rate) on a pipeline vector set under Icarus or Verilator."""
+    work.mkdir(parents=True, exist_ok=True)
+    params, plus = front_params(set_name, work)
+    tag = f"{set_name}_{simulator}" + "".join("_" + d for d in defines)
+    if simulator == "icarus":
+        exe = work / f"tb_front_{tag}"
+        _run([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines),
+              *(f"-Ptb_front.{k}={v}" for k, v in params.items()), "-o", exe, *FRONT_SOURCES], what="iverilog")
+        out = _run([need("vvp"), "-n", exe, *plus], what="vvp", timeout=1800)
+    else:
+        obj = work / f"vl_front_{tag}"
+        _run([need("verilator"), "--binary", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_front",
+              *(f"-D{d}" for d in defines), *(f"-G{k}={v}" for k, v in params.items()), "-Mdir", obj,
+              *FRONT_SOURCES], what="verilator", timeout=900)
+        out = _run([obj / "Vtb_front", *plus], what="verilator run", timeout=1800)
+    return _tb_result(out, f"{simulator} front {set_name}")
+
+
+def yosys_cells(stat: str) -> dict:
+    """Cell name -> count from the last 'Number of cells' block of a Yosys `stat`."""
+    block = stat[stat.rindex("Number of cells"):]
+    out = {}
+    for line in block.splitlines()[1:]:
+        m = re.match(r"\s+(\S+)\s+(\d+)$", line)
+        if not m:
+            break
+        out[m.group(1)] = int(m.group(2))
+    return out
+
+
+def resources(family: str, cells: dict) -> dict:
+    return {k: sum(n for c, n in cells.items() if c.startswith(prefixes)) for k, prefixes in CELLS[family].items()}
+
+
+def synth(family: str, work: Path) -> dict:
+    """Yosys synthesis of the evaluator alone (synth_ice40 -dsp / synth_xilinx): cells and resources."""
+    cmd = (f"read_verilog {HDL / 'hdrg_eval_tm.v'}; "
+           + ("synth_ice40 -dsp" if family == "ice40" else "synth_xilinx") + f" -top {TM_TOP}; tee -o {work / 'stat.txt'} stat")
+    _run([need("yosys"), "-q", "-p", cmd], what="yosys", timeout=900)
+    cells = yosys_cells((work / "stat.txt").read_text())
+    return {"cells": cells, **resources(family, cells)}
+
+
+FRONT_N_HIST = 64                       # ring depth synthesized for the proxy + rate RTL (a parameter)
+
+
+def synth_front(family: str, work: Path) -> dict:
+    """Yosys synthesis of hdrg_front (proxy + rate; N_HIST = FRONT_N_HIST): cells and resources."""
+    cmd = (f"read_verilog {HDL / 'hdrg_front.v'}; chparam -set N_HIST {FRONT_N_HIST} hdrg_front; "
+           + ("synth_ice40 -dsp" if family == "ice40" else "synth_xilinx") + f" -top hdrg_front; "
+           f"tee -o {work / 'stat_front.txt'} stat")
+    _run([need("yosys"), "-q", "-p", cmd], what="yosys", timeout=900)
+    cells = yosys_cells((work / "stat_front.txt").read_text())
+    return {"n_hist": FRONT_N_HIST, "cells": cells, **resources(family, cells)}
+
+
+def pnr_ice40(work: Path, seed: int = 1) -> dict:
+    """nextpnr-ice40 --up5k of the pin-light wrapper: Fmax of the clock, utilisation."""
+    js = work / "pnr.json"
+    _run([need("yosys"), "-q", "-p", f"read_verilog {HDL / 'hdrg_eval_tm.v'} {HDL / 'hdrg_eval_tm_pnr.v'}; "
+                                     f"synth_ice40 -dsp -top {TM_PNR_TOP} -json {js}"], what="yosys", timeout=900)
+    pr = subprocess.run([need("nextpnr-ice40"), "--up5k", "--package", "sg48", "--json", str(js),
+                         "--pcf-allow-unconstrained", "--freq", str(FMAX_GOAL_MHZ), "--seed", str(seed)],
+                        capture_output=True, text=True, timeout=1200)
+    log = pr.stdout + pr.stderr
+    fm = re.findall(r"Max frequency for clock '(clk[^']*)': ([\d.]+) MHz", log)
+    if not fm:
+        raise CostError(f"nextpnr-ice40 reported no Fmax (status {pr.returncode}):\n{log[-1500:]}")
+    util = {m.group(1): (int(m.group(2)), int(m.group(3)))
+            for m in re.finditer(r"(ICESTORM_LC|ICESTORM_DSP|ICESTORM_RAM|SB_IO):\s+(\d+)/\s*(\d+)", log)}
+    return {"fmax_mhz": float(fm[-1][1]), "utilisation": util, "seed": seed}
+
+
+def measure_fpga(target: str, work: Path, log=print) -> dict:
+    work.mkdir(parents=True, exist_ok=True)
+    family = "ice40" if target == "ice40" else "xc7"
+    tools = {"yosys": tool_version("yosys", "-V"), "iverilog": tool_version("iverilog", "-V"),
+             "verilator": tool_version("verilator")}
+    ic = rtl_check_icarus(work)
+    log(f"  icarus: {ic}")
+    vl = rtl_check_verilator(work)
+    log(f"  verilator: {vl}")
+    broken = rtl_check_icarus(work, ("HDRG_BREAK_ROUNDING",))
+    syn = synth(family, work)
+    log(f"  yosys: {syn}")
+    front = {"icarus": {n: rtl_front_check(n, work) for n in ("sequencer", "e2e", "aux")}}
+    front.update(synth_front(family, work))
+    front["bit_exact"] = all(r["mismatches"] == 0 and r["vectors"] > 0 for r in front["icarus"].values())
+    front["cycles_per_sample_max"] = max(r["cycles"] for r in front["icarus"].values())
+    log(f"  proxy + rate RTL: {front}")
+    res = {"target": target, "design": "vectors/hdl/hdrg_eval_tm.v (time-multiplexed evaluator: one 32x32 multiplier)",
+           "scope": "evaluator only (the rest of the pipeline is not in RTL yet: docs/COST.md)",
+           "tools": tools, "bit_exact": ic["mismatches"] == 0 and vl["mismatches"] == 0 and ic["vectors"] > 0,
+           "vectors": ic["vectors"], "icarus": ic, "verilator": vl, "broken_build_caught": broken["mismatches"] > 0,
+           "cycles_per_sample": ic["cycles"], **{k: v for k, v in syn.items()},
+           "front_end": {"design": "vectors/hdl/hdrg_front.v (proxy + rate, not time-multiplexed yet)", **front}}
+    if family == "ice40":
+        tools["nextpnr-ice40"] = tool_version("nextpnr-ice40")
+        p = pnr_ice40(work)
+        log(f"  nextpnr: {p}")
+        res.update({"fmax_mhz": p["fmax_mhz"], "pnr": p, "device": "iCE40 UP5K (sg48)",
+                    "samples_per_s_at_fmax": round(p["fmax_mhz"] * 1e6 / ic["cycles"])})
+    else:
+        res.update({"fmax_mhz": None, "device": "Xilinx 7-series (Yosys synth_xilinx; no place-and-route in Debian)"})
+    return res
+
+
+# -- CLI -----------------------------------------------------------------------------------------------
+
+def measure(target: str, work: Path, log=print) -> dict:
+    if target in MCU:
+        return measure_mcu(target, work, log)
+    if target == "host":
+        return measure_host(work, log)
+    return measure_fpga(target, work, log)
+
+
+def summary(r: dict) -> str:
+    lines = [f"target {r['target']}: bit_exact {r['bit_exact']}"]
+    for k in ("cycles_per_sample", "instructions_per_sample", "code_bytes", "code_bytes_O2", "stack_bytes",
+              "ns_per_sample", "luts", "ffs", "dsps", "brams", "fmax_mhz", "broken_build_caught"):
+        if k in r:
+            lines.append(f"  {k}: {r[k]}")
+    if "front_end" in r:
+        f = r["front_end"]
+        lines.append(f"  proxy + rate RTL: bit_exact {f['bit_exact']} (Icarus: "
+                     + ", ".join(f"{n} {x['vectors']}" for n, x in f["icarus"].items())
+                     + f"), max {f['cycles_per_sample_max']} cycles/sample; luts {f['luts']}, ffs {f['ffs']}, "
+                       f"dsps {f['dsps']}, brams {f['brams']} (N_HIST {f['n_hist']})")
+    if "per_stage" in r:
+        for w, d in r["per_stage"].items():
+            lines.append(f"  instructions per sample by stage ({w}, -O2 -fno-inline, mean of {d['samples']}): "
+                         + ", ".join(f"{k} {v}" for k, v in d["instructions_mean_noinline"].items()))
+        lines.append("  code bytes by stage (-O2 -fno-inline): "
+                     + ", ".join(f"{k} {v}" for k, v in r["code_bytes_per_stage_noinline"].items()))
+        for opt in ("-O2", "-Os"):
+            o = r[opt]
+            lines.append(f"  {opt}: library text/data/bss {o['library']}, per-sample code {o['code_bytes']} B, "
+                         f"stack {o['stack_step_bytes']} B ({' > '.join(o['stack_step_path'])}), table load stack "
+                         f"{o['stack_init_bytes']} B")
+            for w, d in o["per_sample"].items():
+                c = d["cycles_m4_model"]
+                lines.append(f"    {w}: {d['samples']} samples, instructions {d['instructions']}, cycles nominal "
+                             f"{c['nominal']['mean']} (low {c['low']['mean']}, high {c['high']['mean']}; max "
+                             f"{c['nominal']['max']})")
+    lines.append("  tools: " + "; ".join(f"{k}: {v}" for k, v in r.get("tools", {}).items()))
+    return "\n".join(lines)
+
+
+def configure_cli(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--target", required=True, choices=TARGETS)
+    parser.add_argument("--json", default=None, help="write the figures as JSON to this file")
+    parser.add_argument("--keep", default=None, help="build directory to keep (default: a temporary one)")
+
+
+def run_cli(args) -> int:
+    if args.keep:
+        r = measure(args.target, Path(args.keep), log=print)
+    else:
+        with tempfile.TemporaryDirectory(prefix="hdrg-cost-") as d:
+            r = measure(args.target, Path(d), log=print)
+    print(summary(r))
+    if args.json:
+        Path(args.json).write_text(json.dumps(r, indent=1, default=str) + "\n")
+    return 0 if r["bit_exact"] else 1

@@ -1,0 +1,117 @@
+"""`hdrg cost`: the cycle model, the call-graph stack analysis and the Yosys report parser on
+small inputs, a missing tool named with its Debian package, and every target's JSON from a real
+build and run (slow; each skips with a reason when its tools are absent: CI installs them)."""
+import json
+import shutil
+import textwrap
+
+import pytest
+
+from host_tools import cli, cost
+
+ARM = shutil.which("arm-none-eabi-gcc") and shutil.which("qemu-system-arm") and cost.NEWLIB_SPECS.is_file()
+FPGA = all(shutil.which(t) for t in ("yosys", "iverilog", "vvp", "verilator"))
+
+
+def test_missing_tool_names_the_debian_package(monkeypatch):
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    with pytest.raises(cost.CostError, match=r"qemu-system-arm not found: install the Debian package qemu-system-arm"):
+        cost.need("qemu-system-arm")
+    with pytest.raises(cost.CostError, match="gcc-arm-none-eabi"):
+        cost.need("arm-none-eabi-gcc")
+
+
+def test_m4_cycle_model_counts_branches_loads_and_pops():
+    dis = {0x10: ("ldr", "r0, [r1, #0]", 2), 0x12: ("ldr", "r2, [r1, #4]", 2), 0x14: ("adds", "r0, r0, r2", 2),
+           0x16: ("cmp", "r0, #0", 2), 0x18: ("bne.n", "20 <x>", 2), 0x1a: ("nop", "", 2),
+           0x20: ("umull", "r0, r1, r2, r3", 4), 0x24: ("pop", "{r4, r5, pc}", 2)}
+    # not taken: ldr 2, ldr pipelined 1, adds 1, cmp 1, bne 1, nop 1, ... ; taken: bne 1 + P
+    straight = [0x10, 0x12, 0x14, 0x16, 0x18, 0x1a]
+    taken = [0x10, 0x12, 0x14, 0x16, 0x18, 0x20, 0x24]
+    assert cost.cycles_m4(straight, dis, P=2, div=7) == 2 + 1 + 1 + 1 + 1 + 1
+    assert cost.cycles_m4(taken, dis, P=2, div=7) == 2 + 1 + 1 + 1 + 3 + 1 + (1 + 3 + 2)
+    assert cost.cycles_m4(taken, dis, P=1, div=7) < cost.cycles_m4(taken, dis, P=3, div=7)
+
+
+def test_worst_stack_path_from_gcc_call_graph(tmp_path):
+    ci = tmp_path / "x.ci"
+    ci.write_text(textwrap.dedent('''\
+        graph: { title: "x.c"
+        node: { title: "step" label: "step\\nx.c:1:1\\n40 bytes (static)" }
+        node: { title: "x.c:eval" label: "eval\\nx.c:2:1\\n24 bytes (static)" }
+        node: { title: "rhu" label: "rhu\\nx.c:3:1\\n8 bytes (static)" }
+        node: { title: "__aeabi_ldivmod" label: "__aeabi_ldivmod\\n<built-in>" shape : ellipse }
+        edge: { sourcename: "step" targetname: "x.c:eval" label: "x.c:1:2" }
+        edge: { sourcename: "step" targetname: "rhu" }
+        edge: { sourcename: "x.c:eval" targetname: "rhu" }
+        edge: { sourcename: "rhu" targetname: "__aeabi_ldivmod" }
+        }
+        '''))
+    stack, edges, dynamic = cost.call_graph(ci)
+    assert stack == {"step": 40, "eval": 24, "rhu": 8, "__aeabi_ldivmod": None} and dynamic == []
+    assert cost.worst_stack(stack, edges, "step") == (72, ["step", "eval", "rhu", "__aeabi_ldivmod?"])
+    assert cost.reachable(edges, "eval") == {"eval", "rhu", "__aeabi_ldivmod"}
+
+
+def test_yosys_stat_parser_sums_families():
+    stat = "   Number of cells:  9\n     LUT2  3\n     LUT6  2\n     FDRE  4\n     DSP48E1  1\n\nother\n"
+    cells = cost.yosys_cells(stat)
+    assert cells == {"LUT2": 3, "LUT6": 2, "FDRE": 4, "DSP48E1": 1}
+    r = cost.resources("xc7", cells)
+    assert (r["luts"], r["ffs"], r["dsps"], r["brams"]) == (5, 4, 1, 0)
+
+
+def _cost_json(target, tmp_path):
+    out = tmp_path / f"{target}.json"
+    rc = cli.main(["cost", "--target", target, "--json", str(out)])
+    r = json.loads(out.read_text())
+    assert rc == 0 and r["target"] == target and r["bit_exact"] is True
+    for key in ("cycles_per_sample", "tools"):
+        assert key in r
+    return r
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("target", ["cortex-m4", "cortex-m7"])
+@pytest.mark.skipif(not ARM, reason="gcc-arm-none-eabi, libnewlib-arm-none-eabi or qemu-system-arm not installed")
+def test_mcu_cost_json(target, tmp_path):
+    r = _cost_json(target, tmp_path)
+    assert r["broken_build_caught"] is True
+    assert r["-O2"]["vectors"] == r["-Os"]["vectors"] > 40000
+    e2e = r["-O2"]["per_sample"]["e2e"]
+    from host_tools import vectors as V
+    cases = V.read_manifest(V.DEFAULT_DIR)["sets"]["e2e"]["cases"]
+    assert e2e["samples"] == sum(min(cost.TRACE_SAMPLES, c["rows"][1] - c["rows"][0]) for c in cases)
+    assert 100 < e2e["instructions"]["min"] <= r["instructions_per_sample"] <= e2e["instructions"]["max"] < 10000
+    c = e2e["cycles_m4_model"]
+    assert c["low"]["mean"] <= r["cycles_per_sample"] == c["nominal"]["mean"] <= c["high"]["mean"]
+    assert r["cycles_per_sample"] >= r["instructions_per_sample"]        # >= 1 cycle per instruction
+    assert 0 < r["code_bytes"] < r["code_bytes_O2"] and set(cost.STAGES["evaluator"]) & set(r["-O2"]["step_functions"])
+    assert r["-O2"]["library"]["text"] > r["-Os"]["library"]["text"] > r["code_bytes"] // 2
+    assert 0 < r["stack_bytes"] < 2048 and r["-O2"]["stack_step_path"][0] == cost.STEP
+    st = r["per_stage"]["aux-sim"]["instructions_mean_noinline"]
+    assert {"evaluator", "aux", "rate", "step"} <= set(st) and st["aux"] > 0
+    assert r["per_stage"]["e2e"]["instructions_mean_noinline"].get("aux", 0) == 0     # Z word: no generators
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("target", ["ice40", "xc7"])
+@pytest.mark.skipif(not FPGA or not shutil.which("nextpnr-ice40"),
+                    reason="yosys, iverilog, verilator or nextpnr-ice40 not installed")
+def test_fpga_cost_json(target, tmp_path):
+    r = _cost_json(target, tmp_path)
+    assert r["broken_build_caught"] is True and r["icarus"]["mismatches"] == r["verilator"]["mismatches"] == 0
+    assert r["front_end"]["bit_exact"] is True and r["front_end"]["luts"] > 100
+    assert 25 <= r["cycles_per_sample"] <= 200
+    assert 100 < r["luts"] and 100 < r["ffs"] and 1 <= r["dsps"]
+    if target == "ice40":                # the UP5K goals
+        assert r["luts"] <= 5280 and r["dsps"] <= 8 and r["fmax_mhz"] >= cost.FMAX_GOAL_MHZ
+        assert r["pnr"]["utilisation"]["ICESTORM_DSP"][0] == r["dsps"]
+    else:
+        assert r["fmax_mhz"] is None
+
+
+@pytest.mark.skipif(not shutil.which("gcc"), reason="gcc not installed")
+def test_host_cost_json(tmp_path):
+    r = _cost_json("host", tmp_path)
+    assert r["vectors"] > 40000 and r["ns_per_sample"] > 0 and r["code_bytes"] > 1000
