@@ -199,11 +199,11 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
     ``valid`` 1/0, other columns and metadata kept, ``compensated: yes`` added.
 
     ``impl='fixed'``: the bit-accurate fixed-point firmware reference
-    (firmware_ref.compensate.compensate_log; ``table`` a firmware_ref.table.Table, or None to
+    (host_tools.fixed_point.compensate_log; ``table`` a firmware_ref.table.Table, or None to
     quantize the model on the fly); same columns, output words converted back to deg/h."""
     check_impl(impl)
     if impl == "fixed":
-        from firmware_ref.compensate import compensate_log
+        from host_tools.fixed_point import compensate_log
         return add_flags(*compensate_log(log, model, table=table, return_flags=True))
     if table is not None:
         raise ValueError("a coefficient table is only used with --impl fixed")

@@ -327,7 +327,7 @@ def dequantized_log(log, model):
     word, so that input quantization, accounted for separately (FORMATS.md), is not counted."""
     from firmware_ref import inputs
     from firmware_ref.aux import aux_columns
-    from firmware_ref.compensate import log_words
+    from host_tools.fixed_point import log_words
 
     cfg = model.config
     w = log_words(log, cfg)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from firmware_ref import formats as F
-from firmware_ref.compensate import compensate_log
+from host_tools.fixed_point import compensate_log
 from host_tools import compensate as comp
 from host_tools import runlog as rl
 from host_tools.cli import main as cli_main
