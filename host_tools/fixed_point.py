@@ -1,6 +1,8 @@
 """The host side of the fixed-point path (``hdrg compensate --impl fixed``): run log -> input
 words (:func:`log_words`), model -> table (host_tools.quantize), the words through the firmware
-reference (firmware_ref.kernel / firmware_ref.compensate.run_reference) and back to deg/h.
+reference (firmware_ref.kernel / firmware_ref.compensate.run_reference) and back to deg/h
+(:func:`compensate_log`); the words back to a float log (:func:`dequantized_log`, the reference
+input of the |fixed - golden| bound).
 
 These need both the golden model (run logs, models, the quantizer) and the bit-accurate reference,
 so they live here: firmware_ref depends on nothing in host_tools (docs/ARCHITECTURE.md).
@@ -14,7 +16,9 @@ from firmware_ref import formats as F
 from firmware_ref import inputs
 from firmware_ref.aux import aux_columns
 from firmware_ref.compensate import run_reference
+from host_tools import compensate as hc
 from host_tools import runlog as rl
+from host_tools.quantize import aux_channel_fracs, quantize
 from host_tools.regressors import power_on_counter
 
 
@@ -37,8 +41,6 @@ def log_words(log, config) -> dict:
            "f": None, "t": None, "aux": None, "k": None}
     sat = psat | rsat
     if config.aux.generator != "none":
-        from host_tools.quantize import aux_channel_fracs
-
         where = f"{log.source}: the aux generator"
         used = {tm["column"] for tm in config.aux.terms if tm["gen"] == "input"}
         for col in sorted(used):
@@ -68,8 +70,6 @@ def log_words(log, config) -> dict:
 
 def check_table_matches(table, model) -> None:
     """Refuse a table whose data flow differs from the model's (a table of another model)."""
-    from host_tools.quantize import quantize
-
     expect = quantize(model).table
     diffs = [name for name in ("proxy_kind", "p_ref", "g_u", "u_off", "sh_u", "rate_est", "rate_n", "rate_shift",
                                "rate_warmup", "g_v", "sh_v", "combiner", "settle_n", "max_stale_n", "mant",
@@ -93,9 +93,6 @@ def compensate_log(log, model, table=None, impl: str = "numba", return_flags: bo
     ``bias_dph`` (BIAS), ``valid`` 1.0/0.0, the same columns as the float path; the metadata adds
     ``compensation_table_crc``.  Model/log mismatches are refused as in the float path.  With
     ``return_flags`` returns ``(log, flags)``, flags uint8[n] (formats.FLAGS bits)."""
-    from host_tools import compensate as hc
-    from host_tools.quantize import quantize
-
     if str(log.metadata.get("compensated", "")).strip().lower() == "yes" or "bias_dph" in log:
         raise ValueError(f"{log.source}: the log is already compensated (metadata 'compensated: yes' "
                          f"or a 'bias_dph' column)")
@@ -140,3 +137,20 @@ def compensate_log(log, model, table=None, impl: str = "numba", return_flags: bo
     if nsat:
         out.metadata["compensation_saturated"] = f"{nsat} samples"
     return (out, flags) if return_flags else out
+
+
+def dequantized_log(log, model):
+    """The reference input of the |fixed - golden| bound: ``log`` with every column the fixed path
+    reads (proxy, rate, and the channels of an aux generator) replaced by the value of its input
+    word, so that input quantization, accounted for separately (FORMATS.md), is not counted."""
+    cfg = model.config
+    w = log_words(log, cfg)
+    cols = {cfg.proxy.column: inputs.from_words(w["p"], inputs.proxy_frac(cfg.proxy.kind)),
+            "rate_dph": inputs.from_words(w["r"], F.RATE_FRAC)}
+    if w["f"] is not None:
+        cols["freq_hz"] = inputs.from_words(w["f"], F.FREQ_FRAC)
+    if w["t"] is not None:
+        cols["temp_c"] = inputs.from_words(w["t"], F.TEMP_FRAC)
+    for c, (col, fr) in enumerate(zip(aux_columns(cfg.aux), aux_channel_fracs(cfg.aux))):
+        cols[col] = inputs.from_words(w["aux"][:, c], fr)
+    return log.with_columns(**cols)

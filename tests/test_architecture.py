@@ -112,3 +112,24 @@ def test_the_checks_can_fail():
     found = [m for _, m in imports("host_tools.fixed_point", known["host_tools.fixed_point"], known, False)]
     assert "firmware_ref.compensate" in found and "host_tools.runlog" in found
     assert "firmware_ref.formats" in module_graph()["firmware_ref.table"]
+
+
+def test_vocabulary_is_declared_once():
+    """The golden model reads the vocabulary's tuples (not copies), and no argparse ``choices`` is a
+    literal tuple/list repeating a vocabulary name."""
+    from firmware_ref import vocabulary as VOC
+    from host_tools import compensate, flags, proxy, rate, regressors, reversal
+
+    assert rate.ESTIMATORS is VOC.ESTIMATORS and proxy.KINDS is VOC.PROXY_KINDS
+    assert reversal.COMBINERS is VOC.REVERSAL_COMBINERS and reversal.ORDERS is VOC.ORDERS
+    assert regressors.AUX_GENERATORS is VOC.AUX_GENERATORS and compensate.FLAG_NAMES is VOC.GOLDEN_FLAG_NAMES
+    assert flags.FLAG_NAMES == {bit: name for bit, (name, _) in VOC.FLAGS.items()}
+    names = {n for v in vars(VOC).values() if isinstance(v, tuple) for n in v if isinstance(n, str)}
+    bad = []
+    for name, path in modules().items():
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.keyword) and node.arg == "choices" and isinstance(node.value, (ast.Tuple, ast.List)):
+                lits = {e.value for e in node.value.elts if isinstance(e, ast.Constant)}
+                if lits & names:
+                    bad.append(f"{path.relative_to(ROOT)}:{node.value.lineno}: choices {sorted(lits)}")
+    assert not bad, "argparse choices repeating the vocabulary (use firmware_ref.vocabulary):\n" + "\n".join(bad)

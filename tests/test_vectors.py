@@ -274,8 +274,9 @@ def test_generate_refuses_changed_vectors_without_version_bump(tmp_path, monkeyp
     with pytest.raises(V.VectorsError, match="bump GENERATOR_VERSION"):
         V.generate(tmp_path, names=("primitives",))
     assert (tmp_path / "primitives.csv").read_bytes() == before
+    bumped = V.GENERATOR_VERSION + 1
     for module in (V, V.spec, V.files, V.build):      # each module that reads the version
-        monkeypatch.setattr(module, "GENERATOR_VERSION", V.GENERATOR_VERSION + 1)
+        monkeypatch.setattr(module, "GENERATOR_VERSION", bumped)
     m = V.generate(tmp_path, names=("primitives",))
     assert m["generator_version"] == V.GENERATOR_VERSION
     assert (tmp_path / "primitives.csv").read_bytes() != before

@@ -26,9 +26,10 @@ Sets (each a CSV with a header, a ``$readmemh`` file and, where tables are used,
 
 Everything in the vector files is an integer (the CSV op names of ``primitives`` aside); seeds are
 fixed; the manifest has no timestamps.  Outputs come from the numba kernel
-(firmware_ref.kernel); every case is cross-checked on its first ``PY_CHECK`` samples with the
-per-sample Python reference (firmware_ref.compensate.run_reference, firmware_ref.evaluator),
-which also gives acc/cnt, vs and sign semantics.
+(firmware_ref.kernel); every sample of every case is checked against the per-sample Python
+reference (firmware_ref.compensate.run_reference, firmware_ref.evaluator), whose trace gives the
+intermediates the kernel does not output (acc/cnt, the Horner rows, the k7 term, t): no second
+evaluator or combiner here.
 
 The fitted models of ``e2e`` are rounded to 7 significant digits (configuration and
 coefficients) before quantization, so that an ulp of difference in the float simulator or the

@@ -184,7 +184,7 @@ def verify(directory, names=None, log=print) -> list:
             elif name == "evaluator":
                 compute_evaluator(vs)
             else:
-                compute_pipeline(vs, rows=name == "e2e", check_python=50)
+                compute_pipeline(vs, rows=name == "e2e")
         except VectorsError as exc:
             problems.append(str(exc))
             continue

@@ -8,6 +8,7 @@ import dataclasses
 import numpy as np
 
 from firmware_ref import formats as F
+from firmware_ref.evaluator import evaluate
 from firmware_ref.table import Table, horner_bounds
 from firmware_ref.terms import K_AUX, N_TERMS, POLY_INDEX
 from host_tools.vectors.spec import EVAL_EXTRA, EVAL_FIELDS, EVAL_INPUTS, VectorsError
@@ -16,42 +17,26 @@ from host_tools.vectors.files import VectorSet
 
 # -- helpers ------------------------------------------------------------------------------------------
 
-def _rhu(x, s: int):
-    """RHU on int64 numpy arrays (or ints): s a Python int >= 0."""
-    return x if s == 0 else (x + (1 << (s - 1))) >> s
-
-
-def horner_rows(table, u, v, z, bank=None) -> dict:
-    """The evaluator's intermediates on int64 arrays (u, v in [-2^30, 2^30], z any int32):
-    ``row0..row3`` = a[i], the Horner row of u^i aligned to the accumulator (LSB 2^-E deg/h),
-    ``zterm`` = RHU(m_7 z, 30 + e_7 - E), ``t`` the accumulator after k7 z, ``b`` = B (LSB 2^-21
-    deg/h), ``zclamped``.  Exactly FORMATS.md step 5 (the formats bound every product below 2^62).
-    ``bank``: int array (1, 2) of the bank of each sample (None: bank 1)."""
-    if bank is not None and table.n_banks == 2:
-        bank = np.asarray(bank, np.int64)
-        one, two = horner_rows(table, u, v, z), horner_rows(table.bank(2), u, v, z)
-        return {k: np.where(bank == 2, two[k], one[k]) for k in one}
-    u = np.asarray(u, np.int64)
-    v = np.asarray(v, np.int64)
-    z = np.asarray(z, np.int64)
-    table = table.bank(1) if hasattr(table, "bank") else table
-    m, E = table.mant, table.e_acc
-    out = {}
-    for i in range(4):
-        c = [m[POLY_INDEX[i][j]] for j in range(4)]
-        p = np.full(u.shape, c[3], np.int64)
-        p = _rhu(p * v, F.Q) + c[2]
-        p = _rhu(p * v, F.Q) + c[1]
-        q = _rhu(p * v, F.Q) + c[0]
-        out[f"row{i}"] = _rhu(q, table.e_row[i] - E)
-    t = out["row3"]
-    for i in (2, 1, 0):
-        t = _rhu(t * u, F.Q) + out[f"row{i}"]
-    zc = np.clip(z, -F.ONE, F.ONE)
-    out["zterm"] = _rhu(np.int64(m[K_AUX]) * zc, F.Q + table.e_7 - E)
-    out["t"] = t + out["zterm"]
-    out["b"] = _rhu(out["t"], E - F.Y_FRAC) if E >= F.Y_FRAC else out["t"] << (F.Y_FRAC - E)
-    out["zclamped"] = (zc != z).astype(np.int64)
+def reference_rows(table, u, v, z, bank=None) -> dict:
+    """The evaluator's intermediates, read from the Python reference's own trace
+    (firmware_ref.evaluator.evaluate, ``trace``: per row i = 3, 2, 1, 0 the values p, p, q, a[i],
+    then the three Horner accumulators t and the final t after k7 z): ``row0..row3`` = a[i], the
+    Horner row of u^i aligned to the accumulator (LSB 2^-E deg/h), ``zterm`` = RHU(m_7 z, 30 + e_7
+    - E), ``t`` the accumulator after k7 z, ``b`` = B (LSB 2^-21 deg/h), ``zclamped``; int64
+    arrays.  ``bank``: int array (1, 2) of the bank of each sample (None: bank 1)."""
+    n = len(u)
+    out = {name: np.zeros(n, np.int64) for name in ("row0", "row1", "row2", "row3", "zterm", "t", "b", "zclamped")}
+    banks = np.ones(n, np.int64) if bank is None else np.asarray(bank, np.int64)
+    for i, (ui, vi, zi, bi) in enumerate(zip(np.asarray(u).tolist(), np.asarray(v).tolist(), np.asarray(z).tolist(),
+                                             banks.tolist())):
+        trace = []
+        b, zc = evaluate(ui, vi, zi, table, trace=trace, bank=bi if table.n_banks == 2 else 1)
+        for r in range(4):
+            out[f"row{r}"][i] = trace[4 * (3 - r) + 3]
+        out["t"][i] = trace[19]
+        out["zterm"][i] = trace[19] - trace[18]
+        out["b"][i] = b
+        out["zclamped"][i] = int(zc)
     return out
 
 
@@ -207,14 +192,13 @@ def evaluator_set(rng) -> VectorSet:
                    "`case`; row0..row3 = the Horner rows a[i] aligned to 2^-E, "
                    "zterm = RHU(m_7 z, 30 + e_7 - E), t = the accumulator after k7 z (LSB 2^-E)",
                    cols, EVAL_INPUTS, EVAL_FIELDS, cases, tables)
-    compute_evaluator(vs, check_python=True)
+    compute_evaluator(vs)
     return vs
 
 
-def compute_evaluator(vs: VectorSet, check_python: bool = False) -> None:
-    """Fill b, zclamped and the intermediates from case/u/v/z: numba kernel (B) and horner_rows
-    (which must agree), optionally every row also by the Python evaluator."""
-    from firmware_ref.evaluator import evaluate
+def compute_evaluator(vs: VectorSet) -> None:
+    """Fill b, zclamped and the intermediates from case/u/v/z: the Python evaluator's trace
+    (:func:`reference_rows`) and the numba kernel's B, which must agree on every row."""
     from firmware_ref.kernel import evaluate_words
 
     c = vs.columns
@@ -228,20 +212,14 @@ def compute_evaluator(vs: VectorSet, check_python: bool = False) -> None:
         u, v, z, bank = c["u"][lo:hi], c["v"][lo:hi], c["z"][lo:hi], c["bank"][lo:hi]
         if not np.all((bank == 1) | ((bank == 2) & (t.n_banks == 2))):
             raise VectorsError(f"evaluator case {case['name']}: bank must be 1, or 2 with a two-bank table")
-        rows = horner_rows(t, u, v, z, bank)
+        rows = reference_rows(t, u, v, z, bank)
         kb = evaluate_words(t, u, v, z)
         if t.n_banks == 2:
             kb = np.where(bank == 2, evaluate_words(t, u, v, z, bank=2), kb)
         if not np.array_equal(kb, rows["b"]):
             i = int(np.argmax(kb != rows["b"]))
-            raise VectorsError(f"evaluator case {case['name']}: numba B {kb[i]} != Horner rows B {rows['b'][i]} "
+            raise VectorsError(f"evaluator case {case['name']}: numba B {kb[i]} != Python reference B {rows['b'][i]} "
                                f"at u={u[i]} v={v[i]} z={z[i]}")
-        if check_python:
-            for i in range(hi - lo):
-                b, zc = evaluate(int(u[i]), int(v[i]), int(z[i]), t, bank=int(bank[i]))
-                if b != rows["b"][i] or int(zc) != rows["zclamped"][i]:
-                    raise VectorsError(f"evaluator case {case['name']}: Python reference B {b} != {rows['b'][i]} "
-                                       f"at u={u[i]} v={v[i]} z={z[i]}")
         for name in res:
             res[name][lo:hi] = rows[name]
     cols = {k: c[k] for k in EVAL_INPUTS}

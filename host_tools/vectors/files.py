@@ -116,7 +116,7 @@ def make_manifest(sets, config, files: dict) -> dict:
     return {
         "format": "hdrg-vectors",
         "format_version": FORMAT_VERSION,
-        "generator": "hdrg vectors (host_tools/vectors.py)",
+        "generator": "hdrg vectors (host_tools/vectors/)",
         "generator_version": GENERATOR_VERSION,
         "sources_sha256": fp["sha256"],
         "sources": fp["files"],

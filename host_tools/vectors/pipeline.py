@@ -1,59 +1,26 @@
 """Recomputing the pipeline sets (``sequencer``, ``e2e``, ``aux``) from their input words: the
-numba kernel's outputs, cross-checked with the per-sample Python reference; the case builder.
+numba kernel's outputs, checked sample by sample against the per-sample Python reference, whose
+trace gives the intermediates the kernel does not output; the case builder.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from firmware_ref import arith, formats as F
-from host_tools.vectors.spec import (AUX_INPUTS, AUX_IN_FIELDS, IN_FIELDS, O_NAMES, PY_CHECK, ROW_FIELDS,
-                                     SEQ_INPUTS, VectorsError)
+from firmware_ref import formats as F
+from host_tools.vectors.spec import (AUX_INPUTS, AUX_IN_FIELDS, IN_FIELDS, O_NAMES, ROW_FIELDS, SEQ_INPUTS,
+                                     VectorsError)
 from host_tools.vectors.files import VectorSet
-from host_tools.vectors.evaluator import horner_rows
-
-
-def window_sums(table, m, r, restart, b=None, warm=None):
-    """The combiner's window sum and count after each sample (acc LSB 2^-10 deg/h, cnt): the part
-    of firmware_ref.sequencer.Combiner that the numba kernel does not output.  ``m`` the mode of
-    each sample (logged or the timer's); for an order-1 table ``b`` (B of each sample, LSB 2^-21)
-    and ``warm`` (rate estimator in warm-up): the sums are of r = symsat32(RHU(c 2^11 - B, 11))
-    over the used (warm) samples."""
-    n = len(m)
-    acc_o = np.zeros(n, np.int64)
-    cnt_o = np.zeros(n, np.int64)
-    if table.combiner == 0:
-        return acc_o, cnt_o
-    order1 = table.order == 1
-    b = np.zeros(n, np.int64) if b is None else np.asarray(b, np.int64)
-    warm = np.zeros(n, bool) if warm is None else np.asarray(warm, bool)
-    cur = acc = cnt = pos = 0
-    for i, (mi, ri, rs) in enumerate(zip(m.tolist(), r.tolist(), restart.tolist())):
-        if rs:
-            cur = acc = cnt = pos = 0
-        if mi != cur:
-            cur = mi if mi in (1, 2) else 0
-            acc = cnt = pos = 0
-        if cur:
-            if pos >= table.settle_n:
-                c = ri if cur == 1 else -ri
-                if order1:
-                    c = arith.sat_signed(arith.rshift_round((c << 11) - int(b[i]), 11), 32)[0]
-                if cnt < F.COUNT_MAX and not (order1 and warm[i]):
-                    acc += c
-                    cnt += 1
-            else:
-                pos += 1
-        acc_o[i] = acc
-        cnt_o[i] = cnt
-    return acc_o, cnt_o
+from host_tools.vectors.evaluator import reference_rows
 
 
 # -- pipeline (sequencer, e2e) ---------------------------------------------------------------------------
 
-def compute_pipeline(vs: VectorSet, rows: bool, check_python: int = PY_CHECK) -> None:
+def compute_pipeline(vs: VectorSet, rows: bool) -> None:
     """Fill the 16 output fields (and with ``rows`` the evaluator intermediates) of every case from
-    the input columns (MODE -1: self-timed): numba kernel + window_sums; the first
-    ``check_python`` samples of each case against firmware_ref.compensate.run_reference."""
+    the input columns (MODE -1: self-timed): the numba kernel and the per-sample Python reference
+    (firmware_ref.compensate.run_reference) must agree on every field of every sample; the window
+    sum and count (acc, cnt) are the reference's, the Horner rows its evaluator's trace
+    (host_tools.vectors.evaluator.reference_rows)."""
     from firmware_ref.compensate import run_reference
     from firmware_ref.kernel import run_words
 
@@ -77,26 +44,21 @@ def compute_pipeline(vs: VectorSet, rows: bool, check_python: int = PY_CHECK) ->
         k = run_words(t, p, r, None if timed else mode, rs, z, self_timed=timed, detail=True, **kw)
         state = k["state"]
         m = np.asarray(F.STATE_MODE, np.int64)[state] if timed else mode
-        acc, cnt = window_sums(t, m, r, rs, k["b"], (k["flags"] & F.FLAG_WARMUP) != 0)
+        ref = run_reference(t, p, r, None if timed else mode, rs, z, self_timed=timed, **kw)
         o = {"state": state, "vs": np.asarray(F.STATE_VS, np.int64)[state],
              "mode": m, "sign": np.asarray(F.STATE_SIGN, np.int64)[state], "u": k["u"], "v": k["v"],
-             "z": k["z"], "s": k["s"], "acc": acc, "cnt": cnt, "y": k["y"], "b": k["b"],
+             "z": k["z"], "s": k["s"], "acc": ref["acc"], "cnt": ref["cnt"], "y": k["y"], "b": k["b"],
              "out": k["out"], "bias": k["bias"], "valid": k["valid"], "flags": k["flags"]}
+        for name in ("state", "vs", "sign", "u", "v", "z", "s", "y", "b", "out", "bias", "valid", "flags"):
+            if not np.array_equal(np.asarray(ref[name], np.int64), np.asarray(o[name], np.int64)):
+                i = int(np.argmax(np.asarray(ref[name], np.int64) != o[name]))
+                raise VectorsError(f"{vs.name} case {case['name']} sample {i}: {name}: numba kernel "
+                                   f"{o[name][i]} != Python reference {ref[name][i]}")
         if rows:
-            hr = horner_rows(t, k["u"], k["v"], z, np.where(m == 2, 2, 1))
+            hr = reference_rows(t, k["u"], k["v"], z, np.where(m == 2, 2, 1))
             if not np.array_equal(hr["b"], k["b"]):
-                raise VectorsError(f"{vs.name} case {case['name']}: Horner rows disagree with the kernel's B")
+                raise VectorsError(f"{vs.name} case {case['name']}: the evaluator trace disagrees with the kernel's B")
             o.update((name, hr[name]) for name, _ in ROW_FIELDS)
-        m_py = min(check_python, hi - lo)
-        if m_py:
-            ref = run_reference(t, p[:m_py], r[:m_py], None if timed else mode[:m_py], rs[:m_py], z[:m_py],
-                                self_timed=timed, **{key: val[:m_py] for key, val in kw.items()})
-            for name in ("state", "vs", "sign", "u", "v", "z", "s", "acc", "cnt", "y", "b", "out", "bias", "valid",
-                         "flags"):
-                if not np.array_equal(np.asarray(ref[name], np.int64), np.asarray(o[name][:m_py], np.int64)):
-                    i = int(np.argmax(np.asarray(ref[name], np.int64) != o[name][:m_py]))
-                    raise VectorsError(f"{vs.name} case {case['name']} sample {i}: {name}: numba kernel "
-                                       f"{o[name][i]} != Python reference {ref[name][i]}")
         for name in res:
             res[name][lo:hi] = o[name]
     cols = {k: c[k] for k in (AUX_INPUTS if has_aux else SEQ_INPUTS)}

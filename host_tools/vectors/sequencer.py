@@ -24,6 +24,15 @@ def _ramp(table, n, rng, rate_lsb=600.0) -> dict:
     return {"p": p, "r": r, "mode": np.zeros(n, np.int64), "restart": None, "z": None}
 
 
+def _extreme_stream(t) -> dict:
+    """21 log-driven samples at P_REF in 2-sample windows with +-(2^31 - 1) rate words: the trend
+    slope clamp and the output (or residual) word saturations."""
+    modes = [1, 1, 2, 2, 1, 1, 2, 2, 1, 1, 2, 2, 2, 3, 1, 1, 1, 2, 2, 2, 1]
+    r = [F.INT32_SYM, F.INT32_SYM, 0, 0, -F.INT32_SYM, -F.INT32_SYM, F.INT32_SYM, F.INT32_SYM, F.INT32_SYM,
+         F.INT32_SYM, -F.INT32_SYM, -F.INT32_SYM, 5, 0, -F.INT32_SYM, 3, 1, F.INT32_SYM, -1, 0, 7]
+    return {"p": np.full(len(modes), t.p_ref, np.int64), "r": np.array(r), "mode": np.array(modes)}
+
+
 def sequencer_set(rng) -> VectorSet:
     from host_tools.vectors.builders import corner_stream, random_model, random_stream
     from host_tools.quantize import quantize
@@ -53,10 +62,7 @@ def sequencer_set(rng) -> VectorSet:
     cs.add("stale_edge_log", "log-driven, max_stale_n = 10: ages 1..15 of the other window (valid up to 10)", t, s)
     # trend slope clamp and output saturation: extreme rate words in short windows
     t = _qtable("diff", "trend", settle_s=0.0, max_stale_s=50.0)
-    modes = [1, 1, 2, 2, 1, 1, 2, 2, 1, 1, 2, 2, 2, 3, 1, 1, 1, 2, 2, 2, 1]
-    r = [F.INT32_SYM, F.INT32_SYM, 0, 0, -F.INT32_SYM, -F.INT32_SYM, F.INT32_SYM, F.INT32_SYM, F.INT32_SYM,
-         F.INT32_SYM, -F.INT32_SYM, -F.INT32_SYM, 5, 0, -F.INT32_SYM, 3, 1, F.INT32_SYM, -1, 0, 7]
-    s = {"p": np.full(len(modes), t.p_ref, np.int64), "r": np.array(r), "mode": np.array(modes)}
+    s = _extreme_stream(t)
     cs.add("slope_clamp_log", "log-driven trend with +-(2^31 - 1) rate words in 2-sample windows: slope clamp, "
            "OUT saturation (flag 128)", t, s)
     # BIAS / OUT saturation: E = 0, B = m_0 << 21
@@ -110,10 +116,7 @@ def sequencer_set(rng) -> VectorSet:
     big2 = np.array([2.0 ** 21 * 0.9] + [0.0] * (N_TERMS - 1))
     t = _qtable("diff", "trend", order="regress_first", settle_s=0.0, max_stale_s=50.0,
                 coef=[1.0] + [0.0] * (N_TERMS - 1), coef2=big2)
-    modes = [1, 1, 2, 2, 1, 1, 2, 2, 1, 1, 2, 2, 2, 3, 1, 1, 1, 2, 2, 2, 1]
-    r = [F.INT32_SYM, F.INT32_SYM, 0, 0, -F.INT32_SYM, -F.INT32_SYM, F.INT32_SYM, F.INT32_SYM, F.INT32_SYM,
-         F.INT32_SYM, -F.INT32_SYM, -F.INT32_SYM, 5, 0, -F.INT32_SYM, 3, 1, F.INT32_SYM, -1, 0, 7]
-    s = {"p": np.full(len(modes), t.p_ref, np.int64), "r": np.array(r), "mode": np.array(modes)}
+    s = _extreme_stream(t)
     cs.add("rtr_residual_saturation_log", "regress_first trend, bank 2 B = 0.9 2^21 deg/h, +-(2^31 - 1) rate "
            "words: the residual word r saturates (flag 128), slope clamp", t, s)
     t = _qtable("lsq", "pair", n=16, order="regress_first", settle_s=0.0, max_stale_s=200.0)

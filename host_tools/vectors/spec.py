@@ -14,9 +14,11 @@ STALE_MESSAGE = ("vectors are stale: regenerate with `hdrg vectors generate -o v
                  "GENERATOR_VERSION/FORMAT_VERSION")
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_DIR = ROOT / "vectors"
-SOURCE_GLOBS = ("firmware_ref/*.py", "firmware_ref/c/*.c", "firmware_ref/c/*.h")
+SOURCE_GLOBS = ("firmware_ref/*.py", "firmware_ref/c/*.c", "firmware_ref/c/*.h",
+                "host_tools/fixed_point.py", "host_tools/vectors/builders.py")   # what the vectors compute with
 SETS = ("primitives", "evaluator", "sequencer", "e2e", "aux")
-PY_CHECK = 300              # samples per case cross-checked with the Python reference
+PY_CHECK = 300              # the manifest's py_check_samples_per_case: at least this many samples per case are
+                            # checked against the Python reference (since the package split: every sample)
 SEED = 20240611             # the one seed; every set derives its generators from it
 
 # -- columns ------------------------------------------------------------------------------------------
