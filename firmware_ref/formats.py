@@ -2,9 +2,9 @@
 (firmware_ref/FORMATS.md) share.
 
 The constants below are used by the Python reference, the numba kernel, the quantizer and the
-table layout; :func:`render_blocks` renders the tables of FORMATS.md from them (the generated
+table layout; firmware_ref.docgen renders the tables of FORMATS.md from them (the generated
 blocks between ``<!-- BEGIN name -->`` and ``<!-- END name -->``; ``python -m
-firmware_ref.formats --update`` rewrites them, tests/test_fixed_formats.py checks they agree).
+firmware_ref.docgen --update`` rewrites them, tests/test_fixed_formats.py checks they agree).
 
 Conventions: ``Qm.f`` is a signed word with f fractional bits; "LSB" is the value of one unit;
 **RHU** is round-half-up by add-then-arithmetic-shift, ``(x + 2**(s-1)) >> s`` (apytypes
@@ -14,8 +14,13 @@ saturation ``[-(2**(w-1) - 1), 2**(w-1) - 1]`` (so negation never overflows).
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass
+
+# the stage vocabulary (names and codes) is declared once, in firmware_ref.vocabulary; re-exported here
+from firmware_ref.vocabulary import (AUX_GENERATORS, AUX_KINDS, COMBINERS, ESTIMATORS, FLAG_AUX_CLAMPED,  # noqa: F401
+                                     FLAG_EXCHANGE, FLAG_INPUT_SAT, FLAG_PROXY_CLAMPED, FLAG_RATE_CLAMPED,
+                                     FLAG_SAT, FLAG_STALE, FLAG_WARMUP, FLAGS, ORDERS, PROXY_KINDS, STAGES,
+                                     STATE_NAMES)
 
 # -- input words ---------------------------------------------------------------------------------
 FREQ_FRAC = 18            # drive-frequency word: uint32, LSB 2^-18 Hz, 0 .. 16384 Hz
@@ -54,29 +59,10 @@ ALIGN_MAX = 31             # e_group - E in 0..31 (row and aux alignment shifts)
 OUT_FRAC = 10              # compensated output and bias words: int32, LSB 2^-10 deg/h
 OUT_SHIFT = Y_FRAC - OUT_FRAC        # 11: the one final rounding
 
-# -- status flags (uint8; bits 1..16 are host_tools.compensate's) ----------------------------------------
-FLAG_PROXY_CLAMPED = 1
-FLAG_RATE_CLAMPED = 2
-FLAG_WARMUP = 4
-FLAG_EXCHANGE = 8
-FLAG_STALE = 16
-FLAG_AUX_CLAMPED = 32      # z outside [-2^30, 2^30] was clamped
-FLAG_INPUT_SAT = 64        # an input value beyond its word's range was saturated (inputs stage, host side)
-FLAG_SAT = 128             # a saturation inside the pipeline (window count, trend slope/distance, output words)
-FLAGS = {
-    FLAG_PROXY_CLAMPED: ("proxy_clamped", "u outside [-1, 1] was clamped (golden: same rule, |u_raw| > 1)"),
-    FLAG_RATE_CLAMPED: ("rate_clamped", "v outside [-1, 1] was clamped"),
-    FLAG_WARMUP: ("warmup", "rate estimator in warm-up (v = 0)"),
-    FLAG_EXCHANGE: ("exchange", "mode 3 (exchange or power-on)"),
-    FLAG_STALE: ("stale", "mode 1/2 sample without a valid combination (settling, no window, too old)"),
-    FLAG_AUX_CLAMPED: ("aux_clamped", "z word outside [-2^30, 2^30] was clamped"),
-    FLAG_INPUT_SAT: ("input_saturated", "a float input beyond its word's range was saturated (host)"),
-    FLAG_SAT: ("saturated", "saturation in the pipeline: window count, trend slope/distance, output word"),
-}
+# -- status flags (uint8; bits 1..16 are host_tools.compensate's): firmware_ref.vocabulary ---------------
 
 # -- sequencer states and virtual-switch control bits (paper Fig. 3c) -------------------------------------
 ST_POWER_ON, ST_EXCH_TO_1, ST_MODE_1, ST_EXCH_TO_2, ST_MODE_2, ST_FTR = range(6)
-STATE_NAMES = ("power_on", "exchange_to_1", "mode_1", "exchange_to_2", "mode_2", "ftr")
 STATE_MODE = (3, 3, 1, 3, 2, 0)      # run-log mode of each state
 VS_DRV_X = 1      # AGC (drive) loop closed on the x electrodes: x is the drive axis
 VS_DRV_Y = 2      # AGC loop closed on y
@@ -101,14 +87,10 @@ STATE_VS = (
 STATE_SIGN = (0, 0, 1, 0, -1, 1)
 MODE_SIGN = (1, 1, -1, 0)           # rate sign per run-log mode 0..3
 
-COMBINERS = ("ftr", "pair", "trend", "none")  # table combiner id 0, 1, 2, 3 (3: regress_first only)
-ORDERS = ("combine_first", "regress_first")   # table order 0, 1
-ESTIMATORS = ("diff", "diffn", "lsq", "iir")
-PROXY_KINDS = ("freq", "temp")
-AUX_GENERATORS = ("none", "sum")      # table aux_gen 0 (z = the external Z word, 0 on the host), 1
+# COMBINERS, ORDERS, ESTIMATORS, PROXY_KINDS, AUX_GENERATORS (table codes): firmware_ref.vocabulary
 
 # -- the aux regressor z: generators of aux_gen 1 'sum' (host_tools.regressors module doc) -------------
-AUX_KINDS = ("input", "rate", "one", "decay_on", "decay_exchange", "ramp", "osc")   # term kind 0..6
+# AUX_KINDS (term kind 0..6): firmware_ref.vocabulary
 AUX_MAX_TERMS = 6         # terms of the sum (hdrg diagnose: 3 iterations x at most 2 terms)
 AUX_MAX_CHANNELS = 4      # aux input words A0..A3 (run-log aux_* columns)
 AUX_TERM_WORDS = 11       # table words per term
@@ -417,146 +399,3 @@ OP_CONFIGS = (("diff", 1, "ftr"), ("diff", 1, "pair"), ("diff", 1, "trend"), ("d
               ("lsq", 8, "pair"), ("lsq", 32, "trend"), ("iir", 4, "pair"))
 # (estimator, n, combiner, order) rows of the regress_first op-count table
 OP_CONFIGS_RTR = (("diff", 1, "none"), ("diff", 1, "pair"), ("diff", 1, "trend"), ("lsq", 8, "pair"))
-
-
-# -- rendering of the generated blocks of FORMATS.md ---------------------------------------------------
-
-def _md_table(header, rows) -> str:
-    out = ["| " + " | ".join(header) + " |", "| " + " | ".join("---" for _ in header) + " |"]
-    out += ["| " + " | ".join(str(x) for x in row) + " |" for row in rows]
-    return "\n".join(out)
-
-
-def render_blocks() -> dict:
-    """name -> markdown text of every generated block of FORMATS.md."""
-    from firmware_ref import table as tbl  # the layout lives with pack/unpack
-
-    blocks = {}
-    blocks["constants"] = _md_table(
-        ("constant", "value", "meaning"),
-        [(name, globals()[name], doc) for name, doc in (
-            ("FREQ_FRAC", "fractional bits of the drive-frequency word"),
-            ("TEMP_FRAC", "fractional bits of the temperature word"),
-            ("RATE_FRAC", "fractional bits of the raw rate word"),
-            ("Q", "fractional bits of u, v, z (Q1.30)"),
-            ("DP_CLAMP", "|P - P_REF| clamp"),
-            ("SPAN_LSB_MAX", "largest proxy span (word LSB)"),
-            ("IIR_FRAC", "extra fractional bits of the iir state"),
-            ("N_HIST_MAX", "longest diffn/lsq window n"),
-            ("S_BITS_MAX", "largest rate-sum clamp exponent SB"),
-            ("MIN_GAIN_BITS", "fewest significant bits of G_U, G_V"),
-            ("W_FRAC", "fractional bits of the window mean W"),
-            ("Y_FRAC", "fractional bits of y and B"),
-            ("SLOPE_FRAC", "fractional bits of the trend slope (per half-sample)"),
-            ("SLOPE_MAX", "trend slope clamp"),
-            ("D_MAX", "trend distance clamp (half-samples)"),
-            ("COUNT_MAX", "saturation of cnt, pos, age, span"),
-            ("TIMER_MAX", "largest sequencer timing field"),
-            ("ACC_LIMIT", "bound of every Horner accumulator"),
-            ("EXP_MIN", "smallest coefficient exponent"),
-            ("EXP_MAX", "largest coefficient exponent"),
-            ("ALIGN_MAX", "largest alignment shift e_g - E"),
-            ("OUT_FRAC", "fractional bits of the output words"),
-            ("OUT_SHIFT", "the final rounding shift (Y_FRAC - OUT_FRAC)"),
-            ("AUX_MAX_TERMS", "most terms of the aux sum"),
-            ("AUX_MAX_CHANNELS", "most aux input words A_c"),
-            ("AUX_TERM_WORDS", "table words per aux term"),
-            ("AUX_FRAC_MAX", "largest fractional bits AF_c of an aux word"),
-            ("AUX_STATE_FRAC", "fractional bits of the filter / decay state"),
-            ("AUX_SB_MIN", "smallest filter / decay coefficient shift"),
-            ("AUX_SB_MAX", "largest filter / decay coefficient shift"),
-            ("AUX_TAU_N_MIN", "shortest time constant fs tau (samples)"),
-            ("AUX_TAU_N_MAX", "longest time constant fs tau (samples)"),
-            ("K_LIMIT", "largest |K| input"),
-            ("SIN_POLY", "osc: sin(pi/2 x) = x sum S_i x^(2i), Q.30"),
-            ("SIN_ERR_LSB", "osc: largest error of the integer sine (LSB 2^-30)"),
-        )])
-    blocks["signals"] = _md_table(("signal", "type", "frac bits", "LSB", "range", "rounding", "overflow", "stage"),
-                                  [(s.name, s.ctype, s.frac, s.lsb, s.range, s.rounding, s.overflow, s.stage)
-                                   for s in SIGNALS])
-    blocks["flags"] = _md_table(("bit", "name", "meaning"),
-                                [(bit, name, text) for bit, (name, text) in FLAGS.items()])
-    blocks["states"] = _md_table(
-        ("id", "state", "mode", "sign", "VS bits", "switches"),
-        [(i, STATE_NAMES[i], STATE_MODE[i], STATE_SIGN[i], f"0x{STATE_VS[i]:02x}",
-          " ".join(name for bit, (name, _) in VS_BITS.items() if STATE_VS[i] & bit) or "-")
-         for i in range(len(STATE_NAMES))])
-    blocks["vs_bits"] = _md_table(("bit", "name", "meaning"),
-                                  [(f"0x{bit:02x}", name, text) for bit, (name, text) in VS_BITS.items()])
-    d = derivation()
-    fig = NoiseFigures()
-    blocks["derivation"] = _md_table(("quantity", "value"), [
-        ("stated drive-frequency noise sigma_f (sim FreqNoise default)", f"{fig.sigma_f_hz:.3g} Hz per sample"),
-        ("PLL step (sim PllQuant default)", f"{d['pll_lsb_hz']:.3g} Hz"),
-        ("df/dt at 1 degC/min (6227.386 Hz x 20.9 ppm/degC / 60)", f"{d['df_dt_hz_per_s'] * 1e3:.4f} mHz/s"),
-        ("per sample at 1 Hz, in word LSB (2^-18 Hz)", f"{d['df_per_sample_lsb']:.1f} LSB"),
-        ("rate-term resolution of one LSB per sample at 1 Hz", f"{d['rate_resolution_c_per_min']:.2e} degC/min"),
-        ("largest LSB adding <= 1 % to sigma_f: sigma_f sqrt(12((1.01)^2-1))", f"{d['q_f_max_hz']:.3g} Hz (>= {d['f_frac_min']} fractional bits)"),
-        ("noise added by 2^-18 Hz to sigma_f (and to the diff noise)", f"{100 * d['f_noise_increase']:.2e} %"),
-        ("frequency word range", f"0 .. {d['f_range_hz']:.0f} Hz"),
-        ("stated ARW 0.003 deg/sqrt(h): 1-sample sigma at 1 Hz", f"{d['sigma_rate_dph']:.3g} deg/h"),
-        ("largest rate LSB adding <= 1 %", f"{d['q_r_max_dph']:.3g} deg/h"),
-        ("noise added by 2^-10 deg/h", f"{100 * d['r_noise_increase']:.2e} %"),
-        ("rate word range", f"+-{d['r_range_dps']:.1f} deg/s"),
-        ("stated board-sensor noise 0.02 degC: largest LSB adding <= 1 %", f"{d['q_t_max_c']:.3g} degC"),
-        ("noise added by 2^-16 degC", f"{100 * d['t_noise_increase']:.2e} %"),
-        ("final output rounding (half an output LSB)", f"{d['out_rounding_dph']:.3g} deg/h"),
-    ])
-    rows = []
-    for est, n, comb in OP_CONFIGS:
-        k = op_counts(est, n, comb)
-        rows.append((f"{est}" + (f" n={n}" if est in ("diffn", "lsq") else ""),
-                     comb, k["mul"], k["add"], k["shift"], k["cmp"], k["mem"], k["div_per_window"]))
-    for est, n, comb in OP_CONFIGS_RTR:
-        k = op_counts(est, n, comb, "regress_first")
-        rows.append((f"{est}" + (f" n={n}" if est in ("diffn", "lsq") else ""),
-                     f"{comb} (regress_first)", k["mul"], k["add"], k["shift"], k["cmp"], k["mem"],
-                     k["div_per_window"]))
-    blocks["ops"] = _md_table(("rate estimator", "combiner", "mul", "add", "shift", "cmp", "mem words",
-                               "div per window"), rows)
-    blocks["layout"] = _md_table(("word", "field", "type", "meaning"),
-                                 [(i, name, typ, text) for i, (name, typ, text) in enumerate(tbl.LAYOUT)]
-                                 + [("...", "aux params", "int32", "aux_nparams words (aux_gen 1: below)"),
-                                    ("last", "crc32", "uint32", "zlib.crc32 of all preceding words, little-endian bytes")])
-    blocks["aux_layout"] = _md_table(
-        ("aux param", "field", "type", "meaning"),
-        [(i, name, typ, text) for i, (name, typ, text) in enumerate(tbl.AUX_HEADER)]
-        + [("2 .. 1+n_chan", "af_c", "uint32", f"fractional bits AF_c of aux word A_c (0..{AUX_FRAC_MAX})")]
-        + [(f"+{i}", name, typ, text) for i, (name, typ, text) in enumerate(tbl.AUX_TERM_LAYOUT)])
-    blocks["aux_coef"] = _md_table(
-        ("kind", "id") + tuple(f"c{i}" for i in range(6)),
-        [(kind, k) + tuple(tbl.AUX_COEF[kind][i] if i < len(tbl.AUX_COEF[kind]) else "0" for i in range(6))
-         for k, kind in enumerate(AUX_KINDS)])
-    rows = []
-    for kind, filt, pw in AUX_OP_ROWS:
-        k = aux_op_counts(kind, filt, pw)
-        label = {"sum": "stage (once)"}.get(kind, kind) + (" tau > 0" if filt else "") + (f" power {pw}" if pw > 1 else "")
-        rows.append((label, k["mul"], k["add"], k["shift"], k["cmp"], k["mem"]))
-    blocks["aux_ops"] = _md_table(("aux term", "mul", "add", "shift", "cmp", "mem words"), rows)
-    return blocks
-
-
-def splice(text: str, blocks: dict) -> str:
-    """Replace every ``<!-- BEGIN name -->...<!-- END name -->`` block of ``text``."""
-    for name, body in blocks.items():
-        begin, end = f"<!-- BEGIN {name} -->", f"<!-- END {name} -->"
-        i, j = text.find(begin), text.find(end)
-        if i < 0 or j < i:
-            raise ValueError(f"FORMATS.md: generated block {name!r} markers missing")
-        text = text[:i + len(begin)] + "\n" + body + "\n" + text[j:]
-    return text
-
-
-def formats_md_path():
-    from pathlib import Path
-    return Path(__file__).with_name("FORMATS.md")
-
-
-if __name__ == "__main__":  # python -m firmware_ref.formats [--update]
-    path = formats_md_path()
-    new = splice(path.read_text(encoding="utf-8"), render_blocks())
-    if "--update" in sys.argv[1:]:
-        path.write_text(new, encoding="utf-8")
-        print(f"{path}: generated blocks updated")
-    else:
-        print(new)

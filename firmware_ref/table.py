@@ -37,6 +37,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from firmware_ref import formats as F
+from firmware_ref import vocabulary as VOC
 from firmware_ref.terms import K_AUX, N_TERMS, POLY_INDEX, TERM_NAMES
 
 # coefficient groups sharing one exponent: the Horner rows u^0..u^3 (c_i0..c_i3), then k7
@@ -161,7 +162,7 @@ class AuxTerm:
 
     @property
     def name(self) -> str:
-        return F.AUX_KINDS[self.kind] if 0 <= self.kind < len(F.AUX_KINDS) else f"kind {self.kind}"
+        return VOC.AUX_KINDS[self.kind] if 0 <= self.kind < len(VOC.AUX_KINDS) else f"kind {self.kind}"
 
 
 @dataclass(frozen=True)
@@ -232,12 +233,12 @@ def check_aux(aux: AuxTable, proxy_kind: int) -> None:
     wsum = 0
     for j, t in enumerate(aux.terms):
         where = f"aux term {j} ({t.name})"
-        need(0 <= t.kind < len(F.AUX_KINDS), f"{where}: kind {t.kind} not in 0..{len(F.AUX_KINDS) - 1}")
+        need(0 <= t.kind < len(VOC.AUX_KINDS), f"{where}: kind {t.kind} not in 0..{len(VOC.AUX_KINDS) - 1}")
         need(t.sign in (0, 1), f"{where}: sign {t.sign} not 0 or 1")
         need(abs(t.weight) <= F.ONE, f"{where}: weight {t.weight} outside [-2^30, 2^30]")
         wsum += abs(t.weight)
         c = t.c
-        used = len(AUX_COEF[F.AUX_KINDS[t.kind]])
+        used = len(AUX_COEF[VOC.AUX_KINDS[t.kind]])
         if t.kind == KIND_INPUT:
             need(0 <= t.src < F.CH_A0 + aux.n_chan,
                  f"{where}: src {t.src} not a channel (0 F, 1 T, 2..{1 + aux.n_chan} A)")
@@ -366,7 +367,7 @@ class Table:
             need(0 < getattr(self, name) < (1 << F.GAIN_BITS), f"{name} {getattr(self, name)} not in 1..2^31-1")
         need(abs(self.u_off) <= self.g_u // 2 + 1, f"u_off {self.u_off} exceeds G_U / 2")
         need(0 <= self.sh_u <= 62 and 0 <= self.sh_v <= 62, f"shifts sh_u {self.sh_u}, sh_v {self.sh_v} not in 0..62")
-        need(0 <= self.rate_est < len(F.ESTIMATORS), f"rate_est {self.rate_est} unknown")
+        need(0 <= self.rate_est < len(VOC.ESTIMATORS), f"rate_est {self.rate_est} unknown")
         need(1 <= self.rate_n <= F.N_HIST_MAX, f"rate_n {self.rate_n} not in 1..{F.N_HIST_MAX}")
         need(self.rate_est != 2 or self.rate_n >= 2, "lsq needs rate_n >= 2")
         need(0 <= self.rate_shift <= 24, f"rate_shift {self.rate_shift} not in 0..24")
@@ -416,7 +417,7 @@ class Table:
                                              f"(evaluator would overflow)")
         w = min_rate_warmup(self.rate_est, self.rate_n)
         need(self.rate_warmup >= w, f"rate_warmup {self.rate_warmup} below {w}, the history length "
-                                    f"of {F.ESTIMATORS[self.rate_est]} n={self.rate_n}")
+                                    f"of {VOC.ESTIMATORS[self.rate_est]} n={self.rate_n}")
 
     # -- words -----------------------------------------------------------------------------------
     def field_values(self) -> dict:

@@ -65,13 +65,8 @@ from host_tools.regressors import AuxConfig, aux_regressor
 from host_tools import reversal as _reversal
 from host_tools.reversal import ReversalConfig, check_modes, combine, combine_values, sign_of
 
-FLAG_PROXY_CLAMPED = 1
-FLAG_RATE_CLAMPED = 2
-FLAG_WARMUP = 4
-FLAG_EXCHANGE = 8
-FLAG_STALE = 16
-FLAG_NAMES = {FLAG_PROXY_CLAMPED: "proxy_clamped", FLAG_RATE_CLAMPED: "rate_clamped",
-              FLAG_WARMUP: "warmup", FLAG_EXCHANGE: "exchange", FLAG_STALE: "stale"}
+from firmware_ref.vocabulary import (FLAG_EXCHANGE, FLAG_PROXY_CLAMPED, FLAG_RATE_CLAMPED, FLAG_STALE,  # noqa: F401
+                                     FLAG_WARMUP, GOLDEN_FLAG_NAMES as FLAG_NAMES)
 FS_TOLERANCE = 0.01  # relative mismatch allowed between the log's sample rate and the model's fs
 # Defaults of a new model, the one place: fit_config_from_logs (and fit_logs for the terms) fill
 # what is not given, so hdrg fit / diagnose / demo and everything reading their model files follow.
@@ -199,11 +194,11 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
     ``valid`` 1/0, other columns and metadata kept, ``compensated: yes`` added.
 
     ``impl='fixed'``: the bit-accurate fixed-point firmware reference
-    (firmware_ref.compensate.compensate_log; ``table`` a firmware_ref.table.Table, or None to
+    (host_tools.fixed_point.compensate_log; ``table`` a firmware_ref.table.Table, or None to
     quantize the model on the fly); same columns, output words converted back to deg/h."""
     check_impl(impl)
     if impl == "fixed":
-        from firmware_ref.compensate import compensate_log
+        from host_tools.fixed_point import compensate_log
         return add_flags(*compensate_log(log, model, table=table, return_flags=True))
     if table is not None:
         raise ValueError("a coefficient table is only used with --impl fixed")

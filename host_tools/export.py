@@ -34,6 +34,7 @@ from pathlib import Path
 from firmware_ref import formats as F
 from firmware_ref.table import LAYOUT, MAGIC, N_FIXED, VERSION as LAYOUT_VERSION, Table
 from firmware_ref.terms import K_AUX, TERM_NAMES, TERM_POWERS
+from host_tools.quantize import FORMAT, VERSION, quantized_coef, read_table
 
 FORMATS = ("c", "json", "mem")
 EXTENSIONS = {"c": ".h", "json": ".json", "mem": ".memh"}
@@ -43,8 +44,6 @@ DEFAULT_NAME = "hdrg_table"
 def load(path) -> tuple[Table, dict | None]:
     """``(table, table_json_dict)``: the checked table of ``path`` and, for a table.json, its
     dict (the float originals and the quantizer's report), else None."""
-    from host_tools.quantize import read_table
-
     path = os.fspath(path)
     table = read_table(path)
     info = None
@@ -149,8 +148,6 @@ def decode_c_header(text: str, name: str = DEFAULT_NAME) -> list:
 def json_dict(table: Table, info: dict | None = None) -> dict:
     """The table.json dict: ``info`` (a table.json dict, float originals) with the words, CRC and
     fields of ``table``, plus the layout; without ``info`` the minimal table.json."""
-    from host_tools.quantize import FORMAT, VERSION, quantized_coef
-
     words = table.to_words()
     d = dict(info) if info else {"model": None, "model_source": None, "coef_dph": None}
     d.update({

@@ -52,6 +52,7 @@ from numpy.polynomial import legendre as _leg
 
 from host_tools.model import jsonable
 from firmware_ref.terms import K_AUX, N_TERMS, PAPER_TERMS, POLY_INDEX, TERM_NAMES, TERM_POWERS, parse_terms
+from firmware_ref.vocabulary import ESTIMATORS, PROXY_KINDS
 
 __all__ = [
     "Accumulator", "FitResult", "UnidentifiableError", "accumulate_groups", "block_groups",
@@ -1011,12 +1012,12 @@ def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, 
 def add_model_options(parser, what: str = "the model") -> None:
     """The options that configure a model (proxy, rate estimator, terms, combiner, ranges), shared by
     `hdrg fit` and `hdrg diagnose` (its starting model)."""
-    parser.add_argument("--proxy", choices=("freq", "temp"), default=None,
+    parser.add_argument("--proxy", choices=PROXY_KINDS, default=None,
                         help="temperature proxy: freq (drive frequency, default when present) or temp (temp_c)")
     from host_tools.compensate import DEFAULT_COMBINER, DEFAULT_ORDER, DEFAULT_RATE, DEFAULT_TERMS
     from host_tools.reversal import COMBINERS, ORDERS
 
-    parser.add_argument("--rate-estimator", default=None, choices=("diff", "diffn", "lsq", "iir", "auto"),
+    parser.add_argument("--rate-estimator", default=None, choices=ESTIMATORS + ("auto",),
                         help=f"proxy-rate estimator of {what} (default: {DEFAULT_RATE['estimator']}; diff is the "
                              f"paper's consecutive difference; auto (hdrg fit only): the candidate of least "
                              f"cross-validated rms among diff, diffn 16, lsq 32, iir 7, iir 9, reported in model.json)")

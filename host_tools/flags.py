@@ -27,13 +27,13 @@ import warnings
 
 import numpy as np
 
-from firmware_ref import formats as F
+from firmware_ref import vocabulary as VOC
 
-FLAG_NAMES = {bit: name for bit, (name, _) in F.FLAGS.items()}
-SATURATION = F.FLAG_SAT | F.FLAG_INPUT_SAT
-EXTRAPOLATION = {F.FLAG_PROXY_CLAMPED: "the proxy is outside the model's proxy range",
-                 F.FLAG_RATE_CLAMPED: "the proxy rate is outside the model's rate range",
-                 F.FLAG_AUX_CLAMPED: "the k7 regressor is outside its range"}
+FLAG_NAMES = {bit: name for bit, (name, _) in VOC.FLAGS.items()}
+SATURATION = VOC.FLAG_SAT | VOC.FLAG_INPUT_SAT
+EXTRAPOLATION = {VOC.FLAG_PROXY_CLAMPED: "the proxy is outside the model's proxy range",
+                 VOC.FLAG_RATE_CLAMPED: "the proxy rate is outside the model's rate range",
+                 VOC.FLAG_AUX_CLAMPED: "the k7 regressor is outside its range"}
 WARN_FRACTION = 0.01   # warn when more than 1 % of the samples are clamped (extrapolation)
 
 

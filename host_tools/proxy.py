@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-KINDS = ("freq", "temp")
+from firmware_ref.vocabulary import PROXY_KINDS as KINDS
 UNITS = {"freq": "Hz", "temp": "degC"}
 COLUMNS = {"freq": "freq_hz", "temp": "temp_c"}
 

@@ -321,25 +321,6 @@ def aux_channel_fracs(aux) -> list:
 
 
 
-def dequantized_log(log, model):
-    """The reference input of the |fixed - golden| bound: ``log`` with every column the fixed path
-    reads (proxy, rate, and the channels of an aux generator) replaced by the value of its input
-    word, so that input quantization, accounted for separately (FORMATS.md), is not counted."""
-    from firmware_ref import inputs
-    from firmware_ref.aux import aux_columns
-    from firmware_ref.compensate import log_words
-
-    cfg = model.config
-    w = log_words(log, cfg)
-    cols = {cfg.proxy.column: inputs.from_words(w["p"], inputs.proxy_frac(cfg.proxy.kind)),
-            "rate_dph": inputs.from_words(w["r"], F.RATE_FRAC)}
-    if w["f"] is not None:
-        cols["freq_hz"] = inputs.from_words(w["f"], F.FREQ_FRAC)
-    if w["t"] is not None:
-        cols["temp_c"] = inputs.from_words(w["t"], F.TEMP_FRAC)
-    for c, (col, fr) in enumerate(zip(aux_columns(cfg.aux), aux_channel_fracs(cfg.aux))):
-        cols[col] = inputs.from_words(w["aux"][:, c], fr)
-    return log.with_columns(**cols)
 
 def _coef_shift(b: Fraction, what: str, n_samples: float) -> tuple:
     """(B, SB) of a filter / decay coefficient b = 1 - a: the largest SB in 31..62 with

@@ -54,7 +54,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-ESTIMATORS = ("diff", "diffn", "lsq", "iir")
+from firmware_ref.vocabulary import ESTIMATORS
 _CODE = {name: i for i, name in enumerate(ESTIMATORS)}
 MAX_SHIFT = 24
 RATE_UNITS = {"freq": "Hz/s", "temp": "degC/s"}

@@ -111,8 +111,8 @@ import numba
 import numpy as np
 
 from firmware_ref.terms import K_AUX, N_TERMS, POLY_INDEX, TERM_POWERS
+from firmware_ref.vocabulary import AUX_GENERATORS
 
-AUX_GENERATORS = ("none", "sum")
 # generator of a term of the "sum" -> (required parameters, optional parameters with defaults)
 GENERATORS = {
     "input": (("column", "ref", "span"), {"tau_s": 0.0, "power": 1}),

@@ -78,8 +78,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-COMBINERS = ("pair", "trend", "none")
-ORDERS = ("regress_first", "combine_first")
+from firmware_ref.vocabulary import ORDERS, REVERSAL_COMBINERS as COMBINERS
 DEFAULT_MAX_STALE_S = 300.0
 # the defaults of new models (host_tools.compensate.fit_config_from_logs, the CLI of hdrg fit / diagnose)
 # and of the raw-log combination of hdrg metrics: chosen on the foreign benchmark (docs/REGRESS_THEN_REVERSE.md)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from firmware_ref.kernel import run_words
-from firmware_ref.vectors import make_model
+from host_tools.vectors.builders import make_model
 from host_tools.quantize import quantize
 from host_tools.sim import mode_sequence
 from test_c_twin import CFLAGS, GCC, build, input_records, table_line

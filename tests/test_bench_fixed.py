@@ -13,7 +13,7 @@ from firmware_ref import formats as F
 from firmware_ref.compensate import run_reference
 from firmware_ref.kernel import run_words
 from firmware_ref.terms import K_AUX, POLY_INDEX
-from firmware_ref.vectors import make_model
+from host_tools.vectors.builders import make_model
 from host_tools.quantize import quantize
 from host_tools.sim import mode_sequence
 

@@ -20,12 +20,13 @@ import pytest
 import firmware_ref
 from firmware_ref import arith
 from firmware_ref import formats as F
-from firmware_ref.compensate import log_words, run_reference
+from firmware_ref.compensate import run_reference
+from host_tools.fixed_point import log_words
 from firmware_ref.evaluator import evaluate
 from firmware_ref.kernel import evaluate_words, run_words
 from firmware_ref.table import FIELD_INDEX, Table, TableError, crc32_words
 from firmware_ref.terms import K_AUX
-from firmware_ref.vectors import (aux_stream, corner_stream, make_model, random_aux_model, random_model,
+from host_tools.vectors.builders import (aux_stream, corner_stream, make_model, random_aux_model, random_model,
                                   random_stream, with_aux)
 from host_tools.quantize import quantize
 
@@ -62,7 +63,7 @@ def table_line(table) -> str:
 
 def input_records(table, s, self_timed=False) -> np.ndarray:
     """int64[n, 6]: F T R MODE RESTART Z (the proxy word in the column of the table's kind); a
-    stream with aux channels (``k`` not None: firmware_ref.vectors.aux_stream) gives int64[n, 11]
+    stream with aux channels (``k`` not None: host_tools.vectors.builders.aux_stream) gives int64[n, 11]
     with F and T from ``f``, ``t`` and K A0 A1 A2 A3 after Z."""
     n = len(s["p"])
     aux = s.get("k") is not None
@@ -664,7 +665,7 @@ def test_ubsan_build(ubsan_exe):
     table = aux_extreme_table()
     s = aux_stream(np.random.default_rng(3), table, 5000, extreme=0.05)
     assert_same(kernel(table, s), run_bin(ubsan_exe, table, s), what="ubsan aux extremes")
-    from firmware_ref.vectors import two_bank_table    # regress_first: residual saturation, both banks
+    from host_tools.vectors.builders import two_bank_table    # regress_first: residual saturation, both banks
     big = np.zeros(17)
     big[0] = 2.0 ** 21 * 0.9
     e = extreme_tables()
@@ -862,7 +863,7 @@ def test_bin_block_width_errors_are_fatal(c_exe):
 
 def rtr_table(rng, estimator, combiner, **kw):
     """A two-bank regress_first table: bank 2 quantized from a second random model."""
-    from firmware_ref.vectors import two_bank_table
+    from host_tools.vectors.builders import two_bank_table
     t1 = quantize(random_model(rng, reversal=True, estimator=estimator), n_random=10, **kw).table
     t2 = quantize(random_model(rng, reversal=True, estimator=estimator), n_random=10, **kw).table
     return two_bank_table(t1, t2, combiner)
@@ -889,7 +890,7 @@ def test_regress_first_streams_equal_numba_and_reference(c_exe, seed, estimator,
 def test_regress_first_corners_and_saturation(c_exe, combiner):
     """Corner streams on a two-bank table whose bank 2 has |B| near the output range: the residual
     word saturates (flag 128); text protocol against the reference and the kernel."""
-    from firmware_ref.vectors import two_bank_table
+    from host_tools.vectors.builders import two_bank_table
     big = np.zeros(17)
     big[0] = 2.0 ** 21 * 0.9
     table = two_bank_table(table_of("diffn", "pair"), table_of("diffn", "pair", coef=big), combiner)
@@ -904,7 +905,7 @@ def test_evaluator_bank_select_and_version_1_table(c_exe):
     """EVAL U V Z BANK evaluates bank 2 (== the kernel's and Python's bank 2); a version-1 table is
     read by the C parser as order 0 with one bank and runs exactly like its version-2 words."""
     from firmware_ref.table import N_FIXED, N_FIXED_V1
-    from firmware_ref.vectors import two_bank_table
+    from host_tools.vectors.builders import two_bank_table
     rng = np.random.default_rng(3)
     table = two_bank_table(table_of("diff", "pair"), table_of("diff", "pair", coef=rng.normal(0, 100, 17)), 1)
     u, v, z = (rng.integers(-F.ONE, F.ONE + 1, 300) for _ in range(3))

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from firmware_ref.table import MAGIC, Table, TableError
-from firmware_ref.vectors import make_model, random_model, random_stream
+from host_tools.vectors.builders import make_model, random_model, random_stream
 from host_tools import export as ex
 from host_tools.quantize import quantize, read_table
 from test_c_twin import C_DIR, CFLAGS, GCC, assert_same, build, kernel, run_bin, run_text

@@ -17,15 +17,17 @@ from firmware_ref import arith
 from firmware_ref import formats as F
 from firmware_ref import inputs
 from firmware_ref.aux import sin_q30
-from firmware_ref.compensate import compensate_log, log_words, run_reference
+from firmware_ref.compensate import run_reference
+from host_tools.fixed_point import compensate_log, log_words
 from firmware_ref.kernel import _rhu_wide, _sin_q30, run_words
 from firmware_ref.table import FIELD_INDEX, Table, TableError, encode_aux
-from firmware_ref.vectors import make_model, with_aux
+from host_tools.vectors.builders import make_model, with_aux
 from host_tools import compensate as hc
 from host_tools import runlog as rl
 from host_tools.diagnose import STAT_KEYS, _stats_one, diagnose
 from host_tools.fit import fit_logs
-from host_tools.quantize import QuantizeError, aux_channel_fracs, dequantized_log, quantize, read_table
+from host_tools.fixed_point import dequantized_log
+from host_tools.quantize import QuantizeError, aux_channel_fracs, quantize, read_table
 from host_tools.regressors import aux_regressor
 from test_diagnose import CASES, world
 

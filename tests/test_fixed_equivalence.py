@@ -8,7 +8,7 @@ from firmware_ref import formats as F
 from firmware_ref.compensate import run_reference
 from firmware_ref.kernel import evaluate_words, run_words
 from firmware_ref.terms import K_AUX, POLY_INDEX
-from firmware_ref.vectors import (aux_stream, corner_stream, make_model, random_aux_model, random_model,
+from host_tools.vectors.builders import (aux_stream, corner_stream, make_model, random_aux_model, random_model,
                                   random_stream)
 from host_tools.quantize import quantize
 
@@ -239,7 +239,7 @@ def test_evaluator_numba_equals_vectorized_1e6():
 # -- regress, then reverse (order 1: two banks, the residual combiner) -----------------------------------
 
 def _rtr_table(rng, estimator, combiner, **kw):
-    from firmware_ref.vectors import two_bank_table
+    from host_tools.vectors.builders import two_bank_table
     t1 = quantize(random_model(rng, reversal=True, estimator=estimator), n_random=10, **kw).table
     t2 = quantize(random_model(rng, reversal=True, estimator=estimator), n_random=10, **kw).table
     return two_bank_table(t1, t2, combiner)
@@ -270,7 +270,7 @@ def test_reference_equals_numba_regress_first(seed, combiner):
 def test_reference_equals_numba_regress_first_corners(combiner):
     """Corner streams (+-2^31 rate words, clamped proxies, restarts) on a two-bank table whose
     bank 2 is large: the residual word saturates (flag 128) and both paths agree."""
-    from firmware_ref.vectors import two_bank_table
+    from host_tools.vectors.builders import two_bank_table
     coef = np.array([3e3, -2e3, 1e3, -5e2, 7e2, -3e2, 1e2, 5e2, -4e2, 3e2, -2e2, 1e2, -9e1, 8e1, -7e1, 6e1, -5e1])
     base = dict(estimator="diffn", n=5, combiner="pair", settle_s=2.0, max_stale_s=25.0)
     t1 = quantize(make_model(coef=coef, **base), n_random=10).table
@@ -288,7 +288,7 @@ def test_regress_first_outputs_are_the_residual_combination():
     """Independent check of the order-1 semantics on a warm, settled stream: none gives OUT =
     RHU(s R 2^11 - B, 11); pair gives OUT = RHU(r 2^10 + W_r[o], 11) with W_r[o] the rounded mean
     of the other mode's last window of r (computed here in numpy from the reference's B)."""
-    from firmware_ref.vectors import two_bank_table
+    from host_tools.vectors.builders import two_bank_table
     rng = np.random.default_rng(5)
     from dataclasses import replace
     t1 = replace(quantize(random_model(rng, reversal=True, estimator="diff"), n_random=10).table, settle_n=0,

@@ -2,17 +2,19 @@
 the op counts are consistent with the algorithm."""
 import pytest
 
+from firmware_ref import docgen
 from firmware_ref import formats as F
+from firmware_ref import vocabulary as VOC
 from firmware_ref.table import LAYOUT
 from host_tools import compensate as hc
 
 
 def test_formats_md_generated_blocks_are_current():
-    path = F.formats_md_path()
+    path = docgen.formats_md_path()
     text = path.read_text(encoding="utf-8")
-    blocks = F.render_blocks()
-    assert F.splice(text, blocks) == text, ("FORMATS.md is out of date: run "
-                                           "`python -m firmware_ref.formats --update`")
+    blocks = docgen.render_blocks()
+    assert docgen.splice(text, blocks) == text, ("FORMATS.md is out of date: run "
+                                                "`python -m firmware_ref.docgen --update`")
     for name in blocks:
         assert f"<!-- BEGIN {name} -->" in text
     for s in F.SIGNALS:
@@ -21,8 +23,32 @@ def test_formats_md_generated_blocks_are_current():
         assert f"| {name} |" in text
 
 
+def test_c_header_vocabulary_block_is_current():
+    """firmware_ref/c/hdrg_fw.h's constants block is generated from firmware_ref.vocabulary."""
+    text = docgen.C_HEADER.read_text(encoding="utf-8")
+    assert docgen.splice_c(text) == text, ("hdrg_fw.h's vocabulary block is out of date: run "
+                                           "`python -m firmware_ref.docgen --update`")
+    assert text.count(docgen.C_BEGIN) == 1 and text.count(docgen.C_END) == 1
+    block = text[text.index(docgen.C_BEGIN):text.index(docgen.C_END)]
+    for k, name in enumerate(VOC.ESTIMATORS):
+        assert f"#define HDRG_EST_{name.upper()} {k}u" in block
+    for bit, (name, _) in VOC.FLAGS.items():
+        assert f" {bit}u " in block
+    assert "HDRG_ST_EXCH_TO_2 = 3," in block and "HDRG_AUX_OSC = 6\n" in block
+    # a changed vocabulary would be caught: the block renders from it
+    stale = text.replace("#define HDRG_EST_IIR 3u", "#define HDRG_EST_IIR 4u")
+    assert docgen.splice_c(stale) != stale
+
+
+def test_vocabulary_names_every_stage_and_code():
+    assert {s.stage for s in F.SIGNALS} <= set(VOC.STAGES)
+    assert F.FLAGS is VOC.FLAGS and F.COMBINERS is VOC.COMBINERS and VOC.REVERSAL_COMBINERS == ("pair", "trend", "none")
+    assert sorted(VOC.FLAGS) == [1 << k for k in range(8)]
+    assert set(VOC.GOLDEN_FLAG_NAMES) == {1, 2, 4, 8, 16}
+
+
 def test_formats_md_states_the_algorithm_constants():
-    text = F.formats_md_path().read_text(encoding="utf-8")
+    text = docgen.formats_md_path().read_text(encoding="utf-8")
     for needle in ("div_round_scaled(acc, cnt, 10)", "RHU(slope[o] * d, 16)", "RHU(y_hold - B, 11)",
                    "RHU(dP * T.g_u + T.u_off, T.sh_u)", "iy += RHU(((P - P[i-1]) << 24) - iy, T.rate_shift)",
                    "min(2*age[o] + span[o], 2^22 - 1)", "clamp(div_round_scaled(mean - W[cur], dc2, 16), +-(2^40 - 1))"):

@@ -4,13 +4,14 @@ import numpy as np
 import pytest
 
 from firmware_ref import formats as F
-from firmware_ref.compensate import compensate_log
+from host_tools.fixed_point import compensate_log
 from host_tools import compensate as comp
 from host_tools import runlog as rl
 from host_tools.cli import main as cli_main
 from host_tools.fit import fit, fit_logs
 from host_tools.model import BiasModel
-from host_tools.quantize import dequantized_log, quantize
+from host_tools.fixed_point import dequantized_log
+from host_tools.quantize import quantize
 from host_tools.reversal import ReversalConfig
 from host_tools.sim import simulate
 

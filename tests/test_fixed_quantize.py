@@ -15,7 +15,7 @@ from firmware_ref.evaluator import evaluate
 from firmware_ref.kernel import evaluate_words
 from firmware_ref.table import FIELD_INDEX, MAGIC, N_FIXED, Table, TableError
 from firmware_ref.terms import K_AUX, N_TERMS, TERM_POWERS
-from firmware_ref.vectors import make_model
+from host_tools.vectors.builders import make_model
 from host_tools.quantize import QuantizeError, configure_cli, quantize, read_table, run_cli
 
 CORNERS = [-F.ONE, -F.ONE + 1, -1, 0, 1, F.ONE - 1, F.ONE]
@@ -200,7 +200,7 @@ def test_version_1_table_reads_as_combine_first_one_bank(table):
 
 def test_two_bank_table_fields_and_refusals(table):
     from dataclasses import replace
-    from firmware_ref.vectors import two_bank_table
+    from host_tools.vectors.builders import two_bank_table
     other = replace(table, mant=tuple(-m for m in table.mant))
     t2 = two_bank_table(table, other, 3)
     words = t2.to_words()

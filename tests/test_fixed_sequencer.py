@@ -8,7 +8,7 @@ from firmware_ref import formats as F
 from firmware_ref.compensate import Pipeline
 from firmware_ref.kernel import run_words
 from firmware_ref.sequencer import Combiner, Sequencer, Timer
-from firmware_ref.vectors import make_model
+from host_tools.vectors.builders import make_model
 from host_tools import runlog as rl
 from host_tools.quantize import quantize
 from host_tools.reversal import combine

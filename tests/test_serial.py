@@ -27,7 +27,7 @@ from hypothesis import strategies as st
 from firmware_ref import formats as F
 from firmware_ref import inputs
 from firmware_ref import table as T
-from firmware_ref.compensate import compensate_log
+from host_tools.fixed_point import compensate_log
 from firmware_ref.kernel import run_words
 from host_tools.link import device as D
 from host_tools import runlog

@@ -1,4 +1,4 @@
-"""Test vectors (host_tools/vectors.py, vectors/): the committed vectors regenerate byte for byte
+"""Test vectors (host_tools/vectors/, vectors/): the committed vectors regenerate byte for byte
 and match the algorithm sources they record; verify recomputes them and points at the first
 mismatch; generate refuses a changed vector without a version bump; check-impl passes the C twin
 and catches a deliberately broken build; the pipeline vectors agree with the per-sample Python
@@ -82,7 +82,7 @@ def test_generate_writes_the_same_bytes(tmp_path, regenerated):
 def test_staleness_names_changed_sources_and_changed_vectors(monkeypatch, regenerated):
     fp = V.source_fingerprint()
     changed = {"sha256": "0" * 64, "files": {**fp["files"], "firmware_ref/arith.py": "1" * 64}}
-    monkeypatch.setattr(V, "source_fingerprint", lambda root=V.ROOT: changed)
+    monkeypatch.setattr(V.build, "source_fingerprint", lambda root=V.ROOT: changed)
     problems = V.staleness(VECTORS, regenerated)
     assert problems == ["algorithm sources changed since generation: firmware_ref/arith.py"]
     monkeypatch.undo()
@@ -104,7 +104,7 @@ def test_manifest_and_files(manifest):
     assert len(manifest["sources"]) >= 10 and "firmware_ref/kernel.py" in manifest["sources"]
     assert "firmware_ref/c/hdrg_fw.c" in manifest["sources"]
     for name, meta in manifest["sets"].items():
-        vs = V._load_set(VECTORS, name, meta)           # parses every CSV field as an integer
+        vs = V.load_set(VECTORS, name, meta)           # parses every CSV field as an integer
         assert len(vs) == meta["rows"] > 0
         mem = (VECTORS / meta["mem"]).read_text().splitlines()
         assert len(mem) == meta["rows"] and all(len(line) * 4 == meta["mem_record_bits"] for line in mem[:50])
@@ -121,30 +121,30 @@ def test_manifest_and_files(manifest):
 def test_sets_cover_what_they_claim(manifest):
     """The sequencer set reaches every flag, state and a saturated output; the evaluator set has
     clamped z, |u| = |v| = 1 and B beyond 2^42; the primitives have ties on both signs."""
-    seq = V._load_set(VECTORS, "sequencer", manifest["sets"]["sequencer"]).columns
+    seq = V.load_set(VECTORS, "sequencer", manifest["sets"]["sequencer"]).columns
     flags = np.bitwise_or.reduce(seq["flags"])
     for bit in (1, 2, 4, 8, 16, 32, 128):
         assert flags & bit, f"flag {bit} never set"
     assert set(seq["state"].tolist()) == set(range(6))
     assert (np.abs(seq["out"]) == F.INT32_SYM).any() and (np.abs(seq["bias"]) == F.INT32_SYM).any()
     assert (seq["MODE"] == -1).any() and (seq["MODE"] >= 0).any()
-    ev = V._load_set(VECTORS, "evaluator", manifest["sets"]["evaluator"]).columns
+    ev = V.load_set(VECTORS, "evaluator", manifest["sets"]["evaluator"]).columns
     assert ev["zclamped"].any() and not ev["zclamped"].all()
     assert (np.abs(ev["u"]) == F.ONE).any() and (np.abs(ev["v"]) == F.ONE).any()
     assert (np.abs(ev["b"]) >= 1 << 42).any()
-    pr = V._load_set(VECTORS, "primitives", manifest["sets"]["primitives"]).columns
+    pr = V.load_set(VECTORS, "primitives", manifest["sets"]["primitives"]).columns
     rhu = pr["op"] == V.PRIM_OPS.index("RHU")
     s = pr["b"]
     tie = rhu & (s > 0) & ((pr["a"] & ((1 << np.minimum(s, 62)) - 1)) == (1 << np.maximum(s - 1, 0)))
     assert (tie & (pr["a"] > 0)).any() and (tie & (pr["a"] < 0)).any()
     assert set(pr["op"].tolist()) == set(range(len(V.PRIM_OPS)))
-    e2e = V._load_set(VECTORS, "e2e", manifest["sets"]["e2e"]).columns
+    e2e = V.load_set(VECTORS, "e2e", manifest["sets"]["e2e"]).columns
     for col in ("F", "T", "R", "u", "v", "z", "row0", "row3", "zterm", "t", "b", "acc", "y", "out", "flags"):
         assert col in e2e
     assert e2e["valid"].mean() > 0.5 and (e2e["acc"] != 0).any() and (e2e["T"] != 0).all()
     # aux: every generator kind, signs, powers, filters, K edges, the weight-sum clamp, every aux word
     meta = manifest["sets"]["aux"]
-    aux = V._load_set(VECTORS, "aux", meta)
+    aux = V.load_set(VECTORS, "aux", meta)
     c = aux.columns
     from firmware_ref.table import Table
     kinds, signs, powers, filt, chans = set(), set(), set(), False, set()
@@ -172,7 +172,7 @@ def test_sets_cover_regress_first(manifest):
     combiner (pair, trend, none) in the sequencer and e2e sets, mode-2 samples whose B comes from
     bank 2, valid outputs, a saturated residual word; the evaluator set asks for bank 2."""
     for name in ("sequencer", "e2e"):
-        vs = V._load_set(VECTORS, name, manifest["sets"][name])
+        vs = V.load_set(VECTORS, name, manifest["sets"][name])
         c = vs.columns
         combs = set()
         for case in vs.cases:
@@ -185,11 +185,11 @@ def test_sets_cover_regress_first(manifest):
             m = c["mode"][lo:hi]
             assert (m == 2).any() and (m == 1).any() and c["valid"][lo:hi].any(), case["name"]
         assert combs == {"pair", "trend", "none"}, (name, combs)
-    seq = V._load_set(VECTORS, "sequencer", manifest["sets"]["sequencer"])
+    seq = V.load_set(VECTORS, "sequencer", manifest["sets"]["sequencer"])
     case = next(c for c in seq.cases if c["name"] == "rtr_residual_saturation_log")
     lo, hi = case["rows"]
     assert (seq.columns["flags"][lo:hi] & F.FLAG_SAT).any()
-    ev = V._load_set(VECTORS, "evaluator", manifest["sets"]["evaluator"]).columns
+    ev = V.load_set(VECTORS, "evaluator", manifest["sets"]["evaluator"]).columns
     assert (ev["bank"] == 2).sum() > 500 and set(ev["bank"].tolist()) == {1, 2}
 
 
@@ -201,7 +201,7 @@ def test_pipeline_vectors_equal_python_reference_on_whole_cases(manifest):
                             ("e2e", ("mode_reversal", "regress_first_pair")),
                             ("aux", ("single_decay_exchange_sign", "single_input_temp_long_lag", "osc_k_edges",
                                      "weight_sum_clamp", "coefficient_extremes", "random_5", "sim_aux"))):
-        vs = V._load_set(VECTORS, set_name, manifest["sets"][set_name])
+        vs = V.load_set(VECTORS, set_name, manifest["sets"][set_name])
         c = vs.columns
         for case in vs.cases:
             if case["name"] not in names:
@@ -245,7 +245,7 @@ def test_verify_reports_first_mismatch_with_inputs(tmp_path):
     assert f"F={fields[2]}" in first and f"R={fields[4]}" in first and "bias: file" in first
     # a consistent forgery (manifest hash updated) is still caught by the recomputation
     m = json.loads((d / "manifest.json").read_text())
-    m["files"]["sequencer.csv"]["sha256"] = V._sha256((d / "sequencer.csv").read_bytes())
+    m["files"]["sequencer.csv"]["sha256"] = V.files._sha256((d / "sequencer.csv").read_bytes())
     m["files"]["sequencer.csv"]["bytes"] = len((d / "sequencer.csv").read_bytes())
     (d / "manifest.json").write_text(json.dumps(m))
     problems = V.verify(d, ["sequencer"], log=quiet)
@@ -269,12 +269,14 @@ def test_generate_refuses_changed_vectors_without_version_bump(tmp_path, monkeyp
     V.generate(tmp_path, names=("primitives",))
     before = (tmp_path / "primitives.csv").read_bytes()
     V.generate(tmp_path, names=("primitives",))              # unchanged: fine
-    real = V._prim_cases
-    monkeypatch.setattr(V, "_prim_cases", lambda rng: real(rng)[1:])    # "the algorithm changed"
+    real = V.primitives._prim_cases
+    monkeypatch.setattr(V.primitives, "_prim_cases", lambda rng: real(rng)[1:])    # "the algorithm changed"
     with pytest.raises(V.VectorsError, match="bump GENERATOR_VERSION"):
         V.generate(tmp_path, names=("primitives",))
     assert (tmp_path / "primitives.csv").read_bytes() == before
-    monkeypatch.setattr(V, "GENERATOR_VERSION", V.GENERATOR_VERSION + 1)
+    bumped = V.GENERATOR_VERSION + 1
+    for module in (V, V.spec, V.files, V.build):      # each module that reads the version
+        monkeypatch.setattr(module, "GENERATOR_VERSION", bumped)
     m = V.generate(tmp_path, names=("primitives",))
     assert m["generator_version"] == V.GENERATOR_VERSION
     assert (tmp_path / "primitives.csv").read_bytes() != before

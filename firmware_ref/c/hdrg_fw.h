@@ -84,26 +84,52 @@ enum hdrg_word {
 #define HDRG_AUX_SB_MAX 62u
 #define HDRG_AUX_POWER_MAX 5u
 #define HDRG_K_LIMIT ((int64_t)1 << 62)
+
+/* ---- vocabulary: codes of the table fields, aux term kinds, sequencer states, status flags -- */
+/* BEGIN vocabulary (generated from firmware_ref/vocabulary.py: python -m firmware_ref.docgen --update) */
+#define HDRG_PROXY_FREQ 0u
+#define HDRG_PROXY_TEMP 1u
+#define HDRG_EST_DIFF 0u
+#define HDRG_EST_DIFFN 1u
+#define HDRG_EST_LSQ 2u
+#define HDRG_EST_IIR 3u
+#define HDRG_COMB_FTR 0u
+#define HDRG_COMB_PAIR 1u
+#define HDRG_COMB_TREND 2u
+#define HDRG_COMB_NONE 3u
+#define HDRG_ORDER_COMBINE_FIRST 0u
+#define HDRG_ORDER_REGRESS_FIRST 1u
+#define HDRG_AUXGEN_NONE 0u
+#define HDRG_AUXGEN_SUM 1u
 enum hdrg_aux_kind {
-    HDRG_AUX_INPUT = 0, HDRG_AUX_RATE, HDRG_AUX_ONE, HDRG_AUX_DECAY_ON, HDRG_AUX_DECAY_EXCHANGE,
-    HDRG_AUX_RAMP, HDRG_AUX_OSC
+    HDRG_AUX_INPUT = 0,
+    HDRG_AUX_RATE = 1,
+    HDRG_AUX_ONE = 2,
+    HDRG_AUX_DECAY_ON = 3,
+    HDRG_AUX_DECAY_EXCHANGE = 4,
+    HDRG_AUX_RAMP = 5,
+    HDRG_AUX_OSC = 6
 };
-
-/* ---- status flags ---------------------------------------------------------------------- */
-#define HDRG_FLAG_PROXY_CLAMPED 1u
-#define HDRG_FLAG_RATE_CLAMPED 2u
-#define HDRG_FLAG_WARMUP 4u
-#define HDRG_FLAG_EXCHANGE 8u
-#define HDRG_FLAG_STALE 16u
-#define HDRG_FLAG_AUX_CLAMPED 32u
-#define HDRG_FLAG_INPUT_SAT 64u         /* host side only: never set here */
-#define HDRG_FLAG_SAT 128u
-
-/* ---- sequencer states and virtual-switch bits ------------------------------------------ */
 enum hdrg_seq_state {
-    HDRG_ST_POWER_ON = 0, HDRG_ST_EXCH_TO_1, HDRG_ST_MODE_1, HDRG_ST_EXCH_TO_2, HDRG_ST_MODE_2,
-    HDRG_ST_FTR
+    HDRG_ST_POWER_ON = 0,
+    HDRG_ST_EXCH_TO_1 = 1,
+    HDRG_ST_MODE_1 = 2,
+    HDRG_ST_EXCH_TO_2 = 3,
+    HDRG_ST_MODE_2 = 4,
+    HDRG_ST_FTR = 5
 };
+/* status flags (uint8) */
+#define HDRG_FLAG_PROXY_CLAMPED 1u      /* u outside [-1, 1] was clamped (golden: same rule, |u_raw| > 1) */
+#define HDRG_FLAG_RATE_CLAMPED 2u       /* v outside [-1, 1] was clamped */
+#define HDRG_FLAG_WARMUP 4u             /* rate estimator in warm-up (v = 0) */
+#define HDRG_FLAG_EXCHANGE 8u           /* mode 3 (exchange or power-on) */
+#define HDRG_FLAG_STALE 16u             /* mode 1/2 sample without a valid combination (settling, no window, too old) */
+#define HDRG_FLAG_AUX_CLAMPED 32u       /* z word outside [-2^30, 2^30] was clamped */
+#define HDRG_FLAG_INPUT_SAT 64u         /* a float input beyond its word's range was saturated (host) */
+#define HDRG_FLAG_SAT 128u              /* saturation in the pipeline: window count, trend slope/distance, output word */
+/* END vocabulary */
+
+/* ---- virtual-switch bits ------------------------------------------------------------- */
 #define HDRG_VS_DRV_X 0x01u
 #define HDRG_VS_DRV_Y 0x02u
 #define HDRG_VS_SNS_Y 0x04u

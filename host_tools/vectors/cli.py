@@ -1,0 +1,58 @@
+"""``hdrg vectors generate|verify|check-impl``: argument parsing over build and runner.
+"""
+from __future__ import annotations
+
+import argparse
+
+from host_tools.vectors.spec import FORMAT_VERSION, GENERATOR_VERSION, O_NAMES
+from host_tools.vectors.build import generate, verify
+from host_tools.vectors.runner import check_impl
+
+
+# -- CLI ----------------------------------------------------------------------------------------------
+
+def configure_cli(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="action", metavar="ACTION")
+    sub.required = True
+    g = sub.add_parser("generate", help="generate the vectors into a directory")
+    g.add_argument("-o", "--output", default="vectors", help="output directory (default: vectors/)")
+    g.add_argument("--force", action="store_true", help="overwrite changed vectors without a version bump")
+    v = sub.add_parser("verify", help="check the SHA-256s and recompute every vector from its inputs")
+    v.add_argument("directory", nargs="?", default="vectors", help="vectors directory (default: vectors/)")
+    v.add_argument("--sets", default=None, help="comma list of sets (default all)")
+    c = sub.add_parser("check-impl", help="drive an external implementation through the stdin/stdout protocol "
+                                          "(vectors/README.md) and compare")
+    c.add_argument("--cmd", required=True, help="the program and its arguments, e.g. './hdrg_fw'")
+    c.add_argument("directory", nargs="?", default="vectors", help="vectors directory (default: vectors/)")
+    c.add_argument("--sets", default=None, help="comma list of sets (default all)")
+    c.add_argument("--fields", default=None, help=f"compare only these O fields of the pipeline sets "
+                                                  f"(default all: {','.join(O_NAMES)})")
+    c.add_argument("--timeout", type=float, default=600.0, help="seconds per set (default 600)")
+
+
+def _names(text):
+    return None if text is None else [s.strip() for s in text.split(",") if s.strip()]
+
+
+def run_cli(args) -> int:
+    if args.action == "generate":
+        m = generate(args.output, force=args.force)
+        total = sum(f["bytes"] for f in m["files"].values())
+        for name, s in m["sets"].items():
+            print(f"{name}: {s['rows']} rows, {len(s['cases'])} cases")
+        print(f"wrote {len(m['files']) + 1} files ({total / 1e6:.2f} MB) to {args.output} "
+              f"(format {FORMAT_VERSION}, generator {GENERATOR_VERSION})")
+        return 0
+    if args.action == "verify":
+        problems = verify(args.directory, _names(args.sets))
+        for p in problems:
+            print(f"MISMATCH: {p}")
+        print("vectors OK" if not problems else f"{len(problems)} problem(s)")
+        return 0 if not problems else 1
+    rep = check_impl(args.cmd, args.directory, _names(args.sets), _names(args.fields), args.timeout)
+    total = sum(s["rows"] for s in rep["sets"].values())
+    if rep["mismatches"]:
+        print(f"FAIL: {rep['mismatches']} mismatching answers ({total} vectors); first mismatch:\n{rep['first']}")
+        return 1
+    print(f"PASS: {total} vectors in {len(rep['sets'])} sets, no mismatch")
+    return 0

@@ -1,0 +1,94 @@
+"""The ``e2e`` set's case generator: simulated chamber runs with fitted, quantized models.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from host_tools.vectors.spec import E2E_FIELDS, SEQ_INPUTS
+from host_tools.vectors.files import VectorSet
+from host_tools.vectors.pipeline import _Cases, compute_pipeline
+
+
+# -- end to end --------------------------------------------------------------------------------------
+
+E2E_RUNS = (
+    # name, scenario, seed, duration [s], description, reversal (order, combiner) or None
+    ("ftr", "paper-ftr-cycle-4dpm", 11, 2400.0, "FTR, -20..20 degC cycles at 4 degC/min", None),
+    ("mode_reversal", "paper-mr-cycle-4dpm", 12, 2400.0, "mode reversal 30/120 s, cycles at 4 degC/min, "
+     "combine_first pair (legacy)", ("combine_first", "pair")),
+    ("regress_first_pair", "paper-mr-cycle-4dpm", 12, 2400.0, "mode reversal, regress_first pair (two banks)",
+     ("regress_first", "pair")),
+    ("regress_first_none", "paper-mr-cycle-4dpm", 12, 2400.0, "mode reversal, regress_first none (two banks)",
+     ("regress_first", "none")),
+    ("regress_first_trend", "paper-mr-cycle-4dpm", 12, 2400.0, "mode reversal, regress_first trend (two banks)",
+     ("regress_first", "trend")),
+)
+
+
+def _round_sig(x: float, digits: int = 7) -> float:
+    return float(f"{float(x):.{digits}g}")
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (float, np.floating)):
+        return repr(float(x))
+    if isinstance(x, np.integer):
+        return int(x)
+    return x
+
+
+def e2e_model(log, reversal=None):
+    """The model of a run: fit_config_from_logs (rounded to 7 significant digits; ``reversal`` an
+    (order, combiner) pair for a mode-reversal log), fit_logs with it, coefficients (both banks)
+    rounded to 7 significant digits; returns (model, table)."""
+    from host_tools import compensate as hc
+    from host_tools.fit import fit_logs
+    from host_tools.model import BiasModel, ModelConfig
+    from host_tools.proxy import ProxyConfig
+    from host_tools.quantize import quantize
+    from host_tools.rate import RateConfig
+
+    from host_tools.reversal import ReversalConfig
+
+    rev = None if reversal is None else ReversalConfig(reversal[1], order=reversal[0])
+    cfg0 = hc.fit_config_from_logs([log], reversal=rev)
+    cfg = ModelConfig(ProxyConfig(cfg0.proxy.kind, _round_sig(cfg0.proxy.ref), _round_sig(cfg0.proxy.span)),
+                      RateConfig(cfg0.rate.estimator, cfg0.rate.n, cfg0.rate.shift, _round_sig(cfg0.rate.span),
+                                 cfg0.rate.fs), cfg0.reversal, cfg0.aux)
+    fitted, _ = fit_logs([log], cfg, terms="all")            # pinned: the default became "auto"
+    coef = np.array([_round_sig(c) for c in fitted.coef], np.float64)
+    coef2 = None if fitted.coef_mode2 is None else np.array([_round_sig(c) for c in fitted.coef_mode2], np.float64)
+    model = BiasModel(cfg, fitted.terms, coef, source=f"<vectors e2e {log.source}>", coef_mode2=coef2)
+    return model, quantize(model, n_random=10).table
+
+
+def e2e_set() -> tuple:
+    """(VectorSet, configuration dict)."""
+    from firmware_ref import inputs
+    from host_tools.fixed_point import log_words
+    from host_tools.sim import simulate
+
+    cs = _Cases()
+    config = {}
+    for name, scenario, seed, duration, desc, reversal in E2E_RUNS:
+        log = simulate(scenario, seed=seed, duration_s=duration)
+        model, table = e2e_model(log, reversal)
+        w = log_words(log, model.config)
+        other = (inputs.temp_words(log["temp_c"]) if table.proxy_kind == 0 else inputs.freq_words(log["freq_hz"]))[0]
+        cs.add(name, f"{desc}: host_tools.sim.simulate({scenario!r}, seed={seed}, duration_s={duration:g}), "
+               f"fitted, quantized; log-driven", table, w, t_words=other)
+        config[name] = {"scenario": scenario, "seed": seed, "duration_s": repr(duration),
+                        "model": {"config": model.config.to_dict(), "terms": list(model.terms),
+                                  "coef": list(model.coef),
+                                  **({"coef_mode2": list(model.coef_mode2)} if model.coef_mode2 is not None
+                                     else {})},
+                        "input_saturated_samples": int(np.count_nonzero(w["input_sat"]))}
+    vs = VectorSet("e2e", "simulated chamber runs through the whole pipeline with every intermediate: the "
+                   "sequencer set's columns plus the evaluator's Horner rows (row0..row3, zterm, t at 2^-E)",
+                   cs.columns(), SEQ_INPUTS, E2E_FIELDS, cs.cases, cs.tables)
+    compute_pipeline(vs, rows=True)
+    return vs, _jsonable(config)
