@@ -33,6 +33,7 @@ import tempfile
 from pathlib import Path
 
 from host_tools import vectors as V
+from host_tools.vectors.runner import requests
 
 ROOT = Path(__file__).resolve().parent.parent
 C_DIR = ROOT / "firmware_ref" / "c"
@@ -258,8 +259,8 @@ def case_requests(set_name: str, cases=None, n: int = TRACE_SAMPLES) -> str:
     committed pipeline vector set."""
     manifest = V.read_manifest(V.DEFAULT_DIR)
     meta = manifest["sets"][set_name]
-    vs = V._load_set(V.DEFAULT_DIR, set_name, meta)
-    reqs = V._requests(vs, None)
+    vs = V.load_set(V.DEFAULT_DIR, set_name, meta)
+    reqs = requests(vs, None)
     lines, k = [], 0
     for ci, case in enumerate(vs.cases):
         lo, hi = case["rows"]

@@ -17,7 +17,7 @@ from host_tools.vectors.build import _describe_row, load_set, _set_order
 
 # -- check-impl ---------------------------------------------------------------------------------------
 
-def _requests(vs: VectorSet, fields) -> list:
+def requests(vs: VectorSet, fields) -> list:
     """(request line, expected response tokens, row index or None, compared token positions)."""
     c = vs.columns
     reqs = []
@@ -73,7 +73,7 @@ def check_impl(cmd, directory=DEFAULT_DIR, names=None, fields=None, timeout: flo
     for name in _set_order(manifest, names):
         meta = manifest["sets"][name]
         vs = load_set(directory, name, meta)
-        reqs = _requests(vs, fields)
+        reqs = requests(vs, fields)
         data = "".join(r[0] + "\n" for r in reqs) + "QUIT\n"
         try:
             pr = subprocess.run(argv, input=data.encode(), capture_output=True, timeout=timeout)
