@@ -977,7 +977,8 @@ def _rate_label(est, n, shift):
     return {"diff": "diff", "diffn": f"diffn n={n}", "lsq": f"lsq n={n}", "iir": f"iir shift={shift}"}[est]
 
 
-def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, **config_kw):
+def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, significance=1.0, min_gain=0.02,
+                  **config_kw):
     """Rate estimator 'auto': for every candidate (estimator, n, shift) build the config
     (host_tools.compensate.fit_config_from_logs with ``config_kw``), fit ``terms`` with
     cross-validation over the runs (one run: ``cv_blocks`` time blocks, see :func:`fit_logs`), and
@@ -992,7 +993,8 @@ def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, 
         label = _rate_label(est, n, shift)
         try:
             cfg = fit_config_from_logs(logs, rate_estimator=est, n=n, shift=shift, **config_kw)
-            model, res = fit_logs(logs, cfg, terms, cv_blocks=cv_blocks, blocks=True, drop_unidentifiable=True)
+            model, res = fit_logs(logs, cfg, terms, cv_blocks=cv_blocks, blocks=True, drop_unidentifiable=True,
+                                  significance=significance, min_gain=min_gain)
         except ValueError as exc:
             rows.append({"estimator": label, "error": str(exc)})
             continue
@@ -1013,11 +1015,14 @@ def add_model_options(parser, what: str = "the model") -> None:
     `hdrg fit` and `hdrg diagnose` (its starting model)."""
     parser.add_argument("--proxy", choices=("freq", "temp"), default=None,
                         help="temperature proxy: freq (drive frequency, default when present) or temp (temp_c)")
-    from host_tools.compensate import DEFAULT_COMBINER, DEFAULT_ORDER, DEFAULT_RATE, DEFAULT_TERMS
+    from host_tools.compensate import (DEFAULT_COMBINER, DEFAULT_ORDER, DEFAULT_RATE, DEFAULT_RATE_SELECTION_MR,
+                                       DEFAULT_SETTLE_S, DEFAULT_TERMS)
     from host_tools.reversal import COMBINERS, ORDERS
 
     parser.add_argument("--rate-estimator", default=None, choices=("diff", "diffn", "lsq", "iir", "auto"),
-                        help=f"proxy-rate estimator of {what} (default: {DEFAULT_RATE['estimator']}; diff is the "
+                        help=f"proxy-rate estimator of {what} (default: {DEFAULT_RATE['estimator']}"
+                             + ("; hdrg fit on mode-reversal logs: auto" if DEFAULT_RATE_SELECTION_MR == "auto" else "")
+                             + f"; diff is the "
                              f"paper's consecutive difference; auto (hdrg fit only): the candidate of least "
                              f"cross-validated rms among diff, diffn 16, lsq 32, iir 7, iir 9, reported in model.json)")
     parser.add_argument("--rate-n", type=int, default=None,
@@ -1034,7 +1039,9 @@ def add_model_options(parser, what: str = "the model") -> None:
     parser.add_argument("--combiner", choices=COMBINERS, default=None,
                         help=f"mode-reversal combiner (mode-reversal logs only): pair (the paper), trend (ours) or "
                              f"none (regress_first only: joint regression alone) (default: {DEFAULT_COMBINER})")
-    parser.add_argument("--settle", type=float, default=0.0, help="settling time excluded after each exchange [s]")
+    parser.add_argument("--settle", type=float, default=None,
+                        help=f"mode-reversal logs only: settling time excluded after each exchange [s] "
+                             f"(default: {DEFAULT_SETTLE_S:g})")
     parser.add_argument("--proxy-range", default=None, help="declared proxy range LO,HI in proxy units (default: training range +10%%)")
     parser.add_argument("--rate-range", default=None, help="declared largest |d proxy/dt| [proxy units/s] (default: from data)")
 
@@ -1055,7 +1062,7 @@ MIN_SAMPLES_PER_TERM = 10   # `hdrg fit` refuses fewer valid samples per coeffic
 
 def run_cli(args) -> int:
     from host_tools import runlog
-    from host_tools.compensate import fit_config_from_logs
+    from host_tools.compensate import DEFAULT_RATE_SELECTION_MR, fit_config_from_logs
 
     from host_tools.atomic import refuse_overwrite
     from host_tools.checks import check_fit_inputs
@@ -1066,6 +1073,9 @@ def run_cli(args) -> int:
     reversal = ({"combiner": args.combiner, "settle_s": args.settle, "order": args.order}
                 if any(log.reversal for log in logs) else None)
     kw = dict(proxy_kind=args.proxy, proxy_range=args.proxy_range, rate_range=args.rate_range, reversal=reversal)
+    if (args.rate_estimator is None and args.rate_n is None and args.rate_shift is None and reversal is not None
+            and DEFAULT_RATE_SELECTION_MR == "auto"):
+        args.rate_estimator = "auto"   # the default for mode-reversal logs (host_tools.compensate)
     try:
         if args.rate_estimator == "auto":
             model, res = fit_auto_rate(logs, args.terms, cv_blocks=args.cv_blocks, **kw)
