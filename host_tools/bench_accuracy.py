@@ -71,7 +71,7 @@ class Option:
     est: str
     terms: str = "all"
     settle: float = 0.0   # settle_s [s] of the reversal config (name suffix '+sN')
-    sig: float = 1.0      # significance of the 'auto' term selection (name suffix '+sigN')
+    sig: float = 1.0      # significance of the 'auto' term selection (name suffix '+sigN'), pinned (not the default)
 
     @property
     def name(self) -> str:

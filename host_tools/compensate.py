@@ -80,6 +80,7 @@ DEFAULT_ORDER, DEFAULT_COMBINER = _reversal.DEFAULT_ORDER, _reversal.DEFAULT_COM
 DEFAULT_SETTLE_S = _reversal.DEFAULT_SETTLE_S  # defined in host_tools.reversal
 DEFAULT_RATE = {"estimator": "diff", "n": 8, "shift": 4}   # robust: no long warm-up, any fs, bursty logs
 DEFAULT_TERMS = "auto"
+DEFAULT_SIGNIFICANCE = 1.0   # of terms 'auto' in fit_logs: keep the smallest model within this many CV standard errors
 # `hdrg fit` on mode-reversal logs without --rate-estimator/--rate-n/--rate-shift: 'auto' (the
 # candidate of least cross-validated rms, host_tools.fit.fit_auto_rate) or 'fixed' (DEFAULT_RATE).
 # FTR logs always get DEFAULT_RATE (on the measured FTR logs 'auto' picks iir and extrapolates badly).

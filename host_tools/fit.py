@@ -922,7 +922,7 @@ def design_matrix(u, v, z=None, terms=range(N_TERMS)) -> np.ndarray:
 
 # -- run-log glue and the `hdrg fit` command ------------------------------------------------------
 
-def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8, significance=1.0,
+def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8, significance=None,
              min_gain=0.02, blocks=None):
     """Fit a :class:`host_tools.model.BiasModel` with ``config`` (a ModelConfig) to RunLogs.
 
@@ -935,11 +935,13 @@ def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8
     mode-2 samples, one term set (see :func:`fit_accumulators`).  ``terms`` None ->
     host_tools.compensate.DEFAULT_TERMS.  ``blocks`` True: cut a single run into ``cv_blocks``
     time blocks whatever the terms (so fixed terms get a cross-validated rms too); None: only for
-    'auto'.  Returns (model, FitResult)."""
-    from host_tools.compensate import DEFAULT_TERMS, prepare
+    'auto'.  ``significance`` of the 'auto' selection (:func:`select_terms`): None ->
+    host_tools.compensate.DEFAULT_SIGNIFICANCE.  Returns (model, FitResult)."""
+    from host_tools.compensate import DEFAULT_SIGNIFICANCE, DEFAULT_TERMS, prepare
     from host_tools.model import BiasModel
 
     terms = DEFAULT_TERMS if terms is None else terms
+    significance = DEFAULT_SIGNIFICANCE if significance is None else significance
     auto = isinstance(terms, str) and terms.strip().lower() == "auto"
     two = config.reversal is not None and config.reversal.order == "regress_first"
     accs = {}
@@ -977,7 +979,7 @@ def _rate_label(est, n, shift):
     return {"diff": "diff", "diffn": f"diffn n={n}", "lsq": f"lsq n={n}", "iir": f"iir shift={shift}"}[est]
 
 
-def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, significance=1.0, min_gain=0.02,
+def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, significance=None, min_gain=0.02,
                   **config_kw):
     """Rate estimator 'auto': for every candidate (estimator, n, shift) build the config
     (host_tools.compensate.fit_config_from_logs with ``config_kw``), fit ``terms`` with
