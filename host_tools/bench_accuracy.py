@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from host_tools.compensate import compensate, fit_config_from_logs
-from host_tools.fit import fit_auto_rate, fit_logs
+from host_tools.fit import fit_auto_rate, fit_default, fit_logs
 from host_tools.reversal import ReversalConfig, combine
 from host_tools.sim_foreign import ForeignDevice, damping_bias, foreign_device, simulate_foreign
 
@@ -63,7 +63,8 @@ SEED_STRIDE = 100000
 
 @dataclass(frozen=True)
 class Option:
-    """One pipeline option: ``kind`` ftr | mr-pair | mr-trend | rf-none | rf-pair | rf-trend,
+    """One pipeline option: ``kind`` ftr | mr-pair | mr-trend | rf-none | rf-pair | rf-trend (or
+    ``ftr/default``, ``mr/default``: host_tools.fit.fit_default, i.e. `hdrg fit RUN` without options),
     ``est`` a key of ESTIMATORS or 'raw' (no model), ``terms`` 'all' (17 terms) or 'auto'
     (cross-validated term selection of host_tools.fit; name suffix '+auto')."""
 
@@ -75,6 +76,8 @@ class Option:
 
     @property
     def name(self) -> str:
+        if self.est == "default":
+            return f"{self.kind}/default"
         return (f"{self.kind}/{self.est}" + ("" if self.terms == "all" else f"+{self.terms}")
                 + (f"+s{self.settle:g}" if self.settle else "") + (f"+sig{self.sig:g}" if self.sig != 1.0 else ""))
 
@@ -83,7 +86,7 @@ class Option:
         return self.kind != "ftr"
 
     def reversal_config(self):
-        if not self.reversal:
+        if not self.reversal or self.kind == "mr":   # mr/default: the defaults of fit_config_from_logs
             return None
         order, combiner = self.kind.split("-")
         d = {"combiner": combiner, "settle_s": self.settle}
@@ -102,6 +105,7 @@ def all_options() -> list:
     out = [Option(k, "raw") for k in ("ftr", "mr-pair", "mr-trend")]
     out += [Option(k, e) for k in kinds for e in ESTIMATORS]
     out += [Option(k, e, "auto") for k in kinds for e in AUTO_ESTIMATORS]
+    out += [Option("ftr", "default", "default"), Option("mr", "default", "default")]
     for (k, e, t), variants in VARIANTS:
         if k in kinds:
             out += [o for o in (Option(k, e, t, **v) for v in variants) if o not in out]
@@ -146,7 +150,9 @@ def evaluate_option(opt: Option, train, holdout) -> tuple[float, str]:
                 return _std(holdout.rate_dph), ""
             c = combine(holdout, rev.combiner)
             return _std(c.out_dph[c.valid]), ""
-        if opt.est == "auto":
+        if opt.est == "default":   # exactly `hdrg fit RUN` without options
+            model, _ = fit_default([train])
+        elif opt.est == "auto":
             model, _ = fit_auto_rate([train], opt.terms, reversal=rev, significance=opt.sig)
         else:
             est, n, shift = ESTIMATORS[opt.est]

@@ -84,7 +84,7 @@ DEFAULT_SIGNIFICANCE = 1.0   # of terms 'auto' in fit_logs: keep the smallest mo
 # `hdrg fit` on mode-reversal logs without --rate-estimator/--rate-n/--rate-shift: 'auto' (the
 # candidate of least cross-validated rms, host_tools.fit.fit_auto_rate) or 'fixed' (DEFAULT_RATE).
 # FTR logs always get DEFAULT_RATE (on the measured FTR logs 'auto' picks iir and extrapolates badly).
-DEFAULT_RATE_SELECTION_MR = "fixed"
+DEFAULT_RATE_SELECTION_MR = "auto"
 IMPLS = ("float", "fixed")
 
 
@@ -245,9 +245,9 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
     * rate span: ``rate_range`` [proxy units/s], else RateConfig.from_data (``rate_percentile``
       of |dp/dt| past warm-up on non-exchange samples, times 1 + ``rate_margin``);
     * reversal: None for FTR logs (giving one is an error); for mode-reversal logs ``reversal``
-      (a ReversalConfig, used as is; or a dict, whose missing or None "combiner" / "order" /
-      "settle_s" are DEFAULT_COMBINER / DEFAULT_ORDER / DEFAULT_SETTLE_S) or
-      ReversalConfig(DEFAULT_COMBINER, settle_s=DEFAULT_SETTLE_S, order=DEFAULT_ORDER);
+      (a ReversalConfig, used as is; or a dict, whose missing or None "combiner" / "order" are
+      DEFAULT_COMBINER / DEFAULT_ORDER, and "settle_s" DEFAULT_SETTLE_S for regress_first + pair,
+      else 0 s) or ReversalConfig(DEFAULT_COMBINER, settle_s=DEFAULT_SETTLE_S, order=DEFAULT_ORDER);
     * aux: ``aux`` (AuxConfig or dict) or AuxConfig() ('none').
     """
     logs = list(logs)
@@ -278,8 +278,12 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
             rev = reversal
         else:
             given = {k: v for k, v in dict(reversal or {}).items() if v is not None}
-            rev = ReversalConfig.from_dict({"combiner": DEFAULT_COMBINER, "order": DEFAULT_ORDER,
-                                            "settle_s": DEFAULT_SETTLE_S, **given})
+            kw = {"combiner": DEFAULT_COMBINER, "order": DEFAULT_ORDER, **given}
+            # settle default only where the benchmark measured it (regress_first + pair); 0 s elsewhere
+            # (hdrg paper's combine_first and regression-alone rows get worse with 5 s)
+            if "settle_s" not in kw:
+                kw["settle_s"] = DEFAULT_SETTLE_S if (kw["order"], kw["combiner"]) == ("regress_first", "pair") else 0.0
+            rev = ReversalConfig.from_dict(kw)
     if rate_estimator == "auto":
         raise ValueError("rate estimator 'auto' is chosen by fitting every candidate: use hdrg fit "
                          "(host_tools.fit.fit_auto_rate), not a fixed model configuration")

@@ -980,29 +980,33 @@ def _rate_label(est, n, shift):
 
 
 def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, significance=None, min_gain=0.02,
-                  **config_kw):
+                  drop_unidentifiable=True, **config_kw):
     """Rate estimator 'auto': for every candidate (estimator, n, shift) build the config
     (host_tools.compensate.fit_config_from_logs with ``config_kw``), fit ``terms`` with
     cross-validation over the runs (one run: ``cv_blocks`` time blocks, see :func:`fit_logs`), and
     keep the candidate of least cross-validated rms.  A candidate that cannot be fitted (e.g. no
     sample past its warm-up) is skipped and reported.  Returns (model, FitResult); the model's
     fit info holds "rate_selection": {"method", "chosen", "candidates": [{"estimator", "cv_rms" or
-    "error"}]} (written to model.json)."""
+    "error"}]} (written to model.json).  ``drop_unidentifiable`` as in :func:`fit_logs`; when no
+    candidate fits and one failed as unidentifiable, that UnidentifiableError is raised."""
     from host_tools.compensate import fit_config_from_logs
 
-    rows, best = [], None
+    rows, best, unidentifiable = [], None, None
     for est, n, shift in candidates:
         label = _rate_label(est, n, shift)
         try:
             cfg = fit_config_from_logs(logs, rate_estimator=est, n=n, shift=shift, **config_kw)
-            model, res = fit_logs(logs, cfg, terms, cv_blocks=cv_blocks, blocks=True, drop_unidentifiable=True,
-                                  significance=significance, min_gain=min_gain)
+            model, res = fit_logs(logs, cfg, terms, cv_blocks=cv_blocks, blocks=True,
+                                  drop_unidentifiable=drop_unidentifiable, significance=significance, min_gain=min_gain)
         except ValueError as exc:
             rows.append({"estimator": label, "error": str(exc)})
+            unidentifiable = unidentifiable or (exc if isinstance(exc, UnidentifiableError) else None)
             continue
         rows.append({"estimator": label, "cv_rms": res.cv["cv_rms"]})
         if best is None or res.cv["cv_rms"] < best[0]:
             best = (res.cv["cv_rms"], model, res, label)
+    if best is None and unidentifiable is not None:
+        raise unidentifiable   # (drop_unidentifiable=False) the caller can name the remedy
     if best is None:
         raise ValueError("rate estimator 'auto': no candidate could be fitted: "
                          + "; ".join(f"{r['estimator']}: {r['error']}" for r in rows))
@@ -1010,6 +1014,19 @@ def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, 
     model.fit["rate_selection"] = {"method": "least cross-validated rms (time blocks of one run, or runs)",
                                    "chosen": label, "candidates": rows}
     return model, res
+
+
+def fit_default(logs, terms=None, **config_kw):
+    """What `hdrg fit` does without rate flags: mode-reversal logs with
+    host_tools.compensate.DEFAULT_RATE_SELECTION_MR 'auto' -> :func:`fit_auto_rate`, else
+    :func:`fit_logs` with the default configuration (host_tools.compensate.fit_config_from_logs
+    with ``config_kw``).  Returns (model, FitResult)."""
+    from host_tools.compensate import DEFAULT_RATE_SELECTION_MR, fit_config_from_logs
+
+    logs = list(logs)
+    if DEFAULT_RATE_SELECTION_MR == "auto" and logs and all(log.reversal for log in logs):
+        return fit_auto_rate(logs, terms, **config_kw)
+    return fit_logs(logs, fit_config_from_logs(logs, **config_kw), terms)
 
 
 def add_model_options(parser, what: str = "the model") -> None:
@@ -1078,6 +1095,7 @@ def run_cli(args) -> int:
     if (args.rate_estimator is None and args.rate_n is None and args.rate_shift is None and reversal is not None
             and DEFAULT_RATE_SELECTION_MR == "auto"):
         args.rate_estimator = "auto"   # the default for mode-reversal logs (host_tools.compensate)
+        kw["drop_unidentifiable"] = args.drop_unidentifiable   # (an explicit 'auto' drops them, as before)
     try:
         if args.rate_estimator == "auto":
             model, res = fit_auto_rate(logs, args.terms, cv_blocks=args.cv_blocks, **kw)
