@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from host_tools.compensate import compensate, fit_config_from_logs
-from host_tools.fit import fit_logs
+from host_tools.fit import fit_auto_rate, fit_default, fit_logs
 from host_tools.reversal import ReversalConfig, combine
 from host_tools.sim_foreign import ForeignDevice, damping_bias, foreign_device, simulate_foreign
 
@@ -51,33 +51,45 @@ ESTIMATORS = {"diff": ("diff", 8, 4), "diffn4": ("diffn", 4, 4), "diffn16": ("di
               "lsq8": ("lsq", 8, 4), "lsq32": ("lsq", 32, 4), "iir4": ("iir", 8, 4), "iir7": ("iir", 8, 7),
               "iir9": ("iir", 8, 9)}
 AUTO_ESTIMATORS = ("diff", "iir9")   # 'auto' costs ~0.5 s per fit (forward selection): two estimators only
+# est 'auto': the rate estimator chosen by host_tools.fit.fit_auto_rate (fits every RATE_CANDIDATE)
+# variants of the defaults (issue #10 tuning): settle_s after each exchange, stricter term selection
+VARIANTS = ((("rf-pair", "diff", "auto"), ({"settle": 3.0}, {"settle": 5.0}, {"settle": 10.0}, {"sig": 2.0})),
+            (("rf-pair", "auto", "auto"), ({}, {"settle": 5.0}, {"sig": 2.0})),
+            (("ftr", "diff", "auto"), ({"sig": 2.0},)),
+            (("ftr", "auto", "auto"), ({}, {"sig": 2.0})))
 DAMPING_CHANGE_DPH = 0.5
 SEED_STRIDE = 100000
 
 
 @dataclass(frozen=True)
 class Option:
-    """One pipeline option: ``kind`` ftr | mr-pair | mr-trend | rf-none | rf-pair | rf-trend,
+    """One pipeline option: ``kind`` ftr | mr-pair | mr-trend | rf-none | rf-pair | rf-trend (or
+    ``ftr/default``, ``mr/default``: host_tools.fit.fit_default, i.e. `hdrg fit RUN` without options),
     ``est`` a key of ESTIMATORS or 'raw' (no model), ``terms`` 'all' (17 terms) or 'auto'
     (cross-validated term selection of host_tools.fit; name suffix '+auto')."""
 
     kind: str
     est: str
     terms: str = "all"
+    settle: float = 0.0   # settle_s [s] of the reversal config (name suffix '+sN')
+    sig: float = 1.0      # significance of the 'auto' term selection (name suffix '+sigN'), pinned (not the default)
 
     @property
     def name(self) -> str:
-        return f"{self.kind}/{self.est}" + ("" if self.terms == "all" else f"+{self.terms}")
+        if self.est == "default":
+            return f"{self.kind}/default"
+        return (f"{self.kind}/{self.est}" + ("" if self.terms == "all" else f"+{self.terms}")
+                + (f"+s{self.settle:g}" if self.settle else "") + (f"+sig{self.sig:g}" if self.sig != 1.0 else ""))
 
     @property
     def reversal(self) -> bool:
         return self.kind != "ftr"
 
     def reversal_config(self):
-        if not self.reversal:
+        if not self.reversal or self.kind == "mr":   # mr/default: the defaults of fit_config_from_logs
             return None
         order, combiner = self.kind.split("-")
-        d = {"combiner": combiner}
+        d = {"combiner": combiner, "settle_s": self.settle}
         if has_order():
             d["order"] = "regress_first" if order == "rf" else "combine_first"
         return ReversalConfig(**d)
@@ -93,6 +105,10 @@ def all_options() -> list:
     out = [Option(k, "raw") for k in ("ftr", "mr-pair", "mr-trend")]
     out += [Option(k, e) for k in kinds for e in ESTIMATORS]
     out += [Option(k, e, "auto") for k in kinds for e in AUTO_ESTIMATORS]
+    out += [Option("ftr", "default", "default"), Option("mr", "default", "default")]
+    for (k, e, t), variants in VARIANTS:
+        if k in kinds:
+            out += [o for o in (Option(k, e, t, **v) for v in variants) if o not in out]
     return out
 
 
@@ -134,9 +150,14 @@ def evaluate_option(opt: Option, train, holdout) -> tuple[float, str]:
                 return _std(holdout.rate_dph), ""
             c = combine(holdout, rev.combiner)
             return _std(c.out_dph[c.valid]), ""
-        est, n, shift = ESTIMATORS[opt.est]
-        cfg = fit_config_from_logs([train], rate_estimator=est, n=n, shift=shift, reversal=rev)
-        model, _ = fit_logs([train], cfg, terms=opt.terms)
+        if opt.est == "default":   # exactly `hdrg fit RUN` without options
+            model, _ = fit_default([train])
+        elif opt.est == "auto":
+            model, _ = fit_auto_rate([train], opt.terms, reversal=rev, significance=opt.sig)
+        else:
+            est, n, shift = ESTIMATORS[opt.est]
+            cfg = fit_config_from_logs([train], rate_estimator=est, n=n, shift=shift, reversal=rev)
+            model, _ = fit_logs([train], cfg, terms=opt.terms, significance=opt.sig)
         out = compensate(holdout, model)
         valid = out["valid"] > 0
         if valid.sum() < 2:
@@ -189,8 +210,9 @@ def summarize(records, options) -> dict:
 
 
 def run_benchmark(n_devices: int = 50, seed: int = 0, patterns=None, train_rate: float = 4.0,
-                  holdout_rate: float = 2.0, duration_s=None, progress=None) -> dict:
-    """The benchmark (module doc).  Returns {'config', 'records', 'summary'} (JSON-able)."""
+                  holdout_rate: float = 2.0, duration_s=None, progress=None, start: int = 0) -> dict:
+    """The benchmark (module doc) on devices ``start`` .. ``start + n_devices - 1`` of set ``seed``.
+    Returns {'config', 'records', 'summary'} (JSON-able)."""
     if not (isinstance(n_devices, int) and n_devices >= 1):
         raise ValueError(f"--devices must be a positive integer, not {n_devices!r}")
     if not (isinstance(seed, int) and seed >= 0):
@@ -198,17 +220,45 @@ def run_benchmark(n_devices: int = 50, seed: int = 0, patterns=None, train_rate:
     for what, r in (("--train-rate", train_rate), ("--holdout-rate", holdout_rate)):
         if not (math.isfinite(r) and r > 0):
             raise ValueError(f"{what} must be a positive number of degC/min, not {r!r}")
+    if not (isinstance(start, int) and start >= 0):
+        raise ValueError(f"--start must be a non-negative integer, not {start!r}")
     options = select_options(patterns)
     records = []
     t0 = time.time()
     for i in range(n_devices):
-        records.append(evaluate_device(seed * SEED_STRIDE + i, options, train_rate, holdout_rate, duration_s))
+        records.append(evaluate_device(seed * SEED_STRIDE + start + i, options, train_rate, holdout_rate, duration_s))
         if progress:
             progress(f"device {i + 1}/{n_devices} ({time.time() - t0:.0f} s)")
-    config = {"devices": n_devices, "seed": seed, "train": {"rate_c_per_min": train_rate, "power_on": 0, "noise_seed": 0},
+    config = {"devices": n_devices, "start": start, "seed": seed, "options": [o.name for o in options], "train": {"rate_c_per_min": train_rate, "power_on": 0, "noise_seed": 0},
               "holdout": {"rate_c_per_min": holdout_rate, "power_on": 1, "noise_seed": 1},
               "duration_s": duration_s, "damping_change_dph": DAMPING_CHANGE_DPH, "regress_first": has_order(),
               "elapsed_s": round(time.time() - t0, 1)}
+    return {"config": config, "records": records, "summary": summarize(records, options)}
+
+
+def merge(results) -> dict:
+    """One result from several runs of the same options and protocol on disjoint devices (e.g.
+    ``--start 0 --devices 25`` and ``--start 25 --devices 25``): records concatenated, summary
+    recomputed.  Runs that differ in options or protocol, or share a device, are an error."""
+    results = list(results)
+    if not results:
+        raise ValueError("nothing to merge")
+    key = ("seed", "train", "holdout", "duration_s", "damping_change_dph", "options")
+    for r in results:   # runs written before config had "options": the summary's option names
+        r["config"].setdefault("options", list(r["summary"]))
+        r["config"].setdefault("start", 0)
+    c0 = results[0]["config"]
+    for r in results[1:]:
+        diff = [k for k in key if r["config"].get(k) != c0.get(k)]
+        if diff:
+            raise ValueError(f"cannot merge benchmark runs that differ in {', '.join(diff)}")
+    records = [rec for r in results for rec in r["records"]]
+    seeds = [rec["seed"] for rec in records]
+    if len(set(seeds)) != len(seeds):
+        raise ValueError("cannot merge benchmark runs that share a device seed")
+    options = select_options(c0["options"])
+    config = {**c0, "devices": len(records), "start": min(r["config"].get("start", 0) for r in results),
+              "elapsed_s": round(sum(r["config"]["elapsed_s"] for r in results), 1)}
     return {"config": config, "records": records, "summary": summarize(records, options)}
 
 
@@ -324,6 +374,11 @@ def effect_sizes(n_devices: int, seed: int, rate_c_per_min: float = 2.0) -> dict
 def configure_cli(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--devices", type=int, default=50, help="number of random devices (default 50)")
     parser.add_argument("--seed", type=int, default=0, help="device set: seeds S*100000 + i (default 0)")
+    parser.add_argument("--start", type=int, default=0, metavar="I",
+                        help="first device index (devices I .. I+N-1; default 0), to split a run")
+    parser.add_argument("--merge", nargs="+", metavar="JSON", default=None,
+                        help="instead: merge --json files of split runs (same options, disjoint devices) and "
+                             "print their tables (with --json: write the merged result)")
     parser.add_argument("--json", metavar="F", help="write config, per-device records and summary as JSON")
     parser.add_argument("--pipelines", nargs="+", metavar="PATTERN",
                         help="options to run (fnmatch patterns, e.g. 'ftr/*' 'mr-trend/iir9'; default all)")
@@ -351,11 +406,20 @@ def run_cli(args) -> int:
     if args.plausibility is not None:
         print(plausibility(args.devices, args.seed, args.plausibility))
         return 0
-    res = run_benchmark(args.devices, args.seed, args.pipelines, args.train_rate, args.holdout_rate, args.duration,
-                        progress=lambda msg: print(f"hdrg bench accuracy: {msg}", file=sys.stderr))
-    print(f"held-out std at 1 s / noise floor; {args.devices} foreign devices (seed {args.seed}), train "
-          f"{args.train_rate:g} degC/min power-on 0, hold out {args.holdout_rate:g} degC/min power-on 1; "
-          f"{res['config']['elapsed_s']} s")
+    if args.merge:
+        parts = []
+        for path in args.merge:
+            with open(path) as fh:
+                parts.append(json.load(fh))
+        res = merge(parts)
+    else:
+        res = run_benchmark(args.devices, args.seed, args.pipelines, args.train_rate, args.holdout_rate,
+                            args.duration, progress=lambda msg: print(f"hdrg bench accuracy: {msg}", file=sys.stderr),
+                            start=args.start)
+    cfg = res["config"]
+    print(f"held-out std at 1 s / noise floor; {cfg['devices']} foreign devices (set {cfg['seed']}, from index "
+          f"{cfg['start']}), train {cfg['train']['rate_c_per_min']:g} degC/min power-on 0, hold out "
+          f"{cfg['holdout']['rate_c_per_min']:g} degC/min power-on 1; {cfg['elapsed_s']} s")
     print(format_table(res))
     print("\nmedian / p90, all devices:")
     print(format_pivot(res))

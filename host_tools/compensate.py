@@ -72,8 +72,14 @@ FS_TOLERANCE = 0.01  # relative mismatch allowed between the log's sample rate a
 # what is not given, so hdrg fit / diagnose / demo and everything reading their model files follow.
 # Chosen on held-out runs at another temperature rate (docs/REGRESS_THEN_REVERSE.md "Defaults").
 DEFAULT_ORDER, DEFAULT_COMBINER = _reversal.DEFAULT_ORDER, _reversal.DEFAULT_COMBINER  # defined in host_tools.reversal
+DEFAULT_SETTLE_S = _reversal.DEFAULT_SETTLE_S  # defined in host_tools.reversal
 DEFAULT_RATE = {"estimator": "diff", "n": 8, "shift": 4}   # robust: no long warm-up, any fs, bursty logs
 DEFAULT_TERMS = "auto"
+DEFAULT_SIGNIFICANCE = 1.0   # of terms 'auto' in fit_logs: keep the smallest model within this many CV standard errors
+# `hdrg fit` on mode-reversal logs without --rate-estimator/--rate-n/--rate-shift: 'auto' (the
+# candidate of least cross-validated rms, host_tools.fit.fit_auto_rate) or 'fixed' (DEFAULT_RATE).
+# FTR logs always get DEFAULT_RATE (on the measured FTR logs 'auto' picks iir and extrapolates badly).
+DEFAULT_RATE_SELECTION_MR = "auto"
 IMPLS = ("float", "fixed")
 
 
@@ -235,7 +241,8 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
       of |dp/dt| past warm-up on non-exchange samples, times 1 + ``rate_margin``);
     * reversal: None for FTR logs (giving one is an error); for mode-reversal logs ``reversal``
       (a ReversalConfig, used as is; or a dict, whose missing or None "combiner" / "order" are
-      DEFAULT_COMBINER / DEFAULT_ORDER) or ReversalConfig(DEFAULT_COMBINER, order=DEFAULT_ORDER);
+      DEFAULT_COMBINER / DEFAULT_ORDER, and "settle_s" DEFAULT_SETTLE_S for regress_first + pair,
+      else 0 s) or ReversalConfig(DEFAULT_COMBINER, settle_s=DEFAULT_SETTLE_S, order=DEFAULT_ORDER);
     * aux: ``aux`` (AuxConfig or dict) or AuxConfig() ('none').
     """
     logs = list(logs)
@@ -266,7 +273,12 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
             rev = reversal
         else:
             given = {k: v for k, v in dict(reversal or {}).items() if v is not None}
-            rev = ReversalConfig.from_dict({"combiner": DEFAULT_COMBINER, "order": DEFAULT_ORDER, **given})
+            kw = {"combiner": DEFAULT_COMBINER, "order": DEFAULT_ORDER, **given}
+            # settle default only where the benchmark measured it (regress_first + pair); 0 s elsewhere
+            # (hdrg paper's combine_first and regression-alone rows get worse with 5 s)
+            if "settle_s" not in kw:
+                kw["settle_s"] = DEFAULT_SETTLE_S if (kw["order"], kw["combiner"]) == ("regress_first", "pair") else 0.0
+            rev = ReversalConfig.from_dict(kw)
     if rate_estimator == "auto":
         raise ValueError("rate estimator 'auto' is chosen by fitting every candidate: use hdrg fit "
                          "(host_tools.fit.fit_auto_rate), not a fixed model configuration")

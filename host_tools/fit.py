@@ -923,7 +923,7 @@ def design_matrix(u, v, z=None, terms=range(N_TERMS)) -> np.ndarray:
 
 # -- run-log glue and the `hdrg fit` command ------------------------------------------------------
 
-def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8, significance=1.0,
+def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8, significance=None,
              min_gain=0.02, blocks=None):
     """Fit a :class:`host_tools.model.BiasModel` with ``config`` (a ModelConfig) to RunLogs.
 
@@ -936,11 +936,13 @@ def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8
     mode-2 samples, one term set (see :func:`fit_accumulators`).  ``terms`` None ->
     host_tools.compensate.DEFAULT_TERMS.  ``blocks`` True: cut a single run into ``cv_blocks``
     time blocks whatever the terms (so fixed terms get a cross-validated rms too); None: only for
-    'auto'.  Returns (model, FitResult)."""
-    from host_tools.compensate import DEFAULT_TERMS, prepare
+    'auto'.  ``significance`` of the 'auto' selection (:func:`select_terms`): None ->
+    host_tools.compensate.DEFAULT_SIGNIFICANCE.  Returns (model, FitResult)."""
+    from host_tools.compensate import DEFAULT_SIGNIFICANCE, DEFAULT_TERMS, prepare
     from host_tools.model import BiasModel
 
     terms = DEFAULT_TERMS if terms is None else terms
+    significance = DEFAULT_SIGNIFICANCE if significance is None else significance
     auto = isinstance(terms, str) and terms.strip().lower() == "auto"
     two = config.reversal is not None and config.reversal.order == "regress_first"
     accs = {}
@@ -978,28 +980,34 @@ def _rate_label(est, n, shift):
     return {"diff": "diff", "diffn": f"diffn n={n}", "lsq": f"lsq n={n}", "iir": f"iir shift={shift}"}[est]
 
 
-def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, **config_kw):
+def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, significance=None, min_gain=0.02,
+                  drop_unidentifiable=True, **config_kw):
     """Rate estimator 'auto': for every candidate (estimator, n, shift) build the config
     (host_tools.compensate.fit_config_from_logs with ``config_kw``), fit ``terms`` with
     cross-validation over the runs (one run: ``cv_blocks`` time blocks, see :func:`fit_logs`), and
     keep the candidate of least cross-validated rms.  A candidate that cannot be fitted (e.g. no
     sample past its warm-up) is skipped and reported.  Returns (model, FitResult); the model's
     fit info holds "rate_selection": {"method", "chosen", "candidates": [{"estimator", "cv_rms" or
-    "error"}]} (written to model.json)."""
+    "error"}]} (written to model.json).  ``drop_unidentifiable`` as in :func:`fit_logs`; when no
+    candidate fits and one failed as unidentifiable, that UnidentifiableError is raised."""
     from host_tools.compensate import fit_config_from_logs
 
-    rows, best = [], None
+    rows, best, unidentifiable = [], None, None
     for est, n, shift in candidates:
         label = _rate_label(est, n, shift)
         try:
             cfg = fit_config_from_logs(logs, rate_estimator=est, n=n, shift=shift, **config_kw)
-            model, res = fit_logs(logs, cfg, terms, cv_blocks=cv_blocks, blocks=True, drop_unidentifiable=True)
+            model, res = fit_logs(logs, cfg, terms, cv_blocks=cv_blocks, blocks=True,
+                                  drop_unidentifiable=drop_unidentifiable, significance=significance, min_gain=min_gain)
         except ValueError as exc:
             rows.append({"estimator": label, "error": str(exc)})
+            unidentifiable = unidentifiable or (exc if isinstance(exc, UnidentifiableError) else None)
             continue
         rows.append({"estimator": label, "cv_rms": res.cv["cv_rms"]})
         if best is None or res.cv["cv_rms"] < best[0]:
             best = (res.cv["cv_rms"], model, res, label)
+    if best is None and unidentifiable is not None:
+        raise unidentifiable   # (drop_unidentifiable=False) the caller can name the remedy
     if best is None:
         raise ValueError("rate estimator 'auto': no candidate could be fitted: "
                          + "; ".join(f"{r['estimator']}: {r['error']}" for r in rows))
@@ -1009,16 +1017,32 @@ def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, 
     return model, res
 
 
+def fit_default(logs, terms=None, **config_kw):
+    """What `hdrg fit` does without rate flags: mode-reversal logs with
+    host_tools.compensate.DEFAULT_RATE_SELECTION_MR 'auto' -> :func:`fit_auto_rate`, else
+    :func:`fit_logs` with the default configuration (host_tools.compensate.fit_config_from_logs
+    with ``config_kw``).  Returns (model, FitResult)."""
+    from host_tools.compensate import DEFAULT_RATE_SELECTION_MR, fit_config_from_logs
+
+    logs = list(logs)
+    if DEFAULT_RATE_SELECTION_MR == "auto" and logs and all(log.reversal for log in logs):
+        return fit_auto_rate(logs, terms, **config_kw)
+    return fit_logs(logs, fit_config_from_logs(logs, **config_kw), terms)
+
+
 def add_model_options(parser, what: str = "the model") -> None:
     """The options that configure a model (proxy, rate estimator, terms, combiner, ranges), shared by
     `hdrg fit` and `hdrg diagnose` (its starting model)."""
     parser.add_argument("--proxy", choices=PROXY_KINDS, default=None,
                         help="temperature proxy: freq (drive frequency, default when present) or temp (temp_c)")
-    from host_tools.compensate import DEFAULT_COMBINER, DEFAULT_ORDER, DEFAULT_RATE, DEFAULT_TERMS
+    from host_tools.compensate import (DEFAULT_COMBINER, DEFAULT_ORDER, DEFAULT_RATE, DEFAULT_RATE_SELECTION_MR,
+                                       DEFAULT_SETTLE_S, DEFAULT_TERMS)
     from host_tools.reversal import COMBINERS, ORDERS
 
     parser.add_argument("--rate-estimator", default=None, choices=ESTIMATORS + ("auto",),
-                        help=f"proxy-rate estimator of {what} (default: {DEFAULT_RATE['estimator']}; diff is the "
+                        help=f"proxy-rate estimator of {what} (default: {DEFAULT_RATE['estimator']}"
+                             + ("; hdrg fit on mode-reversal logs: auto" if DEFAULT_RATE_SELECTION_MR == "auto" else "")
+                             + f"; diff is the "
                              f"paper's consecutive difference; auto (hdrg fit only): the candidate of least "
                              f"cross-validated rms among diff, diffn 16, lsq 32, iir 7, iir 9, reported in model.json)")
     parser.add_argument("--rate-n", type=int, default=None,
@@ -1035,7 +1059,9 @@ def add_model_options(parser, what: str = "the model") -> None:
     parser.add_argument("--combiner", choices=COMBINERS, default=None,
                         help=f"mode-reversal combiner (mode-reversal logs only): pair (the paper), trend (ours) or "
                              f"none (regress_first only: joint regression alone) (default: {DEFAULT_COMBINER})")
-    parser.add_argument("--settle", type=float, default=0.0, help="settling time excluded after each exchange [s]")
+    parser.add_argument("--settle", type=float, default=None,
+                        help=f"mode-reversal logs only: settling time excluded after each exchange [s] "
+                             f"(default: {DEFAULT_SETTLE_S:g})")
     parser.add_argument("--proxy-range", default=None, help="declared proxy range LO,HI in proxy units (default: training range +10%%)")
     parser.add_argument("--rate-range", default=None, help="declared largest |d proxy/dt| [proxy units/s] (default: from data)")
 
@@ -1056,7 +1082,7 @@ MIN_SAMPLES_PER_TERM = 10   # `hdrg fit` refuses fewer valid samples per coeffic
 
 def run_cli(args) -> int:
     from host_tools import runlog
-    from host_tools.compensate import fit_config_from_logs
+    from host_tools.compensate import DEFAULT_RATE_SELECTION_MR, fit_config_from_logs
 
     from host_tools.atomic import refuse_overwrite
     from host_tools.checks import check_fit_inputs
@@ -1067,6 +1093,10 @@ def run_cli(args) -> int:
     reversal = ({"combiner": args.combiner, "settle_s": args.settle, "order": args.order}
                 if any(log.reversal for log in logs) else None)
     kw = dict(proxy_kind=args.proxy, proxy_range=args.proxy_range, rate_range=args.rate_range, reversal=reversal)
+    if (args.rate_estimator is None and args.rate_n is None and args.rate_shift is None and reversal is not None
+            and DEFAULT_RATE_SELECTION_MR == "auto"):
+        args.rate_estimator = "auto"   # the default for mode-reversal logs (host_tools.compensate)
+        kw["drop_unidentifiable"] = args.drop_unidentifiable   # (an explicit 'auto' drops them, as before)
     try:
         if args.rate_estimator == "auto":
             model, res = fit_auto_rate(logs, args.terms, cv_blocks=args.cv_blocks, **kw)

@@ -84,6 +84,7 @@ DEFAULT_MAX_STALE_S = 300.0
 # and of the raw-log combination of hdrg metrics: chosen on the foreign benchmark (docs/REGRESS_THEN_REVERSE.md)
 DEFAULT_ORDER = "regress_first"
 DEFAULT_COMBINER = "pair"
+DEFAULT_SETTLE_S = 5.0   # settling time excluded after each exchange [s] of new regress_first + pair models (fit_config_from_logs)
 _KIND = {"pair": 0, "trend": 1, "none": 2}
 
 

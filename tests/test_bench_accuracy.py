@@ -135,3 +135,25 @@ def test_ablation_table():
     rows = text.splitlines()
     assert rows[0] == "| physics | ftr/diff |" and len(rows) == 2 + len(ba.ABLATIONS)
     assert all(" / " in r for r in rows[2:])
+
+
+def test_variant_options_and_split_runs_merge_to_the_whole():
+    names = [o.name for o in ba.all_options()]
+    if ba.has_order():
+        assert {"rf-pair/diff+auto+s5", "rf-pair/auto+auto", "rf-pair/diff+auto+sig2"} <= set(names)
+        o = ba.select_options(["rf-pair/diff+auto+s5"])[0]
+        assert (o.settle, o.terms, o.reversal_config().settle_s) == (5.0, "auto", 5.0)
+    assert {"ftr/auto+auto", "ftr/diff+auto+sig2"} <= set(names) and len(set(names)) == len(names)
+    pipes = ["ftr/diff", "ftr/raw"]
+    whole = ba.run_benchmark(2, patterns=pipes, duration_s=2500.0)
+    parts = [ba.run_benchmark(1, patterns=pipes, duration_s=2500.0, start=i) for i in (1, 0)]
+    merged = ba.merge(json.loads(json.dumps(p)) for p in parts)
+    assert sorted(r["seed"] for r in merged["records"]) == [0, 1] and merged["config"]["devices"] == 2
+    for name in pipes:   # (the damping-change subset is empty here: nan == nan fails)
+        assert merged["summary"][name]["all"] == whole["summary"][name]["all"]
+        assert merged["summary"][name]["damping_change"]["n"] == whole["summary"][name]["damping_change"]["n"]
+    with pytest.raises(ValueError, match="share a device"):
+        ba.merge([parts[0], parts[0]])
+    other = ba.run_benchmark(1, patterns=["ftr/raw"], duration_s=2500.0, start=2)
+    with pytest.raises(ValueError, match="differ in options"):
+        ba.merge([parts[0], other])

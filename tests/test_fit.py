@@ -269,3 +269,27 @@ def test_fit_is_invariant_to_chunking_and_chunk_order(cuts, order):
         acc.add(_U[a:b], _V[a:b], _Z[a:b], _Y[a:b])
     assert acc.n == 3000
     np.testing.assert_allclose(F.solve(acc, ALL).coef, _REF, rtol=1e-9, atol=1e-9 * np.abs(_REF).max())
+
+
+@pytest.mark.benchmark
+@pytest.mark.parametrize("how", ["diff", "auto"])
+def test_bench_fit_time_rate_auto_vs_fixed(benchmark, how):
+    """Fit time of one foreign mode-reversal training run (4 degC/min, whole chamber profile; the
+    accuracy benchmark's training run) with terms auto: the fixed default rate estimator (diff)
+    against rate estimator 'auto' (every RATE_CANDIDATE fitted).  Run:
+    python -m pytest tests/test_fit.py -m benchmark -k rate_auto"""
+    from host_tools.compensate import fit_config_from_logs
+    from host_tools.fit import fit_auto_rate, fit_logs
+    from host_tools.sim_foreign import foreign_device, simulate_foreign
+
+    log = simulate_foreign(foreign_device(3), 4.0, True, 0, 0)
+    rev = {"combiner": "pair", "order": "regress_first"}
+
+    def run():
+        if how == "auto":
+            return fit_auto_rate([log], "auto", reversal=rev)[0]
+        return fit_logs([log], fit_config_from_logs([log], rate_estimator="diff", reversal=rev), "auto")[0]
+
+    model = benchmark.pedantic(run, rounds=3, iterations=1, warmup_rounds=1)
+    assert model.coef_mode2 is not None and np.all(np.isfinite(model.coef))
+    benchmark.extra_info.update({"samples": len(log), "rate": model.config.rate.estimator})

@@ -408,7 +408,7 @@ def test_fit_config_from_logs():
     assert (explicit.proxy.lo, explicit.proxy.hi, explicit.rate.span) == (-40.0, 85.0, 0.5)
     mr = comp.fit_config_from_logs([mr_log()], reversal={"combiner": "trend"})
     assert mr.reversal.combiner == "trend"
-    assert comp.fit_config_from_logs([mr_log()]).reversal == ReversalConfig(comp.DEFAULT_COMBINER, order=comp.DEFAULT_ORDER)
+    assert comp.fit_config_from_logs([mr_log()]).reversal == ReversalConfig(comp.DEFAULT_COMBINER, settle_s=comp.DEFAULT_SETTLE_S, order=comp.DEFAULT_ORDER)
     assert comp.fit_config_from_logs([mr_log()], reversal={"combiner": "trend"}).reversal.order == comp.DEFAULT_ORDER
     legacy = comp.fit_config_from_logs([mr_log()], reversal=ReversalConfig("trend"))
     assert legacy.reversal == ReversalConfig("trend", order="combine_first")

@@ -193,7 +193,7 @@ def test_segments_restart_windows_and_warmup():
     log = mr_log(n_periods=10, gap_at=gap)
     assert list(log.segments) == [0, gap]
     cfg = comp.fit_config_from_logs([log], rate_estimator="lsq", n=16,
-                                    reversal={"combiner": "pair", "order": "regress_first"})
+                                    reversal={"combiner": "pair", "order": "regress_first", "settle_s": 0.0})
     W = cfg.rate.warmup
     assert W > 1
     pr = comp.prepare(log, cfg)
@@ -338,3 +338,32 @@ def test_rate_estimator_auto_keeps_least_cv_and_reports_it(tmp_path):
     assert json.loads(path.read_text())["fit"]["rate_selection"]["chosen"] == sel["chosen"]
     with pytest.raises(ValueError, match="auto"):
         comp.fit_config_from_logs([log], rate_estimator="auto")
+
+
+def test_settle_and_mr_rate_selection_defaults_come_from_compensate(tmp_path, monkeypatch):
+    from host_tools.cli import main
+
+    log = mr_log(n_periods=10)
+    monkeypatch.setattr(comp, "DEFAULT_SETTLE_S", 7.0)
+    assert config(log, "pair").reversal.settle_s == 7.0   # the default pipeline
+    assert config(log, "pair", settle_s=None).reversal.settle_s == 7.0
+    assert config(log, "pair", settle_s=0.0).reversal.settle_s == 0.0
+    assert comp.fit_config_from_logs([log]).reversal.settle_s == 7.0
+    for comb, order in (("none", "regress_first"), ("trend", "regress_first"), ("pair", "combine_first")):
+        assert config(log, comb, order).reversal.settle_s == 0.0   # not measured to help: 0 s
+    log = with_bias(log, config(log, settle_s=0.0), common, damping)
+    run = tmp_path / "run.csv"
+    rl.write(log, run)
+    models = {}
+    for sel, extra in (("auto", []), ("auto", ["--rate-estimator", "diff"]), ("auto", ["--rate-shift", "5"]),
+                       ("fixed", []), ("fixed", ["--settle", "2"])):
+        monkeypatch.setattr(comp, "DEFAULT_RATE_SELECTION_MR", sel)
+        m = tmp_path / f"m{len(models)}.json"
+        assert main(["fit", str(run), "-o", str(m), "--terms", "k0,k1,k4", "--combiner", "pair", *extra]) == 0
+        models[(sel, *extra)] = json.loads(m.read_text())
+    assert "rate_selection" in models[("auto",)]["fit"]
+    for key in (("auto", "--rate-estimator", "diff"), ("auto", "--rate-shift", "5"), ("fixed",)):
+        assert "rate_selection" not in models[key]["fit"]
+        assert models[key]["config"]["reversal"]["settle_s"] == 7.0
+    assert models[("fixed",)]["config"]["rate"]["estimator"] == comp.DEFAULT_RATE["estimator"]
+    assert models[("fixed", "--settle", "2")]["config"]["reversal"]["settle_s"] == 2.0

@@ -6,7 +6,7 @@ import numpy as np
 from host_tools import runlog as rl
 from host_tools.bench_accuracy import ESTIMATORS
 from host_tools.compensate import compensate, fit_config_from_logs
-from host_tools.fit import fit_logs
+from host_tools.fit import fit_auto_rate, fit_logs
 from host_tools import metrics
 
 warnings.simplefilter("ignore")
@@ -30,11 +30,15 @@ print("case".ljust(24), "raw".rjust(8), *[f"{e}/{t}".rjust(14) for e in ests for
 for name, tr, ho in cases:
     row = [std1(ho.rate_dph, ho.t_s, np.ones(len(ho), bool))]
     for e in ests:
-        est, n, sh = ESTIMATORS[e]
         for t in terms:
             try:
-                cfg = fit_config_from_logs([tr], rate_estimator=est, n=n, shift=sh, proxy_margin=0.5, rate_margin=0.5)
-                model, res = fit_logs([tr], cfg, t, drop_unidentifiable=True, blocks=True)
+                if e == "auto":   # the rate estimator chosen by cross-validation (host_tools.fit.fit_auto_rate)
+                    model, res = fit_auto_rate([tr], t, proxy_margin=0.5, rate_margin=0.5)
+                    print(name, "auto chose", model.fit["rate_selection"]["chosen"], file=sys.stderr)
+                else:
+                    est, n, sh = ESTIMATORS[e]
+                    cfg = fit_config_from_logs([tr], rate_estimator=est, n=n, shift=sh, proxy_margin=0.5, rate_margin=0.5)
+                    model, res = fit_logs([tr], cfg, t, drop_unidentifiable=True, blocks=True)
                 out = compensate(ho, model)
                 v = out["valid"] > 0
                 row.append(std1(out.rate_dph, ho.t_s, v))
