@@ -863,7 +863,10 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator="diff", 
     if rev and max_iter > 0:
         say("structural candidates: regress-then-reverse (per-mode banks) with each combiner, by CV")
         entry, alt_model = _order_step(train, hold, evals, cfg, model, cv_blocks, cv_folds)
-        if entry is not None:
+        if entry is not None and "skipped" in entry:
+            report["structural_skipped"] = entry["skipped"]
+            say(entry["skipped"])
+        elif entry is not None:
             iterations.append(entry)
             if entry["confirmed"] is not False:
                 model = alt_model
@@ -946,6 +949,12 @@ def _order_step(train, hold, evals, cfg, model, cv_blocks, cv_folds):
     if not (best["gain"] >= CONFIRM_MIN_DROP and best["folds_improved"] > len(folds) // 2):
         return None, None
     alt_model, _ = fit_logs(train, best["cfg"], terms, drop_unidentifiable=True)
+    try:        # the model the loop writes must go to the firmware path (hdrg quantize)
+        from host_tools.quantize import quantize
+        quantize(alt_model, n_random=100)
+    except (ValueError, ArithmeticError) as exc:
+        return {"skipped": f"regress-then-reverse ({best['combiner']}) gains {best['gain']:.3f} in CV but "
+                           f"does not quantize on this build: {exc}"}, None
     before, after = error_stats(evals, model), error_stats(evals, alt_model)
     confirmed = confirmed_on_holdout(before, after) if hold else None
     entry = {"effect": "reversal_order", "params": {"order": "regress_first", "combiner": best["combiner"]},
