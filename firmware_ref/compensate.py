@@ -6,15 +6,17 @@ bit-identical)::
     state/mode  = sequencer timer (self-timed) or the logged mode
     u, uc       = proxy_u(P)                          (firmware_ref.proxy)
     v, vc, warm = rate.step(P, restart)               (firmware_ref.rate)
-    cvalid, y   = combiner.step(mode, R, restart)     (firmware_ref.sequencer; y held)
     z, zc       = aux_gen 0: clamp(Z, +-2^30); aux_gen 1: the generators (firmware_ref.aux) on
                   the channel words (F, T, A_c), K, mode, restart (or power-on), S, warm
-    B           = evaluate(u, v, z)                   (firmware_ref.evaluator, every sample)
+    B           = evaluate(u, v, z, bank)             (firmware_ref.evaluator, every sample; bank 2
+                                                       on mode-2 samples of a two-bank table)
+    cvalid, y   = combiner.step(mode, R, restart, B, warm)   (firmware_ref.sequencer; y held;
+                                                       order 1 accumulates r = c - B)
     valid       = cvalid and not warm and mode != 3
-    if valid:   OUT = symsat32(RHU(y - B, 11)); BIAS = symsat32(RHU(B, 11))   (held otherwise;
-                                                                             0 before the first)
+    if valid:   OUT = symsat32(RHU(y - B, 11)) (order 0) or symsat32(RHU(y, 11)) (order 1: B is
+                in y already); BIAS = symsat32(RHU(B, 11))   (held otherwise; 0 before the first)
     flags       = 1 uc | 2 vc | 4 warm | 8 (mode == 3) | 16 (not cvalid and mode != 3)
-                  | 32 zc | 128 (any saturation: window count, trend, OUT, BIAS)
+                  | 32 zc | 128 (any saturation: window count, trend, residual r, OUT, BIAS)
 
 OUT and BIAS are int32 words, LSB 2^-10 deg/h; the hold is not reset at restarts (as the golden
 host_tools.compensate).  K is the sample counter since power-on (the golden's ``rint(t_s fs)``);
@@ -79,8 +81,7 @@ class Pipeline:
         ``restart``, external ``z`` (aux_gen 0), channel words ``chan`` by code (aux_gen 1) and
         the counter ``k`` (None: the internal count)."""
         t = self.table
-        so = self.seq.step(mode, r, restart)
-        mode = so.mode
+        state, mode = self.seq.mode_step(mode, restart)
         u, uc = proxy_u(p, t)
         v, vc, warm, s = self.rate.step(p, restart)
         k = self.kc if k is None else int(k)
@@ -90,11 +91,12 @@ class Pipeline:
         else:
             z, zc = clamp(z, -F.ONE, F.ONE)
         self.fresh = False
-        b, _ = evaluate(u, v, z, t)
+        b, _ = evaluate(u, v, z, t, bank=t.bank_of_mode(mode))
+        so = self.seq.combine_step(state, mode, r, restart, b, warm)
         valid = so.valid and not warm and mode != 3
         sat = so.sat
         if valid:
-            o, s1 = sat_signed(rshift_round(so.y - b, F.OUT_SHIFT), 32)
+            o, s1 = sat_signed(rshift_round(so.y - (b if t.order == 0 else 0), F.OUT_SHIFT), 32)
             bw, s2 = sat_signed(rshift_round(b, F.OUT_SHIFT), 32)
             sat = sat or s1 or s2
             self.out_hold, self.bias_hold = o, bw
@@ -188,7 +190,8 @@ def check_table_matches(table, model) -> None:
     expect = quantize(model).table
     diffs = [name for name in ("proxy_kind", "p_ref", "g_u", "u_off", "sh_u", "rate_est", "rate_n", "rate_shift",
                                "rate_warmup", "g_v", "sh_v", "combiner", "settle_n", "max_stale_n", "mant",
-                               "e_row", "e_7", "e_acc", "aux_gen", "aux_params")
+                               "e_row", "e_7", "e_acc", "aux_gen", "aux_params", "order", "n_banks", "mant2",
+                               "e_row2", "e_7_2", "e_acc2")
              if getattr(table, name) != getattr(expect, name)]
     if diffs:
         raise ValueError(f"--table: the table does not match the model {model.source} "

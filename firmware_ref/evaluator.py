@@ -17,6 +17,9 @@ m[POLY_INDEX[i][j]]`` and u, v, z int32 Q1.30 (z clamped to [-2^30, 2^30], flag)
     t = t + RHU(m_7 * z, 30 + e_7 - E)                        # k7 z
     B = RHU(t, E - 21) if E >= 21 else t << (21 - E)          # B: int64, LSB 2^-21 deg/h
 
+Two banks (a regress_first table, order 1): ``bank`` 2 (mode-2 samples) evaluates the same scheme
+with bank 2's mantissas and exponents (m2_k, e2_g, E2); every other sample uses bank 1.
+
 host_tools.quantize chooses the exponents so that every p, q, a and t satisfies
 ``|.| <= 2^31 - 1`` for every |u|, |v|, |z| <= 2^30 (interval analysis; the rounded product
 ``RHU(x * w, 30)`` with |w| <= 2^30 never exceeds |x|), hence every product is below 2^61.
@@ -28,10 +31,12 @@ from firmware_ref.arith import clamp, mul_rshift_round, rshift_round
 from firmware_ref.terms import K_AUX, POLY_INDEX
 
 
-def evaluate(u: int, v: int, z: int, table, trace: list | None = None) -> tuple[int, bool]:
-    """``(B, z_clamped)``: the bias B (int64, LSB 2^-21 deg/h).  ``trace``: if a list, every
-    accumulator value (p, q, a, t) is appended (the overflow proof of the tests reads it)."""
+def evaluate(u: int, v: int, z: int, table, trace: list | None = None, bank: int = 1) -> tuple[int, bool]:
+    """``(B, z_clamped)``: the bias B (int64, LSB 2^-21 deg/h) of coefficient ``bank`` (1 or 2;
+    table.bank_of_mode gives it).  ``trace``: if a list, every accumulator value (p, q, a, t) is
+    appended (the overflow proof of the tests reads it)."""
     z, z_clamped = clamp(z, -F.ONE, F.ONE)
+    table = table.bank(bank) if hasattr(table, "bank") else table
     m, E = table.mant, table.e_acc
     a = [0, 0, 0, 0]
     for i in (3, 2, 1, 0):

@@ -101,7 +101,8 @@ STATE_VS = (
 STATE_SIGN = (0, 0, 1, 0, -1, 1)
 MODE_SIGN = (1, 1, -1, 0)           # rate sign per run-log mode 0..3
 
-COMBINERS = ("ftr", "pair", "trend")  # table combiner id 0, 1, 2
+COMBINERS = ("ftr", "pair", "trend", "none")  # table combiner id 0, 1, 2, 3 (3: regress_first only)
+ORDERS = ("combine_first", "regress_first")   # table order 0, 1
 ESTIMATORS = ("diff", "diffn", "lsq", "iir")
 PROXY_KINDS = ("freq", "temp")
 AUX_GENERATORS = ("none", "sum")      # table aux_gen 0 (z = the external Z word, 0 on the host), 1
@@ -201,7 +202,10 @@ SIGNALS = (
     # sequencer
     Fmt("c = s R (rate-corrected)", "int32", str(RATE_FRAC), f"2^-{RATE_FRAC} deg/h", "sym int32", "exact",
         "cannot overflow (R sym-sat)", "sequencer"),
-    Fmt("acc (window sum)", "int64", str(RATE_FRAC), f"2^-{RATE_FRAC} deg/h", "|acc| < 2^62", "exact",
+    Fmt("x = r = c - B (residual word; order 1, regress_first)", "int32", str(RATE_FRAC),
+        f"2^-{RATE_FRAC} deg/h", "sym int32", "RHU(c 2^11 - B, 11) (B of the sample's bank)", "sym-sat, FLAG_SAT",
+        "sequencer"),
+    Fmt("acc (window sum of c; order 1: of r)", "int64", str(RATE_FRAC), f"2^-{RATE_FRAC} deg/h", "|acc| < 2^62", "exact",
         "cnt saturates: later samples not added, FLAG_SAT", "sequencer"),
     Fmt("cnt, pos, age[o], span[o]", "uint32", "0", "1 sample", "0 .. 2^31-1", "-", "saturate at 2^31-1", "sequencer"),
     Fmt("W[o] (window mean)", "int64", str(W_FRAC), f"2^-{W_FRAC} deg/h", "|W| < 2^41", "RHU division, once per window",
@@ -211,12 +215,15 @@ SIGNALS = (
     Fmt("d (trend distance)", "uint32", "1", "half a sample", "0 .. 2^22-1", "exact", "clamp, FLAG_SAT", "sequencer"),
     Fmt("T (trend term)", "int64", str(W_FRAC), f"2^-{W_FRAC} deg/h", "|T| < 2^46", "RHU (1 shift)", "cannot overflow",
         "sequencer"),
-    Fmt("y (combined output)", "int64", str(Y_FRAC), f"2^-{Y_FRAC} deg/h", "|y| < 2^47", "exact (c 2^10 + W + T)",
-        "cannot overflow", "sequencer"),
+    Fmt("y (combined output)", "int64", str(Y_FRAC), f"2^-{Y_FRAC} deg/h", "|y| < 2^47",
+        "exact (c 2^10 + W + T; order 1: r in place of c; none: r 2^11)", "cannot overflow", "sequencer"),
+    Fmt("order, n_banks (table)", "uint32", "-", "-", "order 0 / 1 banks; 1 / 2 banks", "-", "table refused otherwise",
+        "table"),
     # evaluator
-    Fmt("m_k (coefficient mantissas)", "int32", "e_g (per group)", "2^-e_g deg/h", "sum_j |m_gj| <= 2^31-1",
+    Fmt("m_k, m2_k (coefficient mantissas, bank 1, 2)", "int32", "e_g (per group and bank)", "2^-e_g deg/h",
+        "sum_j |m_gj| <= 2^31-1",
         "RHU from float", "quantizer refuses", "table"),
-    Fmt("e_0..e_3, e_7, E (exponents)", "uint8", "-", "-", f"{EXP_MIN}..{EXP_MAX}; e_g - E in 0..{ALIGN_MAX}", "-",
+    Fmt("e_0..e_3, e_7, E; e2_* (exponents, per bank)", "uint8", "-", "-", f"{EXP_MIN}..{EXP_MAX}; e_g - E in 0..{ALIGN_MAX}", "-",
         "quantizer refuses", "table"),
     Fmt("p, q_i (inner Horner)", "int64", "e_i", "2^-e_i deg/h", "|.| <= 2^31-1 (proved)", "RHU per product",
         "cannot overflow", "evaluator"),
@@ -226,7 +233,7 @@ SIGNALS = (
         "cannot overflow", "evaluator"),
     # output
     Fmt("OUT (compensated rate word)", "int32", str(OUT_FRAC), f"2^-{OUT_FRAC} deg/h", "+-2^21 deg/h",
-        f"RHU (y - B) >> {OUT_SHIFT}: the one final rounding", "sym-sat, FLAG_SAT", "compensate"),
+        f"RHU (y - B) >> {OUT_SHIFT} (order 0), RHU y >> {OUT_SHIFT} (order 1)", "sym-sat, FLAG_SAT", "compensate"),
     Fmt("BIAS (bias word)", "int32", str(OUT_FRAC), f"2^-{OUT_FRAC} deg/h", "+-2^21 deg/h", f"RHU B >> {OUT_SHIFT}",
         "sym-sat, FLAG_SAT", "compensate"),
     Fmt("flags", "uint8", "-", "-", "bits below", "-", "-", "compensate"),
@@ -295,9 +302,11 @@ def derivation(fig: NoiseFigures = NoiseFigures()) -> dict:
 
 # -- operation counts per sample ----------------------------------------------------------------------
 
-def op_counts(estimator: str = "diff", n: int = 1, combiner: str = "pair") -> dict:
+def op_counts(estimator: str = "diff", n: int = 1, combiner: str = "pair", order: str = "combine_first") -> dict:
     """Operations per sample of one configuration, counted by construction from the algorithm of
     FORMATS.md (steady state, valid sample; the once-per-window divisions are listed apart).
+    ``combiner`` "ftr", "pair", "trend" or "none" (regress_first only); ``order`` "combine_first"
+    or "regress_first" (bank select, the residual word r = c - B).
     ``mul``: 32x32->64 (or 64x32) multiplies; ``add``: adds/subtracts/negations; ``shift``;
     ``cmp``: compares/branches (clamps are 2); ``mem``: 32-bit words read or written from the state
     and the table (registers not counted); ``div_per_window``: 64/32 divisions per window commit."""
@@ -322,9 +331,24 @@ def op_counts(estimator: str = "diff", n: int = 1, combiner: str = "pair") -> di
     add(cmp=1, add=1, mem=1)                            # warm-up counter compare + increment
     add(cmp=2, mul=1, add=1, shift=1, mem=3)            # clamp S, product, RHU; table G_V, SH_V, SB
     add(cmp=2)                                          # clamp v
+    if order not in ORDERS:
+        raise ValueError(f"unknown order {order!r}")
+    regress = order == "regress_first"
+    if (combiner == "none" and not regress) or (combiner == "ftr" and regress):
+        raise ValueError(f"combiner {combiner!r} is not legal with order {order!r}")
     # sequencer / combiner
+    if regress:
+        add(cmp=2)                                      # bank select (mode == 2), warm-up gate
+        add(shift=2, add=2, cmp=2)                      # x = symsat32(RHU(c 2^11 - B, 11))
     if combiner == "ftr":
         add(shift=1)                                    # y = R << 11
+    elif combiner == "none":
+        add(cmp=2, add=1, mem=2)                        # mode change, settle; sign
+        add(add=2, mem=3)                               # acc += x (2 words), cnt++
+        add(add=2, mem=2)                               # age[1], age[2] increments
+        add(shift=1)                                    # y = x << 11
+    elif combiner not in ("pair", "trend"):
+        raise ValueError(f"unknown combiner {combiner!r}")
     else:
         add(cmp=3, add=1, mem=2)                        # mode change, settle, staleness; sign
         add(add=2, mem=3)                               # acc += c (2 words), cnt++
@@ -339,8 +363,8 @@ def op_counts(estimator: str = "diff", n: int = 1, combiner: str = "pair") -> di
     add(mul=16, add=16 + 16, shift=16, mem=17 + 6)      # 17 mantissas + 6 exponents
     add(add=4, shift=4)                                 # row alignments (RHU)
     add(add=1, shift=1, cmp=2)                          # B = RHU(t, E - 21); z clamp
-    # compensate: y - B, two RHU, two saturations, hold (2 words)
-    add(add=3, shift=2, cmp=5, mem=2)
+    # compensate: y - B (combine_first only), two RHU, two saturations, hold (2 words)
+    add(add=3 - (1 if regress else 0), shift=2, cmp=5, mem=2)
     return c
 
 
@@ -391,6 +415,8 @@ AUX_OP_ROWS = (("sum", False, 1), ("input", False, 1), ("input", True, 1), ("inp
 
 OP_CONFIGS = (("diff", 1, "ftr"), ("diff", 1, "pair"), ("diff", 1, "trend"), ("diffn", 8, "pair"),
               ("lsq", 8, "pair"), ("lsq", 32, "trend"), ("iir", 4, "pair"))
+# (estimator, n, combiner, order) rows of the regress_first op-count table
+OP_CONFIGS_RTR = (("diff", 1, "none"), ("diff", 1, "pair"), ("diff", 1, "trend"), ("lsq", 8, "pair"))
 
 
 # -- rendering of the generated blocks of FORMATS.md ---------------------------------------------------
@@ -481,6 +507,11 @@ def render_blocks() -> dict:
         k = op_counts(est, n, comb)
         rows.append((f"{est}" + (f" n={n}" if est in ("diffn", "lsq") else ""),
                      comb, k["mul"], k["add"], k["shift"], k["cmp"], k["mem"], k["div_per_window"]))
+    for est, n, comb in OP_CONFIGS_RTR:
+        k = op_counts(est, n, comb, "regress_first")
+        rows.append((f"{est}" + (f" n={n}" if est in ("diffn", "lsq") else ""),
+                     f"{comb} (regress_first)", k["mul"], k["add"], k["shift"], k["cmp"], k["mem"],
+                     k["div_per_window"]))
     blocks["ops"] = _md_table(("rate estimator", "combiner", "mul", "add", "shift", "cmp", "mem words",
                                "div per window"), rows)
     blocks["layout"] = _md_table(("word", "field", "type", "meaning"),

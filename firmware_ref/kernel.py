@@ -7,11 +7,13 @@ int64 whose range the formats prove (no overflow checks here; the reference asse
 Batch organization (the per-sample results are unchanged by it): the samples are processed in
 blocks of CHUNK; per block (1) the rate sums, read straight from the word array (the firmware's
 ring of the last n + 1 words holds the same words within a segment), (2) pass A, the sequential
-state (timer, combiner, hold of y), (2b) the aux generators of an aux_gen 1 table (sequential:
-filter / decay states, the sample counter; firmware_ref.aux), (3) pass B, the stateless rest (u, v, B, the output
-candidates; branch-free so LLVM vectorizes it: products whose operands the formats bound to
-int32 are written as 32 x 32 -> 64 multiplies, vpmuldq) writing the output words and flags,
-(4) pass C, the hold: invalid samples take the last valid output words.
+state of the timer (the mode of every sample), (2b) the aux generators of an aux_gen 1 table
+(sequential: filter / decay states, the sample counter; firmware_ref.aux), (3) pass B, the
+stateless u, v, z and B of the sample's bank (branch-free for one bank so LLVM vectorizes it:
+products whose operands the formats bound to int32 are written as 32 x 32 -> 64 multiplies,
+vpmuldq), (3b) pass A2, the sequential combiner (order 1 reads B: the residual r = c - B) and the
+hold of y, (3c) the output words and flags, (4) pass C, the hold: invalid samples take the last
+valid output words.
 
 :func:`run_words` is the entry point: table + input words -> output words, valid, flags (and,
 with ``detail``, u, v, B, y, state per sample).
@@ -35,6 +37,8 @@ I_SB, I_GV, I_SHV = FI["s_bits"], FI["g_v"], FI["sh_v"]
 I_COMB, I_SETTLE, I_STALE = FI["combiner"], FI["settle_n"], FI["max_stale_n"]
 I_PON, I_EXCH, I_DWELL = FI["power_on_n"], FI["exchange_n"], FI["dwell_n"]
 I_E0, I_E7, I_EACC, I_M0 = FI["e_0"], FI["e_7"], FI["e_acc"], FI["m_0"]
+I2_E0, I2_E7, I2_EACC, I2_M0 = FI["e2_0"], FI["e2_7"], FI["e2_acc"], FI["m2_0"]
+I_ORDER, I_NBANKS = FI["order"], FI["n_banks"]
 
 _ONE = F.ONE
 _Q = F.Q
@@ -177,27 +181,28 @@ def _aux_pass(terms, ch, kin, has_k, kc, c0, m_blk, restart, a_m, a_sraw, a_w, y
 
 
 @numba.njit(cache=True)
-def _eval_consts(cfg):
-    """The evaluator's constants from the table, as one int64 tuple: c[i][j] (16, row-major),
-    row alignment shifts s_i and their rounding halves h_i, m_7, its shift and half, the final
-    B shift, its half and whether it is a left shift (E < 21)."""
-    e_acc = cfg[I_EACC]
+def _eval_consts(cfg, bank2=False):
+    """The evaluator's constants of bank 1 (or bank 2) from the table, as one int64 tuple: c[i][j]
+    (16, row-major), row alignment shifts s_i and their rounding halves h_i, m_7, its shift and
+    half, the final B shift, its half and whether it is a left shift (E < 21)."""
+    ie0, ie7, ieacc, im0 = (I2_E0, I2_E7, I2_EACC, I2_M0) if bank2 else (I_E0, I_E7, I_EACC, I_M0)
+    e_acc = cfg[ieacc]
     c = np.empty(16, np.int64)
     for i in range(4):
         for j in range(4):
-            c[4 * i + j] = cfg[I_M0 + _POLY[i, j]]
-    s0 = cfg[I_E0] - e_acc
-    s1 = cfg[I_E0 + 1] - e_acc
-    s2 = cfg[I_E0 + 2] - e_acc
-    s3 = cfg[I_E0 + 3] - e_acc
-    sh7 = _Q + cfg[I_E7] - e_acc
+            c[4 * i + j] = cfg[im0 + _POLY[i, j]]
+    s0 = cfg[ie0] - e_acc
+    s1 = cfg[ie0 + 1] - e_acc
+    s2 = cfg[ie0 + 2] - e_acc
+    s3 = cfg[ie0 + 3] - e_acc
+    sh7 = _Q + cfg[ie7] - e_acc
     left = 1 if e_acc < F.Y_FRAC else 0
     b_sh = F.Y_FRAC - e_acc if left else e_acc - F.Y_FRAC
     hb = 0 if left else (np.int64(1) << b_sh) >> 1
     one = np.int64(1)
     return (c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9], c[10], c[11], c[12], c[13], c[14], c[15],
             s0, s1, s2, s3, (one << s0) >> 1, (one << s1) >> 1, (one << s2) >> 1, (one << s3) >> 1,
-            cfg[I_M0 + 7], sh7, (one << sh7) >> 1, np.int64(b_sh), np.int64(hb), np.int64(left))
+            cfg[im0 + 7], sh7, (one << sh7) >> 1, np.int64(b_sh), np.int64(hb), np.int64(left))
 
 
 @numba.njit(cache=True, inline="always")
@@ -219,8 +224,8 @@ def _bias(co, uu, vv, zz):
 
 
 @numba.njit(cache=True)
-def _eval_kernel(cfg, u, v, z, out):
-    co = _eval_consts(cfg)
+def _eval_kernel(cfg, u, v, z, out, bank2):
+    co = _eval_consts(cfg, bank2)
     one = np.int64(_ONE)
     for i in range(u.shape[0]):
         out[i] = _bias(co, u[i], v[i], min(max(z[i], -one), one))
@@ -230,34 +235,71 @@ CHUNK = 1024  # samples per block
 
 
 @numba.njit(cache=True)
-def _pass_b(co, pb, p_ref, g_u, u_off, sh_u, a_s, g_v, sh_v, a_y, zb, a_f, a_ok, out, bias, flags):
-    """Stateless part of a block, branch-free so LLVM vectorizes it: u, v (from the clamped rate
-    sum), B, the OUT/BIAS words (candidates: pass C replaces them by the held values on invalid
-    samples) and the flags (pass A's | 1 u clamped | 2 v clamped | 32 z clamped | 128 OUT or
-    BIAS saturated on a valid sample)."""
+def _pass_b(co, co2, two, pb, p_ref, g_u, u_off, sh_u, a_s, g_v, sh_v, zb, a_m, a_b, a_fb):
+    """Stateless part of a block, branch-free so LLVM vectorizes it (one-bank tables): u, v (from
+    the clamped rate sum), z, B (bank 2 on mode-2 samples of a two-bank table, ``two``) and their
+    flags (1 u clamped | 2 v clamped | 32 z clamped)."""
+    if two:
+        _uvzb_two(co, co2, pb, p_ref, g_u, u_off, sh_u, a_s, g_v, sh_v, zb, a_m, a_b, a_fb)
+    else:
+        _uvzb_one(co, pb, p_ref, g_u, u_off, sh_u, a_s, g_v, sh_v, zb, a_b, a_fb)
+
+
+@numba.njit(cache=True, inline="always")
+def _uvz(pb, p_ref, g_u, u_off, h_u, sh_u, s, g_v, h_v, sh_v, zz):
+    """Clamped u, v, z and their flags (1 u, 2 v, 32 z) of one sample."""
     one = np.int64(_ONE)
     lim32 = np.int64(2147483647)
+    dp = min(max(np.int64(pb) - p_ref, -lim32), lim32)
+    uu = (_mul32(dp, g_u) + u_off + h_u) >> sh_u
+    f = np.uint8((uu > one) | (uu < -one))
+    uu = min(max(uu, -one), one)
+    vv = (s * g_v + h_v) >> sh_v
+    f |= np.uint8((vv > one) | (vv < -one)) << 1
+    vv = min(max(vv, -one), one)
+    f |= np.uint8((zz > one) | (zz < -one)) << 5
+    zz = min(max(zz, -one), one)
+    return uu, vv, zz, f
+
+
+@numba.njit(cache=True)
+def _uvzb_one(co, pb, p_ref, g_u, u_off, sh_u, a_s, g_v, sh_v, zb, a_b, a_fb):
     h_u = (np.int64(1) << sh_u) >> 1
     h_v = (np.int64(1) << sh_v) >> 1
     for jb in range(a_s.shape[0]):
-        dp = min(max(np.int64(pb[jb]) - p_ref, -lim32), lim32)
-        uu = (_mul32(dp, g_u) + u_off + h_u) >> sh_u
-        f = np.uint8((uu > one) | (uu < -one))
-        uu = min(max(uu, -one), one)
-        vv = (a_s[jb] * g_v + h_v) >> sh_v
-        f |= np.uint8((vv > one) | (vv < -one)) << 1
-        vv = min(max(vv, -one), one)
-        zz = zb[jb]
-        f |= np.uint8((zz > one) | (zz < -one)) << 5
-        zz = min(max(zz, -one), one)
-        b = _bias(co, uu, vv, zz)
-        ow = (a_y[jb] - b + 1024) >> 11
+        uu, vv, zz, f = _uvz(pb[jb], p_ref, g_u, u_off, h_u, sh_u, a_s[jb], g_v, h_v, sh_v, zb[jb])
+        a_b[jb] = _bias(co, uu, vv, zz)
+        a_fb[jb] = f
+
+
+@numba.njit(cache=True)
+def _uvzb_two(co, co2, pb, p_ref, g_u, u_off, sh_u, a_s, g_v, sh_v, zb, a_m, a_b, a_fb):
+    h_u = (np.int64(1) << sh_u) >> 1
+    h_v = (np.int64(1) << sh_v) >> 1
+    for jb in range(a_s.shape[0]):
+        uu, vv, zz, f = _uvz(pb[jb], p_ref, g_u, u_off, h_u, sh_u, a_s[jb], g_v, h_v, sh_v, zb[jb])
+        if a_m[jb] == 2:
+            a_b[jb] = _bias(co2, uu, vv, zz)
+        else:
+            a_b[jb] = _bias(co, uu, vv, zz)
+        a_fb[jb] = f
+
+
+@numba.njit(cache=True)
+def _pass_out(order, a_y, a_b, a_fb, a_f, a_ok, out, bias, flags):
+    """The OUT/BIAS words (candidates: pass C replaces them by the held values on invalid samples)
+    and the flags (pass A's | pass B's | 128 OUT or BIAS saturated on a valid sample).  OUT =
+    RHU(y - B, 11) (order 0) or RHU(y, 11) (order 1: y holds r = c - B already)."""
+    lim32 = np.int64(2147483647)
+    keep_b = np.int64(1) if order == 0 else np.int64(0)
+    for jb in range(a_y.shape[0]):
+        b = a_b[jb]
+        ow = (a_y[jb] - keep_b * b + 1024) >> 11
         bw = (b + 1024) >> 11
         sat = (ow > lim32) | (ow < -lim32) | (bw > lim32) | (bw < -lim32)
-        f |= np.uint8(sat & (a_ok[jb] != 0)) << 7
         out[jb] = np.int32(min(max(ow, -lim32), lim32))
         bias[jb] = np.int32(min(max(bw, -lim32), lim32))
-        flags[jb] = f | a_f[jb]
+        flags[jb] = a_fb[jb] | a_f[jb] | (np.uint8(sat & (a_ok[jb] != 0)) << 7)
 
 
 @numba.njit(cache=True)
@@ -290,7 +332,10 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
     lens[3] = cfg[I_EXCH]
     lens[4] = cfg[I_DWELL]
     lens[5] = -1
-    co = _eval_consts(cfg)
+    co = _eval_consts(cfg, False)
+    two = cfg[I_NBANKS] == 2
+    co2 = _eval_consts(cfg, two)
+    order = cfg[I_ORDER]
     # -- state (per-mode combiner state in scalars: index 1 and 2)
     seg = 0
     iy = np.int64(0)
@@ -329,6 +374,8 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
     a_m = np.empty(CHUNK, np.int64)    # mode of each sample (logged or the timer's)
     a_sraw = np.empty(CHUNK, np.int64)  # rate sum before its clamp (aux rate terms)
     zgen = np.empty(CHUNK, np.int64)   # generated z before its clamp (aux_gen 1)
+    a_b = np.empty(CHUNK, np.int64)    # B of the sample's bank
+    a_fb = np.empty(CHUNK, np.uint8)   # pass-B flags (1, 2, 32)
     ystate = np.zeros(max(nt, 1), np.int64)
     exst = np.zeros(max(nt, 1), np.int64)
     kc = np.int64(0)
@@ -377,12 +424,11 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
             c = np.uint8((sv > s_lim) | (sv < -s_lim)) & (w ^ 1)
             a_w[jb] = (w << 2) | (c << 1)            # the warm-up (4) and rate-clamp (2) flags
             a_s[jb] = 0 if w else min(max(sv, -s_lim), s_lim)
-        # ---------------- pass A: sequential state (timer, combiner)
+        # ---------------- pass A1: the sequencer state of every sample (timer or logged mode)
         for jb in range(m_blk):
             i = c0 + jb
-            rs = restart[i] != 0
             if self_timed:
-                if rs:
+                if restart[i] != 0:
                     t_state = 0
                     t_cnt = 0
                 for _ in range(3):
@@ -413,9 +459,25 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
                     st_o[i] = 3
                 else:
                     st_o[i] = 1
+            if comb != 0 and (m == 1 or m == 2):
+                last_window = m                      # the combiner's last window (state of mode 3)
+            a_m[jb] = m
+        # ---------------- aux generators (aux_gen 1): sequential, z before its clamp
+        if nt > 0:
+            kc = _aux_pass(terms, ch, kin, has_k, kc, c0, m_blk, restart, a_m, a_sraw, a_w, ystate, exst, zgen)
+            zb = zgen[:m_blk]
+        else:
+            zb = z[c0:c0 + m_blk] if has_z else zero_z[:m_blk]
+        # ---------------- pass B: stateless, vectorized: u, v, z, B of the sample's bank
+        _pass_b(co, co2, two, p[c0:c0 + m_blk], p_ref, g_u, u_off, sh_u, a_s[:m_blk], g_v, sh_v, zb, a_m[:m_blk],
+                a_b[:m_blk], a_fb[:m_blk])
+        # ---------------- pass A2: sequential combiner (order 1: on the residual r = c - B)
+        for jb in range(m_blk):
+            i = c0 + jb
+            rs = restart[i] != 0
+            m = a_m[jb]
             fl = a_w[jb]
-            warm = fl == 4
-            # combiner
+            warm = (fl & 4) != 0
             cvalid = False
             if comb == 0:
                 y_hold = np.int64(r[i]) << 11
@@ -456,7 +518,6 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
                             nc2 = min(nc2 + 1, 2)
                     if m == 1 or m == 2:
                         cur = m
-                        last_window = m
                         # this window's constants: sign, the other mode's state
                         sgn = np.int64(1) if m == 1 else np.int64(-1)
                         if m == 1:
@@ -468,41 +529,43 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
                         cur = 0
                     acc = np.int64(0)
                     cnt = np.int64(0)
-                if cur != 0 and i >= used_from:
+                if cur != 0 and i >= used_from and not (order == 1 and warm):
                     c = sgn * r[i]
+                    if order == 1:
+                        c = ((c << 11) - a_b[jb] + 1024) >> 11        # r = c - B, LSB 2^-10 deg/h
+                        if c > 2147483647 or c < -2147483647:
+                            c = min(max(c, np.int64(-2147483647)), np.int64(2147483647))
+                            fl |= 128
                     if cnt < 2147483647:
                         acc += c
                         cnt += 1
                     else:
                         fl |= 128
-                    ag_o = min(i - e_o, 2147483647)
-                    if have_o and ag_o <= max_stale:
-                        other = other0
-                        if comb == 2:
-                            d = 2 * ag_o + sp_o
-                            if d > 4194303:
-                                d = np.int64(4194303)
-                                fl |= 128
-                            other += _rshr(sl_o * d, 16)
-                        y_hold = (c << 10) + other
+                    if comb == 3:
+                        y_hold = c << 11
                         cvalid = True
+                    else:
+                        ag_o = min(i - e_o, 2147483647)
+                        if have_o and ag_o <= max_stale:
+                            other = other0
+                            if comb == 2:
+                                d = 2 * ag_o + sp_o
+                                if d > 4194303:
+                                    d = np.int64(4194303)
+                                    fl |= 128
+                                other += _rshr(sl_o * d, 16)
+                            y_hold = (c << 10) + other
+                            cvalid = True
             if m == 3:
                 fl |= 8
             elif not cvalid:
                 fl |= 16
             a_y[jb] = y_hold
             a_f[jb] = fl
-            a_m[jb] = m
             valid[i] = 1 if (cvalid and not warm and m != 3) else 0
-        # ---------------- aux generators (aux_gen 1): sequential, z before its clamp
-        if nt > 0:
-            kc = _aux_pass(terms, ch, kin, has_k, kc, c0, m_blk, restart, a_m, a_sraw, a_w, ystate, exst, zgen)
-            zb = zgen[:m_blk]
-        else:
-            zb = z[c0:c0 + m_blk] if has_z else zero_z[:m_blk]
-        # ---------------- pass B: stateless, vectorized: u, v, B, output words and flags
-        _pass_b(co, p[c0:c0 + m_blk], p_ref, g_u, u_off, sh_u, a_s[:m_blk], g_v, sh_v, a_y[:m_blk], zb,
-                a_f[:m_blk], valid[c0:c0 + m_blk], out[c0:c0 + m_blk], bias[c0:c0 + m_blk], flags[c0:c0 + m_blk])
+        # ---------------- output words and flags
+        _pass_out(order, a_y[:m_blk], a_b[:m_blk], a_fb[:m_blk], a_f[:m_blk], valid[c0:c0 + m_blk],
+                  out[c0:c0 + m_blk], bias[c0:c0 + m_blk], flags[c0:c0 + m_blk])
         if detail:
             h_u = (np.int64(1) << sh_u) >> 1
             h_v = (np.int64(1) << sh_v) >> 1
@@ -514,7 +577,7 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
                 u_o[i] = uu
                 v_o[i] = vv
                 z_o[i] = min(max(zb[jb], -one), one)
-                b_o[i] = _bias(co, uu, vv, z_o[i])
+                b_o[i] = a_b[jb]
                 y_o[i] = a_y[jb]
         # ---------------- pass C: invalid samples hold the last valid output words
         for jb in range(m_blk):
@@ -588,9 +651,9 @@ def run_words(table, p, r, mode=None, restart=None, z=None, self_timed: bool = F
     return res
 
 
-def evaluate_words(table, u, v, z=None) -> np.ndarray:
-    """B (int64, LSB 2^-21 deg/h) at Q1.30 words u, v (|.| <= 2^30) and z (clamped), by the
-    kernel's evaluator."""
+def evaluate_words(table, u, v, z=None, bank: int = 1) -> np.ndarray:
+    """B (int64, LSB 2^-21 deg/h) of coefficient ``bank`` (1, 2) at Q1.30 words u, v (|.| <=
+    2^30) and z (clamped), by the kernel's evaluator."""
     u = np.ascontiguousarray(u, np.int64)
     v = np.ascontiguousarray(v, np.int64)
     z = np.zeros_like(u) if z is None else np.ascontiguousarray(z, np.int64)
@@ -599,5 +662,7 @@ def evaluate_words(table, u, v, z=None) -> np.ndarray:
     if np.any(np.abs(u) > F.ONE) or np.any(np.abs(v) > F.ONE):
         raise ValueError("u and v must be in [-2^30, 2^30] (the pipeline clamps them)")
     out = np.empty(u.shape[0], np.int64)
-    _eval_kernel(table.config_array(), u, v, z, out)
+    if bank not in (1, 2) or (bank == 2 and table.n_banks != 2):
+        raise ValueError(f"bank {bank}: the table has {table.n_banks} bank(s)")
+    _eval_kernel(table.config_array(), u, v, z, out, bank == 2)
     return out

@@ -52,6 +52,20 @@ wraps on long runs.  Per sample with mode m, rate word R, restart r::
                 y = (c << 10) + other; valid                        # y: LSB 2^-21 deg/h
         else: pos += 1
 
+Regress, then reverse (order 1, /work/spec-rtr.md; golden host_tools.reversal)
+-----------------------------------------------------------------------------
+The combiner takes the **residual word** instead of c: at a sample past settling (``pos >=
+settle_n``) whose rate estimator is warm (``warm`` false)::
+
+    x = symsat32(RHU(c 2^11 - B, 11))          # r = c - B: int32, LSB 2^-10 deg/h  [FLAG_SAT]
+
+with B the bias of the sample's bank (LSB 2^-21 deg/h), and x replaces c everywhere above (window
+sums, means, slopes, y).  A warm-up sample past settling is not used: it neither enters the
+window nor gives a valid output (the golden's "used" rule; order 0 keeps the legacy rule, where
+warm-up samples enter the window and only the output is invalid).  Combiner 3 (none): ``y = x <<
+11``, valid at every used sample.  The pipeline then outputs OUT = RHU(y, 11) (B is already in y)
+instead of RHU(y - B, 11).
+
 FTR (combiner 0): ``y = R << 11``, always valid.  The centre of a window is (first + last)/2, so
 ``2 (i - centre[o]) = 2 age[o] + span[o]`` and the golden ``slope (i - centre)`` equals
 ``(W - W_prev) / dc2 * d``.  Invalid samples keep the last valid y (0 before the first).
@@ -61,9 +75,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from firmware_ref import formats as F
-from firmware_ref.arith import clamp, div_round_scaled, rshift_round
+from firmware_ref.arith import clamp, div_round_scaled, rshift_round, sat_signed
 
-FTR, PAIR, TREND = 0, 1, 2
+FTR, PAIR, TREND, NONE = 0, 1, 2, 3
 
 
 def state_length(table, state: int) -> int:
@@ -147,8 +161,9 @@ class Combiner:
         self.age = [0, 0, 0]
         self.slope = [0, 0, 0]
 
-    def step(self, mode: int, r: int, restart: bool) -> tuple[bool, int, bool]:
-        """One sample: ``(valid, y, sat)`` (y held when not valid)."""
+    def step(self, mode: int, r: int, restart: bool, b: int = 0, warm: bool = False) -> tuple[bool, int, bool]:
+        """One sample: ``(valid, y, sat)`` (y held when not valid).  ``b`` (the sample's bias B,
+        LSB 2^-21 deg/h) and ``warm`` (rate estimator in warm-up) are read by order 1 only."""
         t = self.table
         sat = False
         if t.combiner == FTR:
@@ -183,6 +198,19 @@ class Combiner:
         if cur != 0:
             c = r if cur == 1 else -r
             if self.pos >= t.settle_n:
+                if t.order == 1:
+                    if warm:
+                        return False, self.y_hold, sat
+                    c, cs = sat_signed(rshift_round((c << F.OUT_SHIFT) - b, F.OUT_SHIFT), 32)
+                    sat |= cs
+                    if t.combiner == NONE:
+                        if self.cnt < F.COUNT_MAX:
+                            self.acc += c
+                            self.cnt += 1
+                        else:
+                            sat = True
+                        self.y_hold = c << F.OUT_SHIFT
+                        return True, self.y_hold, sat
                 if self.cnt < F.COUNT_MAX:
                     self.acc += c
                     self.cnt += 1
@@ -223,15 +251,21 @@ class Sequencer:
         self.timer = Timer(table)
         self.comb = Combiner(table)
 
-    def step(self, mode, r: int, restart: bool) -> SeqOut:
+    def mode_step(self, mode, restart: bool) -> tuple[int, int]:
+        """First half of a sample: ``(state, mode)`` (timer, or the logged mode)."""
         if self.self_timed:
             if restart:
                 self.timer.reset()
             state = self.timer.step()
-            mode = F.STATE_MODE[state]
-        else:
-            last = self.comb.last_window
-            state = state_of_mode(int(mode), last)
-        valid, y, sat = self.comb.step(mode, r, restart)
+            return state, F.STATE_MODE[state]
+        return state_of_mode(int(mode), self.comb.last_window), int(mode)
+
+    def combine_step(self, state: int, mode: int, r: int, restart: bool, b: int = 0, warm: bool = False) -> SeqOut:
+        """Second half: the combiner (``b``, ``warm``: see Combiner.step)."""
+        valid, y, sat = self.comb.step(mode, r, restart, b, warm)
         return SeqOut(state, mode, F.STATE_VS[state], F.STATE_SIGN[state], valid, self.comb.acc,
                       self.comb.cnt, y, sat)
+
+    def step(self, mode, r: int, restart: bool, b: int = 0, warm: bool = False) -> SeqOut:
+        state, mode = self.mode_step(mode, restart)
+        return self.combine_step(state, mode, r, restart, b, warm)

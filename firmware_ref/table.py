@@ -1,19 +1,27 @@
 """The coefficient table: one versioned binary layout of 32-bit little-endian words, shared by the
 C header, table.json, ``$readmemh`` memory files and the serial upload.
 
-Layout (version 1; ``LAYOUT`` below, rendered into FORMATS.md)::
+Layout (version 2; ``LAYOUT`` below, rendered into FORMATS.md)::
 
     word 0   magic 0x47524448 ("HDRG" as little-endian bytes)
-    word 1   version (1)
+    word 1   version (2)
     word 2   length: number of words including the CRC
-    3..46    config words and the 17 coefficient mantissas (LAYOUT)
-    47..     aux generator parameters (aux_nparams int32 words; aux_gen 1: AUX_HEADER, one AF_c per
+    3..46    config words and bank 1's exponents and 17 coefficient mantissas (as version 1)
+    47..71   order (0 combine_first, 1 regress_first), n_banks (1, 2), bank 2's exponents
+             e2_0..e2_3, e2_7, e2_acc and mantissas m2_0..m2_16 (all 0 when n_banks = 1)
+    72..     aux generator parameters (aux_nparams int32 words; aux_gen 1: AUX_HEADER, one AF_c per
              aux channel, AUX_TERM_WORDS per term, :func:`decode_aux`)
     last     CRC-32 (IEEE, zlib.crc32) of all preceding words as little-endian bytes
 
-The aux generators (aux_gen 1) live entirely in the variable part, so the fixed part and the
-layout version (1) are those of the tables before them: an older reader refuses an aux_gen 1
-table by its aux_gen field (``aux_gen 1 not 0``), never misreads it.
+Banks (regress, then reverse; /work/spec-rtr.md): a ``regress_first`` table (order 1) has two
+coefficient banks, each with its own exponents (the quantizer sizes each bank on its own), and
+the evaluator uses bank 2 on mode-2 samples, bank 1 on every other sample.  order 1 needs
+n_banks 2 and a mode-reversal combiner (1 pair, 2 trend, 3 none); combiner 3 (none) needs
+order 1; an FTR or combine_first table has order 0 and one bank.
+
+Version 1 (47 fixed words, no order/bank-2 words) is still **read**, as order 0 (combine_first)
+with one bank: its words mean exactly what they meant (``from_words``; the C twin does the same).
+Every writer writes version 2.
 
 Signed fields are stored as two's complement.  :class:`Table` holds the decoded fields;
 ``to_words/from_words``, ``to_bytes/from_bytes``, ``to_memh``/``from_memh`` (one 8-digit hex word
@@ -54,12 +62,14 @@ def horner_bounds(e_row, e_7, e_acc, mant) -> list:
     return rows, bounds
 
 MAGIC = 0x47524448
-VERSION = 1
+VERSION = 2
+VERSIONS_READ = (1, 2)
+ORDER_COMBINE_FIRST, ORDER_REGRESS_FIRST = 0, 1
 
 # (field, type, meaning) of words 0..46
 LAYOUT = (
     ("magic", "uint32", "0x47524448 ('HDRG')"),
-    ("version", "uint32", "layout version (1)"),
+    ("version", "uint32", "layout version (2; 1 is read as order 0, one bank)"),
     ("length", "uint32", "words including the CRC"),
     ("proxy_kind", "uint32", "0 freq (P = F word, uint32), 1 temp (P = T word, int32)"),
     ("p_ref", "int32", "proxy centre P_REF in proxy-word LSB (freq: uint32 bit pattern)"),
@@ -74,7 +84,7 @@ LAYOUT = (
     ("g_v", "int32", "rate gain G_V > 0"),
     ("sh_v", "uint32", "rate shift SH_V: v = RHU(S G_V, SH_V)"),
     ("fs_q16", "uint32", "nominal sample rate x 2^16 (informative; the gains hold fs)"),
-    ("combiner", "uint32", "0 ftr (no reversal), 1 pair, 2 trend"),
+    ("combiner", "uint32", "0 ftr (no reversal), 1 pair, 2 trend, 3 none (order 1 only)"),
     ("settle_n", "uint32", "settling samples per window"),
     ("max_stale_n", "uint32", "staleness limit (samples)"),
     ("power_on_n", "uint32", "sequencer: power-on samples (mode 3)"),
@@ -88,10 +98,21 @@ LAYOUT = (
     ("e_acc", "uint32", "exponent E of the outer accumulator"),
 ) + tuple((f"m_{k}", "int32", f"mantissa of k{k} ({TERM_NAMES[k]})") for k in range(N_TERMS)) + (
     ("aux_gen", "uint32", "aux generator: 0 none (z = the Z word, 0 on the host), 1 sum of generator terms"),
-    ("aux_nparams", "uint32", "number of aux parameter words that follow (aux_gen 1: 2 + n_chan + 11 n_terms)"),
+    ("aux_nparams", "uint32", "number of aux parameter words after word 71 (aux_gen 1: 2 + n_chan + 11 n_terms)"),
 )
+N_FIXED_V1 = len(LAYOUT)         # 47: the fixed part of a version-1 table
+LAYOUT = LAYOUT + (
+    ("order", "uint32", "0 combine_first (combine, then subtract B), 1 regress_first (window sums of r = c - B)"),
+    ("n_banks", "uint32", "coefficient banks: 1, or 2 (order 1: bank 2 on mode-2 samples)"),
+    ("e2_0", "uint32", "bank 2: exponent of row u^0 (0 when n_banks = 1)"),
+    ("e2_1", "uint32", "bank 2: exponent of row u^1"),
+    ("e2_2", "uint32", "bank 2: exponent of row u^2"),
+    ("e2_3", "uint32", "bank 2: exponent of row u^3"),
+    ("e2_7", "uint32", "bank 2: exponent of k7"),
+    ("e2_acc", "uint32", "bank 2: exponent E of the outer accumulator"),
+) + tuple((f"m2_{k}", "int32", f"bank 2: mantissa of k{k} (0 when n_banks = 1)") for k in range(N_TERMS))
 FIELD_INDEX = {name: i for i, (name, _, _) in enumerate(LAYOUT)}
-N_FIXED = len(LAYOUT)            # 47
+N_FIXED = len(LAYOUT)            # 72
 SIGNED = {name for name, typ, _ in LAYOUT if typ == "int32"}
 
 # -- aux parameters of aux_gen 1 ('sum'): header, AF_c per aux channel, AUX_TERM_WORDS per term -------
@@ -261,6 +282,16 @@ def check_aux(aux: AuxTable, proxy_kind: int) -> None:
     need(wsum <= F.ONE + len(aux.terms), f"aux weights: sum |w_j| = {wsum} exceeds 2^30 + n_terms")
 
 
+@dataclass(frozen=True)
+class Bank:
+    """One coefficient bank: row exponents e_0..e_3, e_7, E and the 17 mantissas (k order)."""
+
+    e_row: tuple
+    e_7: int
+    e_acc: int
+    mant: tuple
+
+
 class TableError(ValueError):
     """A table that cannot be used (bad magic, version, length, CRC, or field value)."""
 
@@ -294,12 +325,31 @@ class Table:
     mant: tuple             # 17 mantissas, k order
     aux_gen: int = 0
     aux_params: tuple = field(default_factory=tuple)
+    order: int = 0          # 0 combine_first (and FTR), 1 regress_first
+    n_banks: int = 1
+    e_row2: tuple = (0, 0, 0, 0)    # bank 2 (all 0 when n_banks = 1)
+    e_7_2: int = 0
+    e_acc2: int = 0
+    mant2: tuple = (0,) * N_TERMS
 
     def __post_init__(self):
         self.e_row = tuple(int(e) for e in self.e_row)
         self.mant = tuple(int(m) for m in self.mant)
+        self.e_row2 = tuple(int(e) for e in self.e_row2)
+        self.mant2 = tuple(int(m) for m in self.mant2)
         self.aux_params = tuple(int(p) for p in self.aux_params)
         self.validate()
+
+    def bank(self, b: int) -> "Bank":
+        """The coefficients of bank ``b`` (1 or 2) as a :class:`Bank` (what the evaluator reads)."""
+        if b == 2:
+            return Bank(self.e_row2, self.e_7_2, self.e_acc2, self.mant2)
+        return Bank(self.e_row, self.e_7, self.e_acc, self.mant)
+
+    def bank_of_mode(self, mode: int) -> int:
+        """The bank the evaluator uses for a sample of run-log ``mode``: 2 for mode 2 of a
+        two-bank table, else 1."""
+        return 2 if (self.n_banks == 2 and mode == 2) else 1
 
     # -- checks --------------------------------------------------------------------------------
     def validate(self) -> None:
@@ -325,31 +375,45 @@ class Table:
         need(self.g_v < (1 << (62 - self.s_bits)), f"g_v {self.g_v} too large for s_bits {self.s_bits} "
                                                    f"(|S| G_V must stay below 2^62)")
         need(0 < self.fs_q16 <= F.UINT32_MAX, f"fs_q16 {self.fs_q16} out of range")
-        need(self.combiner in (0, 1, 2), f"combiner {self.combiner} not 0 (ftr), 1 (pair), 2 (trend)")
+        need(self.combiner in (0, 1, 2, 3), f"combiner {self.combiner} not 0 (ftr), 1 (pair), 2 (trend), 3 (none)")
+        need(self.order in (0, 1), f"order {self.order} not 0 (combine_first) or 1 (regress_first)")
+        need(self.n_banks in (1, 2), f"n_banks {self.n_banks} not 1 or 2")
+        need(self.n_banks == 1 + self.order, f"n_banks {self.n_banks} with order {self.order}: combine_first "
+                                             f"(0) has one bank, regress_first (1) two")
+        need(self.combiner != 3 or self.order == 1, "combiner 3 (none) needs order 1 (regress_first)")
+        need(self.combiner != 0 or self.order == 0, "combiner 0 (ftr) needs order 0 (no mode reversal)")
         for name in ("settle_n", "max_stale_n", "power_on_n", "exchange_n"):
             need(0 <= getattr(self, name) <= F.TIMER_MAX, f"{name} {getattr(self, name)} not in 0..2^31-1")
         need(self.max_stale_n < F.COUNT_MAX, "max_stale_n must be below the age saturation 2^31-1")
         need(1 <= self.dwell_n <= F.TIMER_MAX, f"dwell_n {self.dwell_n} not in 1..2^31-1")
-        need(len(self.e_row) == 4, "needs 4 row exponents")
-        need(len(self.mant) == N_TERMS, f"needs {N_TERMS} mantissas")
-        for g, e in enumerate(self.e_row + (self.e_7,)):
-            need(F.EXP_MIN <= e <= F.EXP_MAX, f"exponent {e} of group {g} not in {F.EXP_MIN}..{F.EXP_MAX}")
-            need(0 <= e - self.e_acc <= F.ALIGN_MAX, f"exponent {e} of group {g} minus E {self.e_acc} "
-                                                      f"not in 0..{F.ALIGN_MAX}")
-        need(F.EXP_MIN <= self.e_acc <= F.EXP_MAX, f"E {self.e_acc} not in {F.EXP_MIN}..{F.EXP_MAX}")
-        for k, m in enumerate(self.mant):
-            need(abs(m) <= F.INT32_SYM, f"mantissa m_{k} {m} outside int32")
+        need(len(self.e_row) == 4 and len(self.e_row2) == 4, "needs 4 row exponents per bank")
+        need(len(self.mant) == N_TERMS and len(self.mant2) == N_TERMS, f"needs {N_TERMS} mantissas per bank")
+        if self.n_banks == 1:
+            need(not any(self.e_row2) and self.e_7_2 == 0 and self.e_acc2 == 0 and not any(self.mant2),
+                 "bank 2 words (e2_*, m2_*) must be 0 in a one-bank table")
+        for b in range(1, self.n_banks + 1):
+            bk, pre = self.bank(b), ("" if b == 1 else "bank 2: ")
+            for g, e in enumerate(bk.e_row + (bk.e_7,)):
+                need(F.EXP_MIN <= e <= F.EXP_MAX, f"{pre}exponent {e} of group {g} not in {F.EXP_MIN}..{F.EXP_MAX}")
+                need(0 <= e - bk.e_acc <= F.ALIGN_MAX, f"{pre}exponent {e} of group {g} minus E {bk.e_acc} "
+                                                        f"not in 0..{F.ALIGN_MAX}")
+            need(F.EXP_MIN <= bk.e_acc <= F.EXP_MAX, f"{pre}E {bk.e_acc} not in {F.EXP_MIN}..{F.EXP_MAX}")
+            for k, m in enumerate(bk.mant):
+                need(abs(m) <= F.INT32_SYM, f"{pre}mantissa m{'' if b == 1 else '2'}_{k} {m} outside int32")
         need(self.aux_gen in (0, 1), f"aux_gen {self.aux_gen} not 0 (none) or 1 (sum)")
         if self.aux_gen == 0:
             need(not self.aux_params, "aux generator 0 (none) takes no parameters")
         else:
             check_aux(decode_aux(self.aux_params), self.proxy_kind)
         # (every check above passed: exponents, mantissas and the estimator are in range)
-        rows, bounds = horner_bounds(self.e_row, self.e_7, self.e_acc, self.mant)
-        for g, r in enumerate(rows):
-            need(r <= F.ACC_LIMIT, f"Horner row u^{g}: sum of |mantissas| {r} exceeds 2^31 - 1 (evaluator would overflow)")
-        need(sum(bounds) <= F.ACC_LIMIT, f"Horner accumulator bound {sum(bounds)} exceeds 2^31 - 1 "
-                                         f"(evaluator would overflow)")
+        for b in range(1, self.n_banks + 1):
+            bk, pre = self.bank(b), ("" if b == 1 else "bank 2: ")
+            rows, bounds = horner_bounds(bk.e_row, bk.e_7, bk.e_acc, bk.mant)
+            for g, r in enumerate(rows):
+                need(r <= F.ACC_LIMIT, f"{pre}Horner row u^{g}: sum of |mantissas| {r} exceeds 2^31 - 1 "
+                                       f"(evaluator would overflow)")
+            need(sum(bounds) <= F.ACC_LIMIT, f"{pre}Horner accumulator bound {sum(bounds)} exceeds 2^31 - 1 "
+                                             f"(evaluator would overflow)")
         w = min_rate_warmup(self.rate_est, self.rate_n)
         need(self.rate_warmup >= w, f"rate_warmup {self.rate_warmup} below {w}, the history length "
                                     f"of {F.ESTIMATORS[self.rate_est]} n={self.rate_n}")
@@ -359,13 +423,18 @@ class Table:
         """name -> value of every LAYOUT field (magic, version, length included)."""
         vals = {"magic": MAGIC, "version": VERSION, "length": N_FIXED + len(self.aux_params) + 1}
         for f in fields(self):
-            if f.name in ("e_row", "mant", "aux_params"):
+            if f.name in ("e_row", "mant", "aux_params", "e_row2", "mant2", "e_7_2", "e_acc2"):
                 continue
             vals[f.name] = getattr(self, f.name)
         for i, e in enumerate(self.e_row):
             vals[f"e_{i}"] = e
         for k, m in enumerate(self.mant):
             vals[f"m_{k}"] = m
+        for i, e in enumerate(self.e_row2):
+            vals[f"e2_{i}"] = e
+        vals["e2_7"], vals["e2_acc"] = self.e_7_2, self.e_acc2
+        for k, m in enumerate(self.mant2):
+            vals[f"m2_{k}"] = m
         vals["aux_nparams"] = len(self.aux_params)
         return vals
 
@@ -384,32 +453,39 @@ class Table:
 
     @classmethod
     def from_words(cls, words, source: str = "<words>") -> "Table":
-        """Decode and check (magic, version, length, CRC, field ranges)."""
+        """Decode and check (magic, version, length, CRC, field ranges).  A version-1 table (47
+        fixed words) is read as order 0 (combine_first) with one bank."""
         words = [int(w) for w in words]
         if any(not 0 <= w <= F.UINT32_MAX for w in words):
             raise TableError(f"{source}: a word is outside uint32")
-        if len(words) < N_FIXED + 1:
-            raise TableError(f"{source}: {len(words)} words, a table has at least {N_FIXED + 1}")
+        if len(words) < N_FIXED_V1 + 1:
+            raise TableError(f"{source}: {len(words)} words, a table has at least {N_FIXED_V1 + 1}")
         if words[0] != MAGIC:
             raise TableError(f"{source}: bad magic 0x{words[0]:08x} (expected 0x{MAGIC:08x}, 'HDRG')")
-        if words[1] != VERSION:
-            raise TableError(f"{source}: unsupported table version {words[1]} (this reads {VERSION})")
+        if words[1] not in VERSIONS_READ:
+            raise TableError(f"{source}: unsupported table version {words[1]} (this reads {VERSIONS_READ})")
+        n_fixed = N_FIXED if words[1] == 2 else N_FIXED_V1
+        if len(words) < n_fixed + 1:
+            raise TableError(f"{source}: {len(words)} words, a version-{words[1]} table has at least {n_fixed + 1}")
         if words[2] != len(words):
             raise TableError(f"{source}: length word says {words[2]} words, found {len(words)}")
         crc = crc32_words(words[:-1])
         if crc != words[-1]:
             raise TableError(f"{source}: CRC-32 mismatch (stored 0x{words[-1]:08x}, computed 0x{crc:08x})")
         vals = {}
-        for i, (name, typ, _) in enumerate(LAYOUT):
+        for i, (name, typ, _) in enumerate(LAYOUT[:n_fixed]):
             w = words[i]
             vals[name] = w - (1 << 32) if (typ == "int32" and w >= 1 << 31) else w
         if vals["proxy_kind"] == 0:
             vals["p_ref"] &= 0xFFFFFFFF
         npar = vals["aux_nparams"]
-        if N_FIXED + npar + 1 != len(words):
+        if n_fixed + npar + 1 != len(words):
             raise TableError(f"{source}: aux_nparams {npar} does not match the length {len(words)}")
-        params = [w - (1 << 32) if w >= 1 << 31 else w for w in words[N_FIXED:N_FIXED + npar]]
+        params = [w - (1 << 32) if w >= 1 << 31 else w for w in words[n_fixed:n_fixed + npar]]
         kw = {f.name: vals[f.name] for f in fields(cls) if f.name in vals}
+        if n_fixed == N_FIXED:
+            kw.update(e_row2=tuple(vals[f"e2_{i}"] for i in range(4)), e_7_2=vals["e2_7"], e_acc2=vals["e2_acc"],
+                      mant2=tuple(vals[f"m2_{k}"] for k in range(N_TERMS)))
         try:
             return cls(e_row=tuple(vals[f"e_{i}"] for i in range(4)),
                        mant=tuple(vals[f"m_{k}"] for k in range(N_TERMS)), aux_params=tuple(params), **kw)

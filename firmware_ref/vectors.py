@@ -15,9 +15,11 @@ from firmware_ref.terms import N_TERMS
 def make_model(kind: str = "freq", ref: float = 6227.0, span: float = 3.0, estimator: str = "diff",
                n: int = 8, shift: int = 4, rate_span: float = 0.003, fs: float = 1.0,
                combiner: str | None = "pair", settle_s: float = 0.0, max_stale_s: float = 300.0,
-               coef=None, terms=None):
+               coef=None, terms=None, order: str = "combine_first", coef2=None):
     """A BiasModel from explicit settings (combiner None: FTR).  ``coef``: 17 values (default:
-    a smooth model of a few deg/h)."""
+    a smooth model of a few deg/h).  ``order`` "regress_first" makes a two-bank model with bank 2
+    ``coef2`` (default: ``coef`` with the signs of k1, k4, k8 flipped: a damping term that
+    reverses with the mode)."""
     from host_tools.model import BiasModel, ModelConfig
     from host_tools.proxy import ProxyConfig
     from host_tools.rate import RateConfig
@@ -26,11 +28,20 @@ def make_model(kind: str = "freq", ref: float = 6227.0, span: float = 3.0, estim
     if coef is None:
         coef = [1.5, -4.0, 0.3, 1.1, -1.2, -0.2, 0.9, 0.0, 0.05, 1.8, -0.1, 1.9, 0.7, 0.7, -0.02, -1.1, 0.9]
     coef = np.asarray(coef, np.float64)
+    two = combiner is not None and order == "regress_first"
+    if two:
+        if coef2 is None:
+            coef2 = coef.copy()
+            coef2[[1, 4, 8]] *= -1.0
+        coef2 = np.asarray(coef2, np.float64)
     if terms is None:
-        terms = tuple(k for k in range(N_TERMS) if coef[k] != 0.0)
-    rev = None if combiner is None else ReversalConfig(combiner, max_stale_s, settle_s)
+        nz = coef != 0.0
+        if two:
+            nz |= coef2 != 0.0
+        terms = tuple(k for k in range(N_TERMS) if nz[k])
+    rev = None if combiner is None else ReversalConfig(combiner, max_stale_s, settle_s, order=order)
     cfg = ModelConfig(ProxyConfig(kind, ref, span), RateConfig(estimator, n, shift, rate_span, fs), rev)
-    return BiasModel(cfg, terms, coef, source="<vectors>")
+    return BiasModel(cfg, terms, coef, source="<vectors>", coef_mode2=coef2 if two else None)
 
 
 def random_coef(rng: np.random.Generator, with_k7: bool = True, spread: float = 6.0, scale: float = 10.0):
@@ -44,9 +55,12 @@ def random_coef(rng: np.random.Generator, with_k7: bool = True, spread: float = 
     return c
 
 
-def random_model(rng: np.random.Generator, reversal: bool = True, estimator: str | None = None):
+def random_model(rng: np.random.Generator, reversal: bool = True, estimator: str | None = None,
+                 order: str = "combine_first"):
     """A model with a random data flow (proxy kind, range, estimator, combiner, settle, staleness)
-    and random coefficients (including k7)."""
+    and random coefficients (including k7).  ``order`` "regress_first": two banks (common +-
+    damping, the damping a random fraction of the common part per term) and combiner pair,
+    trend or none."""
     kind = str(rng.choice(["freq", "temp"]))
     est = estimator or str(rng.choice(["diff", "diffn", "lsq", "iir"]))
     n = int(rng.integers(2, 12))
@@ -56,10 +70,16 @@ def random_model(rng: np.random.Generator, reversal: bool = True, estimator: str
     else:
         ref, span = float(rng.uniform(-50.0, 80.0)), float(10 ** rng.uniform(-0.5, 2))
     rate_span = span * float(10 ** rng.uniform(-4, -1.5))
-    comb = str(rng.choice(["pair", "trend"])) if reversal else None
+    two = reversal and order == "regress_first"
+    comb = str(rng.choice(["pair", "trend", "none"] if two else ["pair", "trend"])) if reversal else None
+    coef = random_coef(rng, scale=float(10 ** rng.uniform(-1, 3)))
+    coef2 = None
+    if two:
+        damping = coef * rng.uniform(-0.5, 0.5, N_TERMS)
+        coef, coef2 = coef + damping, coef - damping
     return make_model(kind, ref, span, est, n, shift, rate_span, 1.0, comb,
                       settle_s=float(rng.integers(0, 4)), max_stale_s=float(rng.integers(10, 80)),
-                      coef=random_coef(rng, scale=float(10 ** rng.uniform(-1, 3))))
+                      coef=coef, order=order if reversal else "combine_first", coef2=coef2)
 
 
 def random_stream(rng: np.random.Generator, table, n: int, reversal: bool = True, extreme: float = 0.02) -> dict:
@@ -189,8 +209,13 @@ def with_aux(model, terms):
     coef = np.array(model.coef, np.float64)
     if coef[7] == 0.0:
         coef[7] = 1.0
+    coef2 = None
+    if model.coef_mode2 is not None:
+        coef2 = np.array(model.coef_mode2, np.float64)
+        if coef2[7] == 0.0:
+            coef2[7] = 1.0
     cfg = dataclasses.replace(model.config, aux=AuxConfig.from_terms(terms, model.config.rate.fs))
-    return BiasModel(cfg, tuple(sorted(set(model.terms) | {7})), coef, source="<vectors aux>")
+    return BiasModel(cfg, tuple(sorted(set(model.terms) | {7})), coef, source="<vectors aux>", coef_mode2=coef2)
 
 
 def random_aux_model(rng: np.random.Generator, reversal: bool = True, estimator: str | None = None,
@@ -239,3 +264,17 @@ def aux_stream(rng: np.random.Generator, table, n: int, reversal: bool = True, e
         k = np.arange(n, dtype=np.int64)
     s["k"] = k.astype(np.int64)
     return s
+
+
+def two_bank_table(table, bank2, combiner: int | None = None):
+    """A regress_first (order 1) table: ``table`` with bank 2 = bank 1 of ``bank2`` (a table of the
+    same data flow, e.g. quantized from another coefficient set) and ``combiner`` (1 pair, 2 trend,
+    3 none; default: the table's).  For equivalence tests and vectors, independent of the golden
+    fitter."""
+    import dataclasses
+
+    comb = table.combiner if combiner is None else combiner
+    if comb == 0:
+        raise ValueError("a regress_first table needs a mode-reversal combiner (1, 2, 3)")
+    return dataclasses.replace(table, order=1, n_banks=2, combiner=comb, e_row2=bank2.e_row, e_7_2=bank2.e_7,
+                               e_acc2=bank2.e_acc, mant2=bank2.mant)

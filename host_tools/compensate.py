@@ -70,9 +70,13 @@ FLAG_STALE = 16
 FLAG_NAMES = {FLAG_PROXY_CLAMPED: "proxy_clamped", FLAG_RATE_CLAMPED: "rate_clamped",
               FLAG_WARMUP: "warmup", FLAG_EXCHANGE: "exchange", FLAG_STALE: "stale"}
 FS_TOLERANCE = 0.01  # relative mismatch allowed between the log's sample rate and the model's fs
-# Defaults of a new mode-reversal model (the one place: fit_config_from_logs fills what is not given).
-DEFAULT_ORDER = "combine_first"  # interim: diagnose.py and the fixed-point flows do not take regress_first yet
+# Defaults of a new model, the one place: fit_config_from_logs (and fit_logs for the terms) fill
+# what is not given, so hdrg fit / diagnose / demo and everything reading their model files follow.
+# Chosen on held-out runs at another temperature rate (docs/REGRESS_THEN_REVERSE.md "Defaults").
+DEFAULT_ORDER = "regress_first"
 DEFAULT_COMBINER = "pair"
+DEFAULT_RATE = {"estimator": "diff", "n": 8, "shift": 4}   # robust: no long warm-up, any fs, bursty logs
+DEFAULT_TERMS = "auto"
 IMPLS = ("float", "fixed")
 
 
@@ -219,20 +223,21 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
     return out
 
 
-def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: str = "diff", n: int = 8,
-                         shift: int = 4, proxy_range=None, rate_range: float | None = None,
+def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: str | None = None,
+                         n: int | None = None, shift: int | None = None, proxy_range=None, rate_range: float | None = None,
                          proxy_margin: float = 0.1, rate_margin: float = 0.1, rate_percentile: float = 99.9,
                          reversal=None, aux=None, fs: float | None = None) -> ModelConfig:
     """The default ModelConfig for training ``logs`` (RunLogs, all FTR or all mode reversal).
 
     * proxy kind: ``proxy_kind`` or 'freq' if every log has ``freq_hz``, else 'temp';
+    * rate estimator: ``rate_estimator``, ``n``, ``shift``; each None -> DEFAULT_RATE;
     * fs [Hz]: ``fs`` or the first log's sample rate; every log must match it within 1 %;
     * proxy range: ``proxy_range`` (LO, HI) in proxy units, else ProxyConfig.from_data over the
       logs' non-exchange samples widened by ``proxy_margin``;
     * rate span: ``rate_range`` [proxy units/s], else RateConfig.from_data (``rate_percentile``
       of |dp/dt| past warm-up on non-exchange samples, times 1 + ``rate_margin``);
     * reversal: None for FTR logs (giving one is an error); for mode-reversal logs ``reversal``
-      (a ReversalConfig, used as is; or a dict, whose missing "combiner" / "order" are
+      (a ReversalConfig, used as is; or a dict, whose missing or None "combiner" / "order" are
       DEFAULT_COMBINER / DEFAULT_ORDER) or ReversalConfig(DEFAULT_COMBINER, order=DEFAULT_ORDER);
     * aux: ``aux`` (AuxConfig or dict) or AuxConfig() ('none').
     """
@@ -260,8 +265,17 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
             raise ValueError("reversal settings given but the training logs are FTR (all mode 0)")
         rev = None
     else:
-        rev = reversal if isinstance(reversal, ReversalConfig) else ReversalConfig.from_dict(
-            {"combiner": DEFAULT_COMBINER, "order": DEFAULT_ORDER, **dict(reversal or {})})
+        if isinstance(reversal, ReversalConfig):
+            rev = reversal
+        else:
+            given = {k: v for k, v in dict(reversal or {}).items() if v is not None}
+            rev = ReversalConfig.from_dict({"combiner": DEFAULT_COMBINER, "order": DEFAULT_ORDER, **given})
+    if rate_estimator == "auto":
+        raise ValueError("rate estimator 'auto' is chosen by fitting every candidate: use hdrg fit "
+                         "(host_tools.fit.fit_auto_rate), not a fixed model configuration")
+    rate_estimator = DEFAULT_RATE["estimator"] if rate_estimator is None else rate_estimator
+    n = DEFAULT_RATE["n"] if n is None else n
+    shift = DEFAULT_RATE["shift"] if shift is None else shift
     aux_cfg = AuxConfig() if aux is None else (aux if isinstance(aux, AuxConfig) else AuxConfig.from_dict(dict(aux)))
     keep = [np.asarray(log.mode) != rl.MODE_EXCHANGE for log in logs]
     ps = [log[column] for log in logs]

@@ -922,8 +922,8 @@ def design_matrix(u, v, z=None, terms=range(N_TERMS)) -> np.ndarray:
 
 # -- run-log glue and the `hdrg fit` command ------------------------------------------------------
 
-def fit_logs(logs, config, terms="all", *, drop_unidentifiable=False, cv_blocks=8, significance=1.0,
-             min_gain=0.02):
+def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8, significance=1.0,
+             min_gain=0.02, blocks=None):
     """Fit a :class:`host_tools.model.BiasModel` with ``config`` (a ModelConfig) to RunLogs.
 
     Each log goes through the golden pipeline (:func:`host_tools.compensate.prepare`): only its
@@ -932,10 +932,14 @@ def fit_logs(logs, config, terms="all", *, drop_unidentifiable=False, cv_blocks=
     output).  One accumulator per run; with a single run and ``terms='auto'`` the run is cut into
     ``cv_blocks`` contiguous time blocks for the cross-validation.  A regress_first config fits
     two banks: target c = s * rate on the used samples, bank 1 on mode-1 samples, bank 2 on
-    mode-2 samples, one term set (see :func:`fit_accumulators`).  Returns (model, FitResult)."""
-    from host_tools.compensate import prepare
+    mode-2 samples, one term set (see :func:`fit_accumulators`).  ``terms`` None ->
+    host_tools.compensate.DEFAULT_TERMS.  ``blocks`` True: cut a single run into ``cv_blocks``
+    time blocks whatever the terms (so fixed terms get a cross-validated rms too); None: only for
+    'auto'.  Returns (model, FitResult)."""
+    from host_tools.compensate import DEFAULT_TERMS, prepare
     from host_tools.model import BiasModel
 
+    terms = DEFAULT_TERMS if terms is None else terms
     auto = isinstance(terms, str) and terms.strip().lower() == "auto"
     two = config.reversal is not None and config.reversal.order == "regress_first"
     accs = {}
@@ -944,7 +948,7 @@ def fit_logs(logs, config, terms="all", *, drop_unidentifiable=False, cv_blocks=
         if not pr.used.any():
             raise ValueError(f"{log.source}: no valid sample to fit (all exchange, warm-up or before the first pair)")
         masks = [pr.used & (pr.mode == 1), pr.used & (pr.mode == 2)] if two else [pr.used]
-        if auto and len(logs) == 1:
+        if (auto if blocks is None else blocks) and len(logs) == 1:
             groups = block_groups(len(pr.y), cv_blocks)
             per = [accumulate_groups(pr.u, pr.v, pr.z, pr.y, w, groups) for w in masks]
             for g in per[0]:
@@ -965,20 +969,71 @@ def fit_logs(logs, config, terms="all", *, drop_unidentifiable=False, cv_blocks=
     return model, res
 
 
+# candidates of the rate estimator 'auto' (estimator, n, shift), host_tools.rate
+RATE_CANDIDATES = (("diff", 8, 4), ("diffn", 16, 4), ("lsq", 32, 4), ("iir", 8, 7), ("iir", 8, 9))
+
+
+def _rate_label(est, n, shift):
+    return {"diff": "diff", "diffn": f"diffn n={n}", "lsq": f"lsq n={n}", "iir": f"iir shift={shift}"}[est]
+
+
+def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, **config_kw):
+    """Rate estimator 'auto': for every candidate (estimator, n, shift) build the config
+    (host_tools.compensate.fit_config_from_logs with ``config_kw``), fit ``terms`` with
+    cross-validation over the runs (one run: ``cv_blocks`` time blocks, see :func:`fit_logs`), and
+    keep the candidate of least cross-validated rms.  A candidate that cannot be fitted (e.g. no
+    sample past its warm-up) is skipped and reported.  Returns (model, FitResult); the model's
+    fit info holds "rate_selection": {"method", "chosen", "candidates": [{"estimator", "cv_rms" or
+    "error"}]} (written to model.json)."""
+    from host_tools.compensate import fit_config_from_logs
+
+    rows, best = [], None
+    for est, n, shift in candidates:
+        label = _rate_label(est, n, shift)
+        try:
+            cfg = fit_config_from_logs(logs, rate_estimator=est, n=n, shift=shift, **config_kw)
+            model, res = fit_logs(logs, cfg, terms, cv_blocks=cv_blocks, blocks=True, drop_unidentifiable=True)
+        except ValueError as exc:
+            rows.append({"estimator": label, "error": str(exc)})
+            continue
+        rows.append({"estimator": label, "cv_rms": res.cv["cv_rms"]})
+        if best is None or res.cv["cv_rms"] < best[0]:
+            best = (res.cv["cv_rms"], model, res, label)
+    if best is None:
+        raise ValueError("rate estimator 'auto': no candidate could be fitted: "
+                         + "; ".join(f"{r['estimator']}: {r['error']}" for r in rows))
+    _, model, res, label = best
+    model.fit["rate_selection"] = {"method": "least cross-validated rms (time blocks of one run, or runs)",
+                                   "chosen": label, "candidates": rows}
+    return model, res
+
+
 def add_model_options(parser, what: str = "the model") -> None:
     """The options that configure a model (proxy, rate estimator, terms, combiner, ranges), shared by
     `hdrg fit` and `hdrg diagnose` (its starting model)."""
     parser.add_argument("--proxy", choices=("freq", "temp"), default=None,
                         help="temperature proxy: freq (drive frequency, default when present) or temp (temp_c)")
-    parser.add_argument("--rate-estimator", default="diff", choices=("diff", "diffn", "lsq", "iir"),
-                        help=f"proxy-rate estimator of {what} (default: diff, the paper's consecutive difference)")
-    parser.add_argument("--rate-n", type=int, default=8, help="window length n of diffn/lsq [samples]")
-    parser.add_argument("--rate-shift", type=int, default=4, help="iir coefficient 2^-shift")
-    parser.add_argument("--terms", default="all",
+    from host_tools.compensate import DEFAULT_COMBINER, DEFAULT_ORDER, DEFAULT_RATE, DEFAULT_TERMS
+    from host_tools.reversal import COMBINERS, ORDERS
+
+    parser.add_argument("--rate-estimator", default=None, choices=("diff", "diffn", "lsq", "iir", "auto"),
+                        help=f"proxy-rate estimator of {what} (default: {DEFAULT_RATE['estimator']}; diff is the "
+                             f"paper's consecutive difference; auto (hdrg fit only): the candidate of least "
+                             f"cross-validated rms among diff, diffn 16, lsq 32, iir 7, iir 9, reported in model.json)")
+    parser.add_argument("--rate-n", type=int, default=None,
+                        help=f"window length n of diffn/lsq [samples] (default: {DEFAULT_RATE['n']})")
+    parser.add_argument("--rate-shift", type=int, default=None,
+                        help=f"iir coefficient 2^-shift (default: {DEFAULT_RATE['shift']})")
+    parser.add_argument("--terms", default=None,
                         help=f"terms of {what}: all (the paper's 16 terms) | auto (cross-validated selection) "
-                             f"| k0,k1,... | groups const,temp,rate,cross")
-    parser.add_argument("--combiner", choices=("pair", "trend"), default="trend",
-                        help="mode-reversal combiner (mode-reversal logs only): pair (the paper) or trend (ours, default)")
+                             f"| k0,k1,... | groups const,temp,rate,cross (default: {DEFAULT_TERMS})")
+    parser.add_argument("--order", choices=ORDERS, default=None,
+                        help=f"mode-reversal logs only: regress_first (two coefficient banks by mode, the combiner "
+                             f"pairs the residuals) or combine_first (legacy: combine, then one bank) "
+                             f"(default: {DEFAULT_ORDER})")
+    parser.add_argument("--combiner", choices=COMBINERS, default=None,
+                        help=f"mode-reversal combiner (mode-reversal logs only): pair (the paper), trend (ours) or "
+                             f"none (regress_first only: joint regression alone) (default: {DEFAULT_COMBINER})")
     parser.add_argument("--settle", type=float, default=0.0, help="settling time excluded after each exchange [s]")
     parser.add_argument("--proxy-range", default=None, help="declared proxy range LO,HI in proxy units (default: training range +10%%)")
     parser.add_argument("--rate-range", default=None, help="declared largest |d proxy/dt| [proxy units/s] (default: from data)")
@@ -998,13 +1053,19 @@ def run_cli(args) -> int:
     from host_tools.compensate import fit_config_from_logs
 
     logs = [runlog.read(p) for p in args.runs]
-    reversal = ({"combiner": args.combiner, "settle_s": args.settle}
+    reversal = ({"combiner": args.combiner, "settle_s": args.settle, "order": args.order}
                 if any(log.reversal for log in logs) else None)
-    cfg = fit_config_from_logs(logs, proxy_kind=args.proxy, rate_estimator=args.rate_estimator,
-                               n=args.rate_n, shift=args.rate_shift, proxy_range=args.proxy_range,
-                               rate_range=args.rate_range, reversal=reversal)
-    model, res = fit_logs(logs, cfg, args.terms, drop_unidentifiable=args.drop_unidentifiable,
-                          cv_blocks=args.cv_blocks)
+    kw = dict(proxy_kind=args.proxy, proxy_range=args.proxy_range, rate_range=args.rate_range, reversal=reversal)
+    if args.rate_estimator == "auto":
+        model, res = fit_auto_rate(logs, args.terms, cv_blocks=args.cv_blocks, **kw)
+        sel = model.fit["rate_selection"]
+        print(f"rate estimator auto: {sel['chosen']} (" + ", ".join(
+            f"{r['estimator']} {r['cv_rms']:.4g}" if "cv_rms" in r else f"{r['estimator']} failed"
+            for r in sel["candidates"]) + " deg/h cross-validated rms)")
+    else:
+        cfg = fit_config_from_logs(logs, rate_estimator=args.rate_estimator, n=args.rate_n, shift=args.rate_shift, **kw)
+        model, res = fit_logs(logs, cfg, args.terms, drop_unidentifiable=args.drop_unidentifiable,
+                              cv_blocks=args.cv_blocks)
     model.to_json(args.output)
     print(f"{args.output}: {len(res.terms)} terms {['k%d' % k for k in res.terms]}, n={res.n}, "
           f"rms={res.rms:.4g} deg/h, cond={res.cond:.3g}")
@@ -1017,5 +1078,7 @@ def run_cli(args) -> int:
     if res.cv:
         print(f"cross-validated rms: {res.cv['cv_rms']:.4g} deg/h over {res.cv['groups']} groups")
     for k in res.terms:
-        print(f"  k{k:<2d} {TERM_NAMES[k]:>9s} = {res.coef[k]: .6g} +- {res.stderr[k]:.2g} deg/h")
+        print(f"  k{k:<2d} {TERM_NAMES[k]:>9s} = {res.coef[k]: .6g} +- {res.stderr[k]:.2g} deg/h"
+              + ("" if res.coef_mode2 is None else
+                 f"   (mode 2: {res.coef_mode2[k]: .6g} +- {res.stderr_mode2[k]:.2g})"))
     return 0

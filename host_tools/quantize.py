@@ -36,13 +36,27 @@ firmware_ref/FORMATS.md):
   input word, a time constant, ramp or period out of range, a rate term of another estimator or
   column, a span below one word LSB.  The k7 mantissa and exponent are quantized as before.
 
+* **two banks** (a ``regress_first`` mode-reversal model, /work/spec-rtr.md; table order 1): bank 1
+  (``coef``, mode 1 and every non-mode-2 sample) and bank 2 (``coef_mode2``) are quantized
+  **each with its own exponents** (the rule above, per bank: a bank with small coefficients keeps
+  its resolution whatever the other's size; the firmware reads the bank's exponents with its
+  mantissas, so this costs nothing per sample).  Each bank has its own interval bound
+  (``interval_bounds.banks``) and is refused on its own, naming it ("bank 2: row u^0: ...").
+  Combiner codes: pair 1, trend 2, none 3.  The **residual path** (FORMATS.md, order 1): r =
+  symsat32(RHU(c 2^11 - B, 11)) is an int32 word of the rate word's format, so the window sums,
+  means, slopes and y keep the legacy bounds (|acc| < 2^62, |W| < 2^41, |y| < 2^47); refused: a
+  bank whose |B| bound exceeds the output word (r and OUT would saturate on every sample).
+
 The **bound** on |fixed - golden| (deg/h, golden fed with the dequantized input words) adds:
 coefficient quantization (exact), the evaluator's roundings (1.5 LSB_e per row, 0.5 LSB_E per
 alignment, 1.5 LSB_E outer, 0.5 LSB_E for k7, 0.5 LSB_21), the u and v errors (gain and centre
 quantization, rounding, iir state rounding) times the Lipschitz constants ``sum i |c_ij|`` and
 ``sum j |c_ij|``, |k7| times the z generators' error (analytic per generator, ``_aux_part``;
 the oscillator's at the horizon K < 2^31), the combiner (window-mean and slope roundings, for
-trend at the table's timing) and the final output rounding 2^-11 deg/h.  ``measured`` gives max
+trend at the table's timing) and the final output rounding 2^-11 deg/h.  Two banks: the B
+bound is the larger of the banks'; order 1 adds the residual word's rounding 2^-11 deg/h to the
+error of every r (none: OUT = r, no further rounding; pair: (r + W_r)/2 then the output
+rounding; trend: the legacy slope terms on W_r).  ``measured`` gives max
 |B_fixed - B_golden| on the 3^3 corners of (u, v, z) and on a random grid; for an aux model the
 report's ``aux`` adds the channels, each term's bound and ``measured_z``, max |z_fixed - z_golden|
 on a synthetic run (:func:`measure_aux`).
@@ -92,9 +106,9 @@ class Quantized:
     model: object
     report: dict = field(default_factory=dict)
 
-    def coef_quantized(self) -> np.ndarray:
-        """The coefficients the table represents, deg/h: m_k 2^-e_g."""
-        return quantized_coef(self.table)
+    def coef_quantized(self, bank: int = 1) -> np.ndarray:
+        """The coefficients of ``bank`` the table represents, deg/h: m_k 2^-e_g."""
+        return quantized_coef(self.table, bank)
 
     def to_dict(self) -> dict:
         t = self.table
@@ -110,6 +124,9 @@ class Quantized:
             "model_source": self.model.source,
             "coef_dph": [float(c) for c in self.model.coef],
             "coef_quantized_dph": [float(c) for c in self.coef_quantized()],
+            **({"coef_mode2_dph": [float(c) for c in self.model.coef_mode2],
+                "coef_quantized_mode2_dph": [float(c) for c in self.coef_quantized(2)]}
+               if t.n_banks == 2 else {}),
             "formats": formats_summary(t),
             **self.report,
         }
@@ -129,18 +146,27 @@ def formats_summary(t: Table) -> dict:
         "u_v_z": {"type": "int32", "frac": F.Q},
         "coef_lsb_dph": [2.0 ** -group_exponent(t, k) for k in range(N_TERMS)],
         "accumulator_lsb_dph": 2.0 ** -t.e_acc,
+        **({"coef_lsb_mode2_dph": [2.0 ** -group_exponent(t, k, 2) for k in range(N_TERMS)],
+            "accumulator_lsb_mode2_dph": 2.0 ** -t.e_acc2,
+            "residual_word": {"type": "int32", "frac": F.RATE_FRAC, "unit": "deg/h",
+                              "rule": "symsat32(RHU(c 2^11 - B, 11))"}} if t.n_banks == 2 else {}),
+        "order": F.ORDERS[t.order], "n_banks": t.n_banks,
         "window_mean_frac": F.W_FRAC, "y_frac": F.Y_FRAC, "slope_frac": F.SLOPE_FRAC,
         "output_word": {"type": "int32", "frac": F.OUT_FRAC, "unit": "deg/h"},
         "rounding": "round half up (add 2^(s-1), arithmetic shift)",
     }
 
 
-def group_exponent(t: Table, k: int) -> int:
-    return t.e_7 if k == K_AUX else t.e_row[TERM_POWERS[k][0]]
+def group_exponent(t, k: int, bank: int = 1) -> int:
+    """The exponent of coefficient k in ``bank`` (t: a Table or a table.Bank)."""
+    b = t.bank(bank) if hasattr(t, "bank") else t
+    return b.e_7 if k == K_AUX else b.e_row[TERM_POWERS[k][0]]
 
 
-def quantized_coef(t: Table) -> np.ndarray:
-    return np.array([t.mant[k] * 2.0 ** -group_exponent(t, k) for k in range(N_TERMS)])
+def quantized_coef(t: Table, bank: int = 1) -> np.ndarray:
+    """The coefficients of ``bank`` the table represents, deg/h."""
+    b = t.bank(bank)
+    return np.array([b.mant[k] * 2.0 ** -group_exponent(b, k) for k in range(N_TERMS)])
 
 
 # -- the parts ----------------------------------------------------------------------------------------
@@ -438,14 +464,25 @@ def _aux_part(cfg, pp: dict) -> dict:
 # -- the bound -------------------------------------------------------------------------------------------
 
 def error_bound(table: Table, model, parts: dict | None = None) -> dict:
-    """Bound on |fixed - golden| in deg/h (see the module doc): ``bias_B`` (B at 2^-21),
-    ``bias_word`` (the BIAS output word), ``combiner`` (y), ``out`` (the OUT word)."""
+    """Bound on |fixed - golden| in deg/h (see the module doc): ``bias_B`` (B at 2^-21; two banks:
+    the larger, ``banks`` each), ``bias_word`` (the BIAS output word), ``combiner`` (y), ``out``
+    (the OUT word)."""
+    if table.n_banks == 1:
+        return _error_bound_bank(table, model, parts, table.bank(1), model.coef)
+    banks = [_error_bound_bank(table, model, parts, table.bank(b), c)
+             for b, c in ((1, model.coef), (2, model.coef_mode2))]
+    worst = max(banks, key=lambda d: d["out"])
+    return {**worst, "bias_B": max(d["bias_B"] for d in banks), "bias_word": max(d["bias_word"] for d in banks),
+            "out": max(d["out"] for d in banks), "banks": [d["parts"] for d in banks]}
+
+
+def _error_bound_bank(table: Table, model, parts, bank, coef_f) -> dict:
     cfg = model.config
-    coef = [Fraction(float(x)) for x in model.coef]
-    t = table
+    coef = [Fraction(float(x)) for x in coef_f]
+    t = bank
     E = t.e_acc
     # coefficient quantization
-    eps_coef = sum(abs(coef[k] - Fraction(t.mant[k], 1 << group_exponent(t, k))) for k in range(N_TERMS))
+    eps_coef = sum(abs(coef[k] - Fraction(t.mant[k], 1 << group_exponent(bank, k))) for k in range(N_TERMS))
     # evaluator roundings
     rnd = Fraction(0)
     for i in range(4):
@@ -460,26 +497,42 @@ def error_bound(table: Table, model, parts: dict | None = None) -> dict:
     # input-map errors
     if parts is None:
         parts = {**_proxy_part(cfg.proxy), **_rate_part(cfg.rate, _proxy_part(cfg.proxy)["_lsb"])}
-    du = _norm_error(cfg.proxy.ref, {"lsb": parts["_lsb"], "span_lsb": parts["_span_lsb"], "g": t.g_u,
-                                     "sh": t.sh_u, "off": t.u_off, "ref": t.p_ref})
-    dv = _rate_error(cfg.rate, parts["_s_span"], t.g_v, t.sh_v)
+    tb = table
+    du = _norm_error(cfg.proxy.ref, {"lsb": parts["_lsb"], "span_lsb": parts["_span_lsb"], "g": tb.g_u,
+                                     "sh": tb.sh_u, "off": tb.u_off, "ref": tb.p_ref})
+    dv = _rate_error(cfg.rate, parts["_s_span"], tb.g_v, tb.sh_v)
     lip_u = sum(TERM_POWERS[k][0] * abs(coef[k]) for k in range(N_TERMS) if k != K_AUX)
     lip_v = sum(TERM_POWERS[k][1] * abs(coef[k]) for k in range(N_TERMS) if k != K_AUX)
     float_eps = sum(abs(c) for c in coef) * Fraction(1, 1 << 48)   # golden float64 roundings
     dz = Fraction(0)
-    if t.aux_gen == 1:
+    if tb.aux_gen == 1:
         dz = Fraction(parts["_aux"]["z_error"]) if "_aux" in parts else Fraction(_aux_part(cfg, parts)["_z_error"])
     bias_b = eps_coef + rnd + lip_u * du + lip_v * dv + abs(coef[K_AUX]) * dz + float_eps
     half_out = Fraction(1, 1 << (F.OUT_FRAC + 1))
     # combiner
-    if t.combiner == 0:
+    if tb.order == 1:
+        # residual path: every r carries the B error and its own rounding (half an r LSB)
+        e_r = bias_b + half_out
+        w_err = e_r + Fraction(1, 1 << (F.W_FRAC + 1))          # W_r: mean of the r errors + its rounding
+        if tb.combiner == 3:
+            out = e_r                                            # OUT = r exactly
+        elif tb.combiner == 1:
+            out = (e_r + w_err) / 2 + half_out
+        else:
+            d_max = min(2 * tb.max_stale_n + tb.dwell_n, F.D_MAX)
+            dc2_min = max(2, 4 * (tb.exchange_n + tb.dwell_n) - 2 * tb.dwell_n)
+            ratio = Fraction(d_max, dc2_min)
+            out = (e_r + w_err + 2 * w_err * ratio + Fraction(d_max, 1 << (F.SLOPE_FRAC + 1))
+                   + Fraction(1, 1 << (F.W_FRAC + 1))) / 2 + half_out
+        comb = out - bias_b - half_out
+    elif tb.combiner == 0:
         comb = Fraction(0)
     else:
         w_err = Fraction(1, 1 << (F.W_FRAC + 1))
         comb = w_err / 2
-        if t.combiner == 2:
-            d_max = min(2 * t.max_stale_n + t.dwell_n, F.D_MAX)
-            dc2_min = max(2, 4 * (t.exchange_n + t.dwell_n) - 2 * t.dwell_n)
+        if tb.combiner == 2:
+            d_max = min(2 * tb.max_stale_n + tb.dwell_n, F.D_MAX)
+            dc2_min = max(2, 4 * (tb.exchange_n + tb.dwell_n) - 2 * tb.dwell_n)
             ratio = Fraction(d_max, dc2_min)
             comb = (w_err + 2 * w_err * ratio + Fraction(d_max, 1 << (F.SLOPE_FRAC + 1)) + w_err) / 2
     return {"bias_B": float(bias_b), "bias_word": float(bias_b + half_out), "combiner": float(comb),
@@ -502,9 +555,13 @@ def measure(table: Table, model, n_random: int = 20000, seed: int = 0) -> dict:
     ur, vr, zr = (rng.integers(-F.ONE, F.ONE + 1, n_random) for _ in range(3))
     out = {}
     for name, (u, v, z) in (("corners", (uu, vv, zz)), ("random", (ur, vr, zr))):
-        b = evaluate_words(table, u, v, z) * 2.0 ** -F.Y_FRAC
-        gold = model.evaluate(u * 2.0 ** -F.Q, v * 2.0 ** -F.Q, z * 2.0 ** -F.Q)
-        out[name] = float(np.max(np.abs(b - gold)))
+        worst = 0.0
+        for bank in range(1, table.n_banks + 1):
+            b = evaluate_words(table, u, v, z, bank=bank) * 2.0 ** -F.Y_FRAC
+            mode = np.full(len(u), bank, np.int64) if table.n_banks == 2 else None
+            gold = model.evaluate(u * 2.0 ** -F.Q, v * 2.0 ** -F.Q, z * 2.0 ** -F.Q, mode=mode)
+            worst = max(worst, float(np.max(np.abs(b - gold))))
+        out[name] = worst
     out["n_random"] = int(n_random)
     return out
 
@@ -574,22 +631,29 @@ def quantize(model, exchange_s: float = 30.0, dwell_s: float = 120.0, power_on_s
     try:
         pp = _proxy_part(cfg.proxy)
         rp = _rate_part(cfg.rate, pp["_lsb"])
+        rev = cfg.reversal
+        two = rev is not None and rev.order == "regress_first"
         cp = _coef_part(model.coef)
+        if two:
+            try:
+                cp2 = _coef_part(model.coef_mode2)
+            except QuantizeError as exc:
+                raise QuantizeError(f"bank 2 (mode 2): {exc}") from None
         fs_q16 = rhu(Fraction(fs) * (1 << 16))
         if not 0 < fs_q16 <= F.UINT32_MAX:
             raise QuantizeError(f"sample rate {fs} Hz outside the fs_q16 word (2^-16 .. 65536 Hz)")
-        rev = cfg.reversal
-        comb = 0 if rev is None else (1 if rev.combiner == "pair" else 2)
+        comb = 0 if rev is None else {"pair": 1, "trend": 2, "none": 3}[rev.combiner]
         settle_n = 0 if rev is None else _timing(rev.settle_s, fs, "settle_s")
         stale_n = 0 if rev is None else _timing(rev.max_stale_s, fs, "max_stale_s")
         timing = {"power_on_n": _timing(power_on_s, fs, "power_on_s"),
                   "exchange_n": _timing(exchange_s, fs, "exchange_s"),
                   "dwell_n": _timing(dwell_s, fs, "dwell_s", 1)}
-        total = float(sum(abs(Fraction(float(c))) for c in model.coef))
         out_range = F.INT32_SYM * 2.0 ** -F.OUT_FRAC
-        if total > out_range:
-            raise QuantizeError(f"the bias bound sum |k| = {total:.6g} deg/h exceeds the output word "
-                                f"range +-{out_range:.6g} deg/h")
+        for name, coef in (("", model.coef),) + ((("bank 2 (mode 2): ", model.coef_mode2),) if two else ()):
+            total = float(sum(abs(Fraction(float(c))) for c in coef))
+            if total > out_range:
+                raise QuantizeError(f"{name}the bias bound sum |k| = {total:.6g} deg/h exceeds the output word "
+                                    f"range +-{out_range:.6g} deg/h")
         ap = _aux_part(cfg, pp)
         table = Table(proxy_kind=pp["proxy_kind"], p_ref=pp["p_ref"], g_u=pp["g_u"], u_off=pp["u_off"],
                       sh_u=pp["sh_u"],
@@ -597,7 +661,9 @@ def quantize(model, exchange_s: float = 30.0, dwell_s: float = 120.0, power_on_s
                       rate_warmup=rp["rate_warmup"], s_bits=rp["s_bits"], g_v=rp["g_v"], sh_v=rp["sh_v"],
                       fs_q16=fs_q16, combiner=comb, settle_n=settle_n, max_stale_n=stale_n, **timing,
                       e_row=cp["e_row"], e_7=cp["e_7"], e_acc=cp["e_acc"], mant=cp["mant"],
-                      aux_gen=ap["aux_gen"], aux_params=ap["aux_params"])
+                      aux_gen=ap["aux_gen"], aux_params=ap["aux_params"],
+                      **({"order": 1, "n_banks": 2, "e_row2": cp2["e_row"], "e_7_2": cp2["e_7"],
+                          "e_acc2": cp2["e_acc"], "mant2": cp2["mant"]} if two else {}))
     except (QuantizeError, TableError) as exc:
         raise QuantizeError(f"{where}: {exc}") from None
     warnings = []
@@ -612,7 +678,12 @@ def quantize(model, exchange_s: float = 30.0, dwell_s: float = 120.0, power_on_s
         "timing": {"fs_hz": fs, "settle_n": settle_n, "max_stale_n": stale_n, **timing,
                    "exchange_s": exchange_s, "dwell_s": dwell_s, "power_on_s": power_on_s},
         "interval_bounds": {"group_bounds_at_E": cp["_bounds"], "sum": int(sum(cp["_bounds"])),
-                            "limit": F.ACC_LIMIT},
+                            "limit": F.ACC_LIMIT,
+                            **({"banks": [{"group_bounds_at_E": c["_bounds"], "sum": int(sum(c["_bounds"]))}
+                                          for c in (cp, cp2)],
+                                "residual": {"r": "int32 sym-sat (FLAG_SAT), LSB 2^-10 deg/h",
+                                             "acc": "|acc| <= (2^31 - 1)^2 < 2^62", "W": "|W| < 2^41",
+                                             "y": "|y| < 2^47"}} if two else {})},
         "bound_dph": bound,
         "measured_dph": measure(table, model, n_random),
         "warnings": warnings,
@@ -691,7 +762,9 @@ def run_cli(args) -> int:
             fh.write(t.to_bytes())
     b, m = q.report["bound_dph"], q.report["measured_dph"]
     print(f"{args.output}: {len(t.to_words())} words, CRC-32 0x{t.crc:08x}; exponents rows "
-          f"{list(t.e_row)}, k7 {t.e_7}, E {t.e_acc}")
+          f"{list(t.e_row)}, k7 {t.e_7}, E {t.e_acc}"
+          + (f"; bank 2 rows {list(t.e_row2)}, k7 {t.e_7_2}, E {t.e_acc2} ({F.ORDERS[t.order]}, "
+             f"combiner {F.COMBINERS[t.combiner]})" if t.n_banks == 2 else ""))
     print(f"|fixed - golden| bound: B {b['bias_B']:.3g}, OUT {b['out']:.3g} deg/h; measured B max "
           f"{m['corners']:.3g} (corners), {m['random']:.3g} (random, n={m['n_random']}) deg/h")
     if "aux" in q.report:

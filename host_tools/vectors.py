@@ -61,8 +61,10 @@ from firmware_ref import formats as F
 from firmware_ref.table import Table, TableError, horner_bounds
 from firmware_ref.terms import K_AUX, N_TERMS, POLY_INDEX
 
-FORMAT_VERSION = 2          # file layout (columns, record layout, manifest keys); 2: the aux set (K, A0..A3)
-GENERATOR_VERSION = 2       # the cases and their values; bump when a vector changes; 2: RHUW, SIN, aux
+FORMAT_VERSION = 3          # file layout (columns, record layout, manifest keys); 2: the aux set (K, A0..A3);
+                            # 3: table layout v2 (73+ words), the evaluator's bank column
+GENERATOR_VERSION = 3       # the cases and their values; bump when a vector changes; 2: RHUW, SIN, aux;
+                            # 3: regress_first (two banks, residual combiner pair/trend/none)
 STALE_MESSAGE = ("vectors are stale: regenerate with `hdrg vectors generate -o vectors/` and bump "
                  "GENERATOR_VERSION/FORMAT_VERSION")
 ROOT = Path(__file__).resolve().parent.parent
@@ -80,9 +82,9 @@ PRIM_FLAGGED = ("CLAMP", "SAT")          # answer "R value clamped"
 # (name, bits in the $readmemh record); the CSV has these columns plus the extra ones
 PRIM_FIELDS = (("op", 8), ("a", 64), ("b", 64), ("c", 64), ("result", 64), ("flag", 8))
 PRIM_INPUTS = ("op", "a", "b", "c")
-EVAL_FIELDS = (("case", 16), ("u", 32), ("v", 32), ("z", 32), ("b", 64), ("zclamped", 8))
+EVAL_FIELDS = (("case", 16), ("u", 32), ("v", 32), ("z", 32), ("bank", 8), ("b", 64), ("zclamped", 8))
 EVAL_EXTRA = ("row0", "row1", "row2", "row3", "zterm", "t")          # CSV only
-EVAL_INPUTS = ("case", "u", "v", "z")
+EVAL_INPUTS = ("case", "u", "v", "z", "bank")
 IN_FIELDS = (("F", 32), ("T", 32), ("R", 32), ("MODE", 8), ("RESTART", 8), ("Z", 32))
 O_FIELDS = (("state", 8), ("vs", 8), ("mode", 8), ("sign", 8), ("u", 32), ("v", 32), ("z", 32), ("s", 64),
             ("acc", 64), ("cnt", 32), ("y", 64), ("b", 64), ("out", 32), ("bias", 32), ("valid", 8), ("flags", 8))
@@ -107,14 +109,20 @@ def _rhu(x, s: int):
     return x if s == 0 else (x + (1 << (s - 1))) >> s
 
 
-def horner_rows(table, u, v, z) -> dict:
+def horner_rows(table, u, v, z, bank=None) -> dict:
     """The evaluator's intermediates on int64 arrays (u, v in [-2^30, 2^30], z any int32):
     ``row0..row3`` = a[i], the Horner row of u^i aligned to the accumulator (LSB 2^-E deg/h),
     ``zterm`` = RHU(m_7 z, 30 + e_7 - E), ``t`` the accumulator after k7 z, ``b`` = B (LSB 2^-21
-    deg/h), ``zclamped``.  Exactly FORMATS.md step 5 (the formats bound every product below 2^62)."""
+    deg/h), ``zclamped``.  Exactly FORMATS.md step 5 (the formats bound every product below 2^62).
+    ``bank``: int array (1, 2) of the bank of each sample (None: bank 1)."""
+    if bank is not None and table.n_banks == 2:
+        bank = np.asarray(bank, np.int64)
+        one, two = horner_rows(table, u, v, z), horner_rows(table.bank(2), u, v, z)
+        return {k: np.where(bank == 2, two[k], one[k]) for k in one}
     u = np.asarray(u, np.int64)
     v = np.asarray(v, np.int64)
     z = np.asarray(z, np.int64)
+    table = table.bank(1) if hasattr(table, "bank") else table
     m, E = table.mant, table.e_acc
     out = {}
     for i in range(4):
@@ -135,15 +143,20 @@ def horner_rows(table, u, v, z) -> dict:
     return out
 
 
-def window_sums(table, m, r, restart):
+def window_sums(table, m, r, restart, b=None, warm=None):
     """The combiner's window sum and count after each sample (acc LSB 2^-10 deg/h, cnt): the part
     of firmware_ref.sequencer.Combiner that the numba kernel does not output.  ``m`` the mode of
-    each sample (logged or the timer's)."""
+    each sample (logged or the timer's); for an order-1 table ``b`` (B of each sample, LSB 2^-21)
+    and ``warm`` (rate estimator in warm-up): the sums are of r = symsat32(RHU(c 2^11 - B, 11))
+    over the used (warm) samples."""
     n = len(m)
     acc_o = np.zeros(n, np.int64)
     cnt_o = np.zeros(n, np.int64)
     if table.combiner == 0:
         return acc_o, cnt_o
+    order1 = table.order == 1
+    b = np.zeros(n, np.int64) if b is None else np.asarray(b, np.int64)
+    warm = np.zeros(n, bool) if warm is None else np.asarray(warm, bool)
     cur = acc = cnt = pos = 0
     for i, (mi, ri, rs) in enumerate(zip(m.tolist(), r.tolist(), restart.tolist())):
         if rs:
@@ -153,8 +166,11 @@ def window_sums(table, m, r, restart):
             acc = cnt = pos = 0
         if cur:
             if pos >= table.settle_n:
-                if cnt < F.COUNT_MAX:
-                    acc += ri if cur == 1 else -ri
+                c = ri if cur == 1 else -ri
+                if order1:
+                    c = arith.sat_signed(arith.rshift_round((c << 11) - int(b[i]), 11), 32)[0]
+                if cnt < F.COUNT_MAX and not (order1 and warm[i]):
+                    acc += c
                     cnt += 1
             else:
                 pos += 1
@@ -399,8 +415,9 @@ def compute_primitives(vs: VectorSet) -> None:
 # -- tables -----------------------------------------------------------------------------------------
 
 def _qtable(est="diff", combiner="pair", n=5, shift=2, settle_s=2.0, max_stale_s=25.0, coef=None, kind=None,
-            **timing) -> Table:
-    """A quantized table of firmware_ref.vectors.make_model (as tests/test_c_twin.py's table_of)."""
+            order="combine_first", coef2=None, **timing) -> Table:
+    """A quantized table of firmware_ref.vectors.make_model (as tests/test_c_twin.py's table_of);
+    ``order`` "regress_first": two banks (``coef2``: make_model's default)."""
     from firmware_ref.vectors import make_model
     from host_tools.quantize import quantize
 
@@ -409,7 +426,7 @@ def _qtable(est="diff", combiner="pair", n=5, shift=2, settle_s=2.0, max_stale_s
     temp = (kind or ("temp" if est == "lsq" else "freq")) == "temp"
     model = make_model("temp" if temp else "freq", ref=20.0 if temp else 6227.0, span=30.0 if temp else 3.0,
                        estimator=est, n=n, shift=shift, rate_span=0.5 if temp else 0.003, combiner=combiner,
-                       settle_s=settle_s, max_stale_s=max_stale_s, coef=coef)
+                       settle_s=settle_s, max_stale_s=max_stale_s, coef=coef, order=order, coef2=coef2)
     return quantize(model, n_random=10, **timing).table
 
 
@@ -421,6 +438,13 @@ def _fit_bounds(e_row, e_7, e_acc, mant) -> list:
         if max(rows) <= F.ACC_LIMIT and sum(bounds) <= F.ACC_LIMIT:
             return mant
         mant = [m >> 1 if m >= 0 else -((-m) >> 1) for m in mant]
+
+
+def _two_banks(t1: Table, t2: Table) -> Table:
+    """An order-1 two-bank table: t1 with bank 2 = bank 1 of t2 (combiner pair)."""
+    from firmware_ref.vectors import two_bank_table
+
+    return two_bank_table(t1 if t1.combiner else dataclasses.replace(t1, combiner=1), t2, None)
 
 
 def _random_eval_table(rng, base: Table) -> Table:
@@ -446,10 +470,12 @@ def evaluator_set(rng) -> VectorSet:
     edge = np.array([F.ONE, -F.ONE, F.ONE - 1, -F.ONE + 1, 0, 1, -1], np.int64)
     zedge = np.array([0, F.ONE, -F.ONE, F.ONE + 1, -F.ONE - 1, F.INT32_SYM, -F.INT32_SYM - 1, 12345], np.int64)
 
-    def add(name, desc, table, u, v, z):
+    def add(name, desc, table, u, v, z, bank=None):
         cases.append({"name": name, "description": desc, "table": len(tables)})
         tables.append(table)
-        parts.append((np.asarray(u, np.int64), np.asarray(v, np.int64), np.asarray(z, np.int64)))
+        u = np.asarray(u, np.int64)
+        bank = np.ones(len(u), np.int64) if bank is None else np.asarray(bank, np.int64)
+        parts.append((u, np.asarray(v, np.int64), np.asarray(z, np.int64), bank))
 
     def random_points(n):
         u = rng.integers(-F.ONE, F.ONE, n, endpoint=True)
@@ -512,15 +538,30 @@ def evaluator_set(rng) -> VectorSet:
         t = quantize(random_model(rng), exchange_s=3.0, dwell_s=7.0, n_random=10).table
         u, v, z = random_points(100)
         add(f"quantized_{k}", "firmware_ref.vectors.random_model quantized by host_tools.quantize", t, u, v, z)
+    # two banks (regress_first, order 1): the bank input selects the coefficients and exponents
+    two = [("two_bank_extremes", "bank 1 = e_acc_0 (E = 0, B = t << 21), bank 2 = e_acc_52 (B = RHU(t, 31))",
+            _two_banks(extremes["e_acc_0"][1], extremes["e_acc_52"][1])),
+           ("two_bank_bound_signs", "bank 1 = acc_bound_same_sign, bank 2 = acc_bound_neg: B of opposite sign",
+            _two_banks(extremes["acc_bound_same_sign"][1], extremes["acc_bound_neg"][1]))]
+    for name, desc, t in two:
+        bank = np.resize(np.array([1, 2], np.int64), len(grid_u))
+        add(name, desc + "; u, v, z on the edge grid, banks alternating", t, grid_u, grid_v, grid_z, bank)
+        add(name + "_swapped", desc + "; banks in the other order", t, grid_u, grid_v, grid_z, 3 - bank)
+    for k in range(6):
+        t = quantize(random_model(rng, order="regress_first"), exchange_s=3.0, dwell_s=7.0, n_random=10).table
+        u, v, z = random_points(120)
+        add(f"quantized_two_bank_{k}", "firmware_ref.vectors.random_model(order='regress_first') quantized: two "
+            "banks with their own exponents, random bank per point", t, u, v, z, rng.integers(1, 3, 120))
     case_col = np.concatenate([np.full(len(p[0]), c, np.int64) for c, p in enumerate(parts)])
     cols = {"case": case_col, "u": np.concatenate([p[0] for p in parts]), "v": np.concatenate([p[1] for p in parts]),
-            "z": np.concatenate([p[2] for p in parts])}
+            "z": np.concatenate([p[2] for p in parts]), "bank": np.concatenate([p[3] for p in parts])}
     start = 0
     for c, p in zip(cases, parts):
         c["rows"] = [start, start + len(p[0])]
         start += len(p[0])
     vs = VectorSet("evaluator", "the Horner evaluator alone (FORMATS.md step 5): B (LSB 2^-21 deg/h) and "
-                   "zclamped at (u, v, z) for table `case`; row0..row3 = the Horner rows a[i] aligned to 2^-E, "
+                   "zclamped at (u, v, z) with coefficient bank `bank` (1, or 2 of a two-bank table) for table "
+                   "`case`; row0..row3 = the Horner rows a[i] aligned to 2^-E, "
                    "zterm = RHU(m_7 z, 30 + e_7 - E), t = the accumulator after k7 z (LSB 2^-E)",
                    cols, EVAL_INPUTS, EVAL_FIELDS, cases, tables)
     compute_evaluator(vs, check_python=True)
@@ -541,16 +582,20 @@ def compute_evaluator(vs: VectorSet, check_python: bool = False) -> None:
     for case in vs.cases:
         lo, hi = case["rows"]
         t = vs.tables[case["table"]]
-        u, v, z = c["u"][lo:hi], c["v"][lo:hi], c["z"][lo:hi]
-        rows = horner_rows(t, u, v, z)
+        u, v, z, bank = c["u"][lo:hi], c["v"][lo:hi], c["z"][lo:hi], c["bank"][lo:hi]
+        if not np.all((bank == 1) | ((bank == 2) & (t.n_banks == 2))):
+            raise VectorsError(f"evaluator case {case['name']}: bank must be 1, or 2 with a two-bank table")
+        rows = horner_rows(t, u, v, z, bank)
         kb = evaluate_words(t, u, v, z)
+        if t.n_banks == 2:
+            kb = np.where(bank == 2, evaluate_words(t, u, v, z, bank=2), kb)
         if not np.array_equal(kb, rows["b"]):
             i = int(np.argmax(kb != rows["b"]))
             raise VectorsError(f"evaluator case {case['name']}: numba B {kb[i]} != Horner rows B {rows['b'][i]} "
                                f"at u={u[i]} v={v[i]} z={z[i]}")
         if check_python:
             for i in range(hi - lo):
-                b, zc = evaluate(int(u[i]), int(v[i]), int(z[i]), t)
+                b, zc = evaluate(int(u[i]), int(v[i]), int(z[i]), t, bank=int(bank[i]))
                 if b != rows["b"][i] or int(zc) != rows["zclamped"][i]:
                     raise VectorsError(f"evaluator case {case['name']}: Python reference B {b} != {rows['b'][i]} "
                                        f"at u={u[i]} v={v[i]} z={z[i]}")
@@ -590,13 +635,13 @@ def compute_pipeline(vs: VectorSet, rows: bool, check_python: int = PY_CHECK) ->
         k = run_words(t, p, r, None if timed else mode, rs, z, self_timed=timed, detail=True, **kw)
         state = k["state"]
         m = np.asarray(F.STATE_MODE, np.int64)[state] if timed else mode
-        acc, cnt = window_sums(t, m, r, rs)
+        acc, cnt = window_sums(t, m, r, rs, k["b"], (k["flags"] & F.FLAG_WARMUP) != 0)
         o = {"state": state, "vs": np.asarray(F.STATE_VS, np.int64)[state],
              "mode": m, "sign": np.asarray(F.STATE_SIGN, np.int64)[state], "u": k["u"], "v": k["v"],
              "z": k["z"], "s": k["s"], "acc": acc, "cnt": cnt, "y": k["y"], "b": k["b"],
              "out": k["out"], "bias": k["bias"], "valid": k["valid"], "flags": k["flags"]}
         if rows:
-            hr = horner_rows(t, k["u"], k["v"], z)
+            hr = horner_rows(t, k["u"], k["v"], z, np.where(m == 2, 2, 1))
             if not np.array_equal(hr["b"], k["b"]):
                 raise VectorsError(f"{vs.name} case {case['name']}: Horner rows disagree with the kernel's B")
             o.update((name, hr[name]) for name, _ in ROW_FIELDS)
@@ -744,6 +789,45 @@ def sequencer_set(rng) -> VectorSet:
     t = _qtable("diffn", "pair", n=8, exchange_s=2.0, dwell_s=5.0)
     cs.add("corner_diffn_pair_timed", "firmware_ref.vectors.corner_stream words, self-timed", t,
            corner_stream(t), True)
+    # regress, then reverse (order 1): two banks (bank 2 on mode-2 samples), the residual combiner
+    for comb in ("pair", "trend", "none"):
+        t = _qtable("diff", comb, order="regress_first", power_on_s=2.0, exchange_s=3.0, dwell_s=9.0)
+        cs.add(f"rtr_{comb}_timed", f"regress_first {comb}: self-timed, power-on 2, exchange 3, dwell 9, settle 2; "
+               "windows sum r = c - B of the mode's bank", t, _ramp(t, 200, rng), True)
+    t = _qtable("diff", "pair", order="regress_first", settle_s=0.0, max_stale_s=10.0)
+    modes = [1] * 5 + [2] * 15 + [3] * 3 + [1] * 12 + [3] * 8 + [2] * 6 + [3] * 9 + [1] * 4 + [2] * 3
+    s = _ramp(t, len(modes), rng)
+    s["mode"] = np.array(modes)
+    cs.add("rtr_stale_edge_log", "regress_first pair, log-driven, max_stale_n = 10: ages 1..15 of the other window",
+           t, s)
+    big2 = np.array([2.0 ** 21 * 0.9] + [0.0] * (N_TERMS - 1))
+    t = _qtable("diff", "trend", order="regress_first", settle_s=0.0, max_stale_s=50.0,
+                coef=[1.0] + [0.0] * (N_TERMS - 1), coef2=big2)
+    modes = [1, 1, 2, 2, 1, 1, 2, 2, 1, 1, 2, 2, 2, 3, 1, 1, 1, 2, 2, 2, 1]
+    r = [F.INT32_SYM, F.INT32_SYM, 0, 0, -F.INT32_SYM, -F.INT32_SYM, F.INT32_SYM, F.INT32_SYM, F.INT32_SYM,
+         F.INT32_SYM, -F.INT32_SYM, -F.INT32_SYM, 5, 0, -F.INT32_SYM, 3, 1, F.INT32_SYM, -1, 0, 7]
+    s = {"p": np.full(len(modes), t.p_ref, np.int64), "r": np.array(r), "mode": np.array(modes)}
+    cs.add("rtr_residual_saturation_log", "regress_first trend, bank 2 B = 0.9 2^21 deg/h, +-(2^31 - 1) rate "
+           "words: the residual word r saturates (flag 128), slope clamp", t, s)
+    t = _qtable("lsq", "pair", n=16, order="regress_first", settle_s=0.0, max_stale_s=200.0)
+    modes = [1] * 30 + [2] * 30 + [1] * 30 + [2] * 30
+    s = _ramp(t, len(modes), rng)
+    s["mode"] = np.array(modes)
+    s["restart"] = np.zeros(len(modes), np.int64)
+    s["restart"][[0, 70]] = 1
+    cs.add("rtr_warmup_log", "regress_first pair, lsq n=16: rate warm-up samples (after power-on and a restart "
+           "inside a window) are not used (no sum, not valid)", t, s)
+    for est, comb in (("diffn", "pair"), ("iir", "none"), ("lsq", "trend")):
+        t = _qtable(est, comb, order="regress_first")
+        cs.add(f"rtr_corner_{est}_{comb}", "regress_first: firmware_ref.vectors.corner_stream (log-driven)", t,
+               corner_stream(t))
+    for k in range(3):
+        est = ("diff", "diffn", "iir")[k]
+        t = quantize(random_model(rng, estimator=est, order="regress_first"), exchange_s=3.0, dwell_s=7.0,
+                     n_random=10).table
+        cs.add(f"rtr_random_{k}", f"firmware_ref.vectors.random_model(order='regress_first', {est}, combiner "
+               f"{F.COMBINERS[t.combiner]}) and random_stream{', self-timed' if k == 1 else ''}", t,
+               random_stream(rng, t, 500), k == 1)
     # random models and streams
     for k in range(4):
         reversal = k != 3
@@ -763,9 +847,16 @@ def sequencer_set(rng) -> VectorSet:
 # -- end to end --------------------------------------------------------------------------------------
 
 E2E_RUNS = (
-    # name, scenario, seed, duration [s], description
-    ("ftr", "paper-ftr-cycle-4dpm", 11, 2400.0, "FTR, -20..20 degC cycles at 4 degC/min"),
-    ("mode_reversal", "paper-mr-cycle-4dpm", 12, 2400.0, "mode reversal 30/120 s, cycles at 4 degC/min"),
+    # name, scenario, seed, duration [s], description, reversal (order, combiner) or None
+    ("ftr", "paper-ftr-cycle-4dpm", 11, 2400.0, "FTR, -20..20 degC cycles at 4 degC/min", None),
+    ("mode_reversal", "paper-mr-cycle-4dpm", 12, 2400.0, "mode reversal 30/120 s, cycles at 4 degC/min, "
+     "combine_first pair (legacy)", ("combine_first", "pair")),
+    ("regress_first_pair", "paper-mr-cycle-4dpm", 12, 2400.0, "mode reversal, regress_first pair (two banks)",
+     ("regress_first", "pair")),
+    ("regress_first_none", "paper-mr-cycle-4dpm", 12, 2400.0, "mode reversal, regress_first none (two banks)",
+     ("regress_first", "none")),
+    ("regress_first_trend", "paper-mr-cycle-4dpm", 12, 2400.0, "mode reversal, regress_first trend (two banks)",
+     ("regress_first", "trend")),
 )
 
 
@@ -785,9 +876,10 @@ def _jsonable(x):
     return x
 
 
-def e2e_model(log):
-    """The model of a run: fit_config_from_logs (rounded to 7 significant digits), fit_logs with
-    it, coefficients rounded to 7 significant digits; returns (model, table)."""
+def e2e_model(log, reversal=None):
+    """The model of a run: fit_config_from_logs (rounded to 7 significant digits; ``reversal`` an
+    (order, combiner) pair for a mode-reversal log), fit_logs with it, coefficients (both banks)
+    rounded to 7 significant digits; returns (model, table)."""
     from host_tools import compensate as hc
     from host_tools.fit import fit_logs
     from host_tools.model import BiasModel, ModelConfig
@@ -795,13 +887,17 @@ def e2e_model(log):
     from host_tools.quantize import quantize
     from host_tools.rate import RateConfig
 
-    cfg0 = hc.fit_config_from_logs([log])
+    from host_tools.reversal import ReversalConfig
+
+    rev = None if reversal is None else ReversalConfig(reversal[1], order=reversal[0])
+    cfg0 = hc.fit_config_from_logs([log], reversal=rev)
     cfg = ModelConfig(ProxyConfig(cfg0.proxy.kind, _round_sig(cfg0.proxy.ref), _round_sig(cfg0.proxy.span)),
                       RateConfig(cfg0.rate.estimator, cfg0.rate.n, cfg0.rate.shift, _round_sig(cfg0.rate.span),
                                  cfg0.rate.fs), cfg0.reversal, cfg0.aux)
     fitted, _ = fit_logs([log], cfg)
     coef = np.array([_round_sig(c) for c in fitted.coef], np.float64)
-    model = BiasModel(cfg, fitted.terms, coef, source=f"<vectors e2e {log.source}>")
+    coef2 = None if fitted.coef_mode2 is None else np.array([_round_sig(c) for c in fitted.coef_mode2], np.float64)
+    model = BiasModel(cfg, fitted.terms, coef, source=f"<vectors e2e {log.source}>", coef_mode2=coef2)
     return model, quantize(model, n_random=10).table
 
 
@@ -813,16 +909,18 @@ def e2e_set() -> tuple:
 
     cs = _Cases()
     config = {}
-    for name, scenario, seed, duration, desc in E2E_RUNS:
+    for name, scenario, seed, duration, desc, reversal in E2E_RUNS:
         log = simulate(scenario, seed=seed, duration_s=duration)
-        model, table = e2e_model(log)
+        model, table = e2e_model(log, reversal)
         w = log_words(log, model.config)
         other = (inputs.temp_words(log["temp_c"]) if table.proxy_kind == 0 else inputs.freq_words(log["freq_hz"]))[0]
         cs.add(name, f"{desc}: host_tools.sim.simulate({scenario!r}, seed={seed}, duration_s={duration:g}), "
                f"fitted, quantized; log-driven", table, w, t_words=other)
         config[name] = {"scenario": scenario, "seed": seed, "duration_s": repr(duration),
                         "model": {"config": model.config.to_dict(), "terms": list(model.terms),
-                                  "coef": list(model.coef)},
+                                  "coef": list(model.coef),
+                                  **({"coef_mode2": list(model.coef_mode2)} if model.coef_mode2 is not None
+                                     else {})},
                         "input_saturated_samples": int(np.count_nonzero(w["input_sat"]))}
     vs = VectorSet("e2e", "simulated chamber runs through the whole pipeline with every intermediate: the "
                    "sequencer set's columns plus the evaluator's Horner rows (row0..row3, zterm, t at 2^-E)",
@@ -1007,7 +1105,9 @@ def aux_sim_case() -> tuple:
     with _warnings.catch_warnings():
         _warnings.simplefilter("ignore")
         log = simulate(scenario, seed=seed, duration_s=duration, undeclared=undeclared)
-    cfg0 = hc.fit_config_from_logs([log])
+    from host_tools.reversal import ReversalConfig
+
+    cfg0 = hc.fit_config_from_logs([log], reversal=ReversalConfig("pair", order="combine_first"))
     tr = (float(np.min(log["temp_c"])), float(np.max(log["temp_c"])))
     terms = [{"gen": "decay_on", "tau_s": 300.0, "weight": 0.5},
              {"gen": "input", "column": cfg0.proxy.column, "ref": _round_sig(cfg0.proxy.ref),
@@ -1331,8 +1431,9 @@ def _requests(vs: VectorSet, fields) -> list:
         lo, hi = case["rows"]
         if vs.name == "evaluator":
             for i in range(lo, hi):
-                reqs.append((f"EVAL {c['u'][i]} {c['v'][i]} {c['z'][i]}", ["E", str(c["b"][i]),
-                                                                          str(c["zclamped"][i])], i, None))
+                bank = f" {c['bank'][i]}" if c["bank"][i] != 1 else ""
+                reqs.append((f"EVAL {c['u'][i]} {c['v'][i]} {c['z'][i]}{bank}", ["E", str(c["b"][i]),
+                                                                                 str(c["zclamped"][i])], i, None))
         else:
             fin = AUX_IN_FIELDS if "K" in c else IN_FIELDS
             arr = np.stack([c[n] for n, _ in fin] + [c[n] for n in O_NAMES], axis=1)[lo:hi].tolist()

@@ -134,6 +134,18 @@ def test_bench_numba_fixed_trend_lsq(benchmark):
     print(f"\nnumba fixed, lsq n=8 + trend: {ns:.2f} ns/sample")
 
 
+def test_bench_numba_fixed_regress_first(benchmark):
+    """regress_first (two banks, residual pair combiner): the bank select and the residual word
+    on top of the legacy pipeline."""
+    table = quantize(make_model(estimator="diff", combiner="pair", order="regress_first"), n_random=100).table
+    p, r, mode = paper_stream(table)
+    run_words(table, p[:1000], r[:1000], mode[:1000])
+    benchmark.pedantic(run_words, args=(table, p, r, mode), rounds=5, iterations=1, warmup_rounds=1)
+    ns = 1e9 * benchmark.stats.stats.min / N
+    benchmark.extra_info["ns_per_sample"] = ns
+    print(f"\nnumba fixed, regress_first pair (two banks): {ns:.2f} ns/sample")
+
+
 def test_bench_python_reference(benchmark, paper_table):
     n = 20_000
     p, r, mode = paper_stream(paper_table, n)
@@ -150,3 +162,8 @@ def test_bench_ops_table(benchmark):
         print(f"  {est:5s} n={n:<3d} {comb:5s}  mul {c['mul']:3d}  add {c['add']:3d}  shift {c['shift']:3d}  "
               f"cmp {c['cmp']:3d}  mem {c['mem']:3d}  div/window {c['div_per_window']}")
         benchmark.extra_info[f"{est}-{n}-{comb}"] = c
+    for est, n, comb in F.OP_CONFIGS_RTR:
+        c = F.op_counts(est, n, comb, "regress_first")
+        print(f"  {est:5s} n={n:<3d} {comb:5s} regress_first  mul {c['mul']:3d}  add {c['add']:3d}  "
+              f"shift {c['shift']:3d}  cmp {c['cmp']:3d}  mem {c['mem']:3d}  div/window {c['div_per_window']}")
+        benchmark.extra_info[f"{est}-{n}-{comb}-regress_first"] = c

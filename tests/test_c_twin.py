@@ -487,12 +487,14 @@ def table_cases():
 
     cases = [
         ("magic", [w[0] ^ 1] + w[1:], "MAGIC", 0),
-        ("version", recrc([w[0], 2] + w[2:]), "VERSION", 1),
+        ("version", recrc([w[0], 3] + w[2:]), "VERSION", 1),
         ("short", w[:-2] + [w[-1]], "LENGTH", 2),
-        ("length_word", recrc(w[:2] + [47] + w[3:]), "LENGTH", 2),
-        ("crc", w[:-1] + [w[-1] ^ 0x80000000], "CRC", 47),
-        ("aux_params", recrc(w[:2] + [49] + w[3:-1] + [5, 0]), "LENGTH", 46),
-        ("aux_params_declared", recrc(w[:2] + [49] + w[3:FI["aux_nparams"]] + [1, 5, 0]), "FIELD", 46),
+        ("length_word", recrc(w[:2] + [72] + w[3:]), "LENGTH", 2),
+        ("crc", w[:-1] + [w[-1] ^ 0x80000000], "CRC", 72),
+        ("aux_params", recrc(w[:2] + [74] + w[3:-1] + [5, 0]), "LENGTH", 46),
+        ("aux_params_declared", recrc(w[:2] + [74] + w[3:FI["aux_nparams"]] + [1] + w[FI["order"]:-1] + [5, 0]),
+         "FIELD", 46),
+        ("v2_words_as_v1", recrc([w[0], 1] + w[2:]), "LENGTH", 46),
         ("proxy_kind", field("proxy_kind", 2), "FIELD", 3),
         ("temp_p_ref", field("p_ref", -(1 << 31), {"proxy_kind": 1}), "FIELD", 4),
         ("g_u_zero", field("g_u", 0), "FIELD", 5),
@@ -520,6 +522,16 @@ def table_cases():
         ("mant_min", field("m_5", -(1 << 31)), "FIELD", FI["m_5"]),
         ("aux_gen", field("aux_gen", 2), "FIELD", 45),
         ("aux_gen_1_no_params", field("aux_gen", 1), "FIELD", 46),
+        ("order", field("order", 2), "FIELD", 47),
+        ("n_banks_order_0", field("n_banks", 2), "FIELD", 48),
+        ("order_1_one_bank", field("order", 1), "FIELD", 48),
+        ("bank2_in_one_bank", field("e2_0", 5), "FIELD", 49),
+        ("m2_in_one_bank", field("m2_3", 1), "FIELD", FI["m2_3"]),
+        ("ftr_two_banks", field("combiner", 0, {"order": 1, "n_banks": 2}), "FIELD", 16),
+        ("bank2_e_big", field("e2_1", 53, {"order": 1, "n_banks": 2}), "FIELD", FI["e2_1"]),
+        ("bank2_mant_min", field("m2_5", -(1 << 31), {"order": 1, "n_banks": 2, "e2_0": base.e_row[0],
+                                 "e2_1": base.e_row[1], "e2_2": base.e_row[2], "e2_3": base.e_row[3],
+                                 "e2_7": base.e_7, "e2_acc": base.e_acc}), "FIELD", FI["m2_5"]),
     ]
     return base, cases
 
@@ -534,7 +546,7 @@ def test_table_checks(c_exe):
             Table.from_words(words, name)
         lines.append("TABLE " + " ".join(f"{x:08x}" for x in words))
     out = run_text(c_exe, lines, expect_rc=1)
-    assert out[0] == f"T 48 {base.crc:08x}"
+    assert out[0] == f"T 73 {base.crc:08x}"
     for (name, _, code, word), got in zip(cases, out[1:]):
         assert got.startswith(f"ERR {code} word {word} "), (name, got)
     # a table refused leaves no table
@@ -559,7 +571,7 @@ def test_horner_bound_is_checked_in_c(c_exe):
     out = run_text(c_exe, ["TABLE " + " ".join(f"{w:08x}" for w in words)], expect_rc=1)
     assert out[0].startswith("ERR HORNER")
     ok = with_fields(base, e_row=(30,) * 4, e_7=30, e_acc=30, mant=tuple([F.INT32_SYM // 17] * 17))
-    assert run_text(c_exe, [table_line(ok)])[0].startswith("T 48 ")
+    assert run_text(c_exe, [table_line(ok)])[0].startswith("T 73 ")
 
 
 def test_crc_equals_zlib(c_exe):
@@ -580,14 +592,14 @@ def test_protocol_errors(c_exe):
              "S 0 0 0 2 0 0", "TABLE BUILTIN", "TABLE 47524448 zz", f"RHU 1 {1 << 70}", "SAT 1 64",
              "RESET"]
     out = run_text(c_exe, lines, expect_rc=1)
-    expect = ["ERR NOTABLE", "ERR NOTABLE", "ERR NOTABLE", "ERR SYNTAX", "T 48", "O ", "ERR SYNTAX",
+    expect = ["ERR NOTABLE", "ERR NOTABLE", "ERR NOTABLE", "ERR SYNTAX", "T 73", "O ", "ERR SYNTAX",
               "ERR SYNTAX", "ERR RANGE F", "ERR RANGE T", "ERR RANGE R", "ERR RANGE MODE", "ERR RANGE RESTART",
               "ERR RANGE MODE -1", "OK", "O ", "ERR RANGE MODE -1", "ERR SYNTAX", "ERR SYNTAX", "ERR SYNTAX",
               "ERR RANGE", "ERR NOTABLE"]
     assert len(out) == len(expect)
     for got, exp in zip(out, expect):
         assert got.startswith(exp), (got, exp)
-    assert run_text(c_exe, [table_line(table), "RESET", "QUIT", "BOGUS"]) == [f"T 48 {table.crc:08x}", "OK"]
+    assert run_text(c_exe, [table_line(table), "RESET", "QUIT", "BOGUS"]) == [f"T 73 {table.crc:08x}", "OK"]
 
 
 def test_binary_block_errors_are_fatal(c_exe):
@@ -652,6 +664,17 @@ def test_ubsan_build(ubsan_exe):
     table = aux_extreme_table()
     s = aux_stream(np.random.default_rng(3), table, 5000, extreme=0.05)
     assert_same(kernel(table, s), run_bin(ubsan_exe, table, s), what="ubsan aux extremes")
+    from firmware_ref.vectors import two_bank_table    # regress_first: residual saturation, both banks
+    big = np.zeros(17)
+    big[0] = 2.0 ** 21 * 0.9
+    e = extreme_tables()
+    for comb in (1, 2, 3):
+        for t1, t2 in ((table_of("diffn", "pair"), table_of("diffn", "pair", coef=big)),
+                       (e["E0_max"], e["E52"])):
+            table = two_bank_table(t1 if t1.combiner else with_fields(t1, combiner=1), t2, comb)
+            s = corner_stream(table)
+            assert_same(kernel(table, s), run_bin(ubsan_exe, table, s), what=f"ubsan regress_first {comb}")
+            assert_same(kernel(table, s, True), run_bin(ubsan_exe, table, s, True), what=f"ubsan rtr {comb} timed")
     cases = primitive_cases(np.random.default_rng(1))
     out = run_text(ubsan_exe, [req for req, _ in cases], expect_rc=1)
     assert all(got.startswith(exp) for (_, exp), got in zip(cases, out)) and len(out) == len(cases)
@@ -833,3 +856,74 @@ def test_bin_block_width_errors_are_fatal(c_exe):
     for head, body in (("BIN 2 7", rec.tobytes()), ("BIN 2 11", rec.tobytes()[:100]), ("BENCH 2 1 12", b"")):
         pr = subprocess.run([str(c_exe)], input=f"{table_line(table)}\n{head}\n".encode() + body, capture_output=True)
         assert pr.returncode == 2 and b"fatal" in pr.stderr, head
+
+
+# -- regress, then reverse (layout v2: order 1, two banks, combiner 3 none) ---------------------------------
+
+def rtr_table(rng, estimator, combiner, **kw):
+    """A two-bank regress_first table: bank 2 quantized from a second random model."""
+    from firmware_ref.vectors import two_bank_table
+    t1 = quantize(random_model(rng, reversal=True, estimator=estimator), n_random=10, **kw).table
+    t2 = quantize(random_model(rng, reversal=True, estimator=estimator), n_random=10, **kw).table
+    return two_bank_table(t1, t2, combiner)
+
+
+@pytest.mark.parametrize("seed,estimator,combiner,self_timed", [
+    (0, "diff", 1, False), (1, "lsq", 2, False), (2, "iir", 3, False), (3, "diffn", 1, True), (4, "diff", 3, True)])
+def test_regress_first_streams_equal_numba_and_reference(c_exe, seed, estimator, combiner, self_timed):
+    """Two-bank tables, every residual combiner, logged and self-timed, with restarts: C == numba
+    on 10^5 samples and C == the Python reference (every column) on the first 5000."""
+    rng = np.random.default_rng(1500 + seed)
+    table = rtr_table(rng, estimator, combiner, exchange_s=3.0, dwell_s=7.0, power_on_s=2.0)
+    s = random_stream(rng, table, 100_000, reversal=True)
+    got = run_bin(c_exe, table, s, self_timed)
+    assert_same(kernel(table, s, self_timed), got, what=f"regress_first seed {seed}")
+    short = {k: (v[:5000] if isinstance(v, np.ndarray) else v) for k, v in s.items()}
+    got_s = run_bin(c_exe, table, short, self_timed)
+    assert_same(reference(table, short, self_timed), got_s, REF_KEYS, f"regress_first seed {seed}, reference")
+    m2 = got["mode"] == 2
+    assert m2.any() and (~m2).any() and got["valid"].any()
+
+
+@pytest.mark.parametrize("combiner", [1, 2, 3])
+def test_regress_first_corners_and_saturation(c_exe, combiner):
+    """Corner streams on a two-bank table whose bank 2 has |B| near the output range: the residual
+    word saturates (flag 128); text protocol against the reference and the kernel."""
+    from firmware_ref.vectors import two_bank_table
+    big = np.zeros(17)
+    big[0] = 2.0 ** 21 * 0.9
+    table = two_bank_table(table_of("diffn", "pair"), table_of("diffn", "pair", coef=big), combiner)
+    s = corner_stream(table, reversal=True)
+    got = run_samples_text(c_exe, table, s)
+    assert_same(reference(table, s), got, REF_KEYS, "regress_first corners")
+    assert_same(kernel(table, s), got, what="regress_first corners, kernel")
+    assert (got["flags"] & F.FLAG_SAT).any()
+
+
+def test_evaluator_bank_select_and_version_1_table(c_exe):
+    """EVAL U V Z BANK evaluates bank 2 (== the kernel's and Python's bank 2); a version-1 table is
+    read by the C parser as order 0 with one bank and runs exactly like its version-2 words."""
+    from firmware_ref.table import N_FIXED, N_FIXED_V1
+    from firmware_ref.vectors import two_bank_table
+    rng = np.random.default_rng(3)
+    table = two_bank_table(table_of("diff", "pair"), table_of("diff", "pair", coef=rng.normal(0, 100, 17)), 1)
+    u, v, z = (rng.integers(-F.ONE, F.ONE + 1, 300) for _ in range(3))
+    out = run_text(c_exe, [table_line(table)] + [f"EVAL {a} {b} {c} 2" for a, b, c in zip(u, v, z)]
+                   + [f"EVAL {a} {b} {c} 1" for a, b, c in zip(u, v, z)] + ["EVAL 0 0 0 3"], expect_rc=1)
+    got = np.array([line.split()[1] for line in out[1:-1]], np.int64)
+    np.testing.assert_array_equal(got[:300], evaluate_words(table, u, v, z, bank=2))
+    np.testing.assert_array_equal(got[300:], evaluate_words(table, u, v, z, bank=1))
+    assert not np.array_equal(got[:300], got[300:])
+    assert int(got[0]) == evaluate(int(u[0]), int(v[0]), int(z[0]), table, bank=2)[0]
+    assert out[-1].startswith("ERR RANGE")
+    one = table_of("diff", "trend")
+    w = one.to_words()
+    v1 = [w[0], 1, N_FIXED_V1 + 1] + w[3:N_FIXED_V1]
+    v1 = v1 + [crc32_words(v1)]
+    assert Table.from_words(v1) == one
+    s = random_stream(np.random.default_rng(4), one, 3000, reversal=True)
+    rec = input_records(one, s)
+    lines = ["TABLE " + " ".join(f"{x:08x}" for x in v1)] + ["S " + " ".join(map(str, r)) for r in rec.tolist()]
+    out = run_text(c_exe, lines)
+    assert out[0] == f"T {N_FIXED_V1 + 1} {v1[-1]:08x}" and N_FIXED == 72
+    assert out[1:] == run_text(c_exe, [table_line(one)] + lines[1:])[1:]

@@ -52,9 +52,9 @@ def test_three_exports_hold_the_same_words(quantized, table_json, tmp_path, caps
     assert all(len(line) == 8 for line in memh.splitlines()) and len(memh.splitlines()) == len(words)
     assert [int(w, 16) for w in js["words"]] == words
     assert f"#define HDRG_TABLE_CRC32 0x{crc:08x}u" in header
-    assert f"#define HDRG_TABLE_MAGIC 0x{MAGIC:08x}u" in header and "#define HDRG_TABLE_LAYOUT_VERSION 1u" in header
+    assert f"#define HDRG_TABLE_MAGIC 0x{MAGIC:08x}u" in header and "#define HDRG_TABLE_LAYOUT_VERSION 2u" in header
     assert f"#define HDRG_TABLE_WORDS {len(words)}u" in header
-    assert js["crc32"] == f"0x{crc:08x}" and js["layout_version"] == 1
+    assert js["crc32"] == f"0x{crc:08x}" and js["layout_version"] == 2
     # each decodes to the same table through the readers
     assert read_table(tmp_path / "out" / "hdrg_table.json") == quantized.table
     assert read_table(tmp_path / "out" / "hdrg_table.memh") == quantized.table
@@ -179,7 +179,7 @@ def test_every_export_loads_in_c(quantized, table_json, tmp_path):
              "json": [int(w, 16) for w in json.loads((out / "hdrg_table.json").read_text())["words"]],
              "mem": [int(w, 16) for w in (out / "hdrg_table.memh").read_text().split()]}
     resp = run_text(drv, ["TABLE " + " ".join(f"{w:08x}" for w in ws) for ws in lists.values()])
-    assert resp == [f"T 48 {quantized.table.crc:08x}"] * 3
+    assert resp == [f"T 73 {quantized.table.crc:08x}"] * 3
 
 
 def test_header_for_another_model(tmp_path):
@@ -189,3 +189,31 @@ def test_header_for_another_model(tmp_path):
     for k in range(17):
         assert f" m_{k} " in text
     assert "k1 (u) = m 2^-" in text and "(float -4)" in text
+
+
+def test_two_bank_exports(tmp_path):
+    """A regress_first model: the three exports hold the v2 words (order 1, two banks), the header
+    comments bank 2's coefficients with their float originals, the JSON carries both banks'
+    quantized coefficients, and every export reads back to the same table; a version-1 .memh
+    (one bank) exports as version 2 with the same fields."""
+    model = make_model(combiner="none", order="regress_first")
+    q = quantize(model, n_random=10)
+    q.to_json(tmp_path / "t.json")
+    cli([str(tmp_path / "t.json"), "-o", str(tmp_path / "exp")])
+    text = (tmp_path / "exp" / "hdrg_table.h").read_text()
+    assert "Order 1 (regress_first), 2 coefficient bank(s), combiner 3 (none)" in text
+    assert " m2_1 " in text and "(bank 2) (float 4)" in text          # k1 of bank 2 is -(-4)
+    js = json.loads((tmp_path / "exp" / "hdrg_table.json").read_text())
+    assert js["fields"]["order"] == 1 and js["fields"]["n_banks"] == 2 and js["coef_mode2_dph"][1] == 4.0
+    assert js["coef_quantized_mode2_dph"][1] == pytest.approx(4.0, abs=1e-6)
+    t = read_table(tmp_path / "exp" / "hdrg_table.json")
+    assert t == q.table == read_table(tmp_path / "exp" / "hdrg_table.memh")
+    assert ex.decode_c_header(text) == t.to_words()
+    from firmware_ref.table import N_FIXED, N_FIXED_V1, crc32_words
+    one = quantize(make_model(), n_random=10).table
+    w = one.to_words()
+    v1 = [w[0], 1, N_FIXED_V1 + 1] + w[3:N_FIXED_V1]
+    (tmp_path / "old.memh").write_text("".join(f"{x:08x}\n" for x in v1 + [crc32_words(v1)]))
+    cli([str(tmp_path / "old.memh"), "--format", "mem", "-o", str(tmp_path / "exp1")])
+    words = [int(x, 16) for x in (tmp_path / "exp1" / "hdrg_table.memh").read_text().split()]
+    assert words[1] == 2 and len(words) == N_FIXED + 1 and Table.from_words(words) == one

@@ -211,8 +211,8 @@ def test_aux_table_words_roundtrip_and_validate():
     q = quantize(aux_model(), n_random=10)
     t = q.table
     words = t.to_words()
-    assert words[1] == 1 and words[FIELD_INDEX["aux_gen"]] == 1
-    assert len(words) == 48 + 2 + 1 + 6 * F.AUX_TERM_WORDS and words[2] == len(words)
+    assert words[1] == 2 and words[FIELD_INDEX["aux_gen"]] == 1
+    assert len(words) == 73 + 2 + 1 + 6 * F.AUX_TERM_WORDS and words[2] == len(words)
     assert Table.from_words(words) == t == Table.from_bytes(t.to_bytes()) == Table.from_memh(t.to_memh())
     aux = t.aux()
     assert aux.fracs == (aux_channel_fracs(q.model.config.aux)[0],) and encode_aux(aux.fracs, aux.terms) == t.aux_params
@@ -351,8 +351,9 @@ def test_acceptance_effect_found_exported_quantized_and_run_in_fixed_point(tmp_p
     hold = world(2, und, **sim_kw)
     rep, final = diagnose(train, [hold], plots=False, **diag_kw)
     assert rep["iterations"][0]["effect"] == "turn_on"
-    # the starting model of the loop (diagnose's defaults: trend combiner, settle 0, all 16 terms)
-    cfg0 = hc.fit_config_from_logs(train, reversal=ReversalConfig("trend", settle_s=0.0))
+    # the starting model of the loop (diagnose's defaults: trend combiner, settle 0, all 16 terms;
+    # diagnose passes the reversal as a dict without "order", which reads as combine_first)
+    cfg0 = hc.fit_config_from_logs(train, reversal=ReversalConfig("trend", settle_s=0.0, order="combine_first"))
     base, _ = fit_logs(train, cfg0, "all", drop_unidentifiable=True)
     before_float = _stats_one(*_run(hc.compensate(hold, base), hold))
     assert before_float == pytest.approx({k: rep["baseline"]["holdout"][k] for k in STAT_KEYS}, rel=1e-12)

@@ -234,3 +234,86 @@ def test_evaluator_numba_equals_vectorized_1e6():
         z = rng.integers(-F.ONE - 5, F.ONE + 6, n)
         u[:343], v[:343], z[:343] = (a.ravel() for a in np.meshgrid(g, g, g, indexing="ij"))
         np.testing.assert_array_equal(evaluate_words(table, u, v, z), vec_evaluate(table, u, v, z))
+
+
+# -- regress, then reverse (order 1: two banks, the residual combiner) -----------------------------------
+
+def _rtr_table(rng, estimator, combiner, **kw):
+    from firmware_ref.vectors import two_bank_table
+    t1 = quantize(random_model(rng, reversal=True, estimator=estimator), n_random=10, **kw).table
+    t2 = quantize(random_model(rng, reversal=True, estimator=estimator), n_random=10, **kw).table
+    return two_bank_table(t1, t2, combiner)
+
+
+@pytest.mark.parametrize("seed,combiner", [(s, c) for s in range(4) for c in (1, 2, 3)])
+def test_reference_equals_numba_regress_first(seed, combiner):
+    """Two-bank tables with every residual combiner (pair, trend, none) on random streams with
+    restarts, logged and self-timed: reference == numba, and both banks are evaluated."""
+    rng = np.random.default_rng(900 + seed)
+    est = ("diff", "diffn", "lsq", "iir")[seed]
+    table = _rtr_table(rng, est, combiner, exchange_s=3.0, dwell_s=7.0)
+    s = random_stream(rng, table, 2000, reversal=True)
+    ref, got = both(table, s)
+    assert_same(ref, got, f"regress_first seed {seed}")
+    assert ref["valid"].any() and (ref["flags"] & F.FLAG_STALE).any()
+    # bank select: B of mode-2 samples is bank 2's, of the others bank 1's
+    m2 = s["mode"] == 2
+    for bank, sel in ((1, ~m2), (2, m2)):
+        b = evaluate_words(table, ref["u"][sel], ref["v"][sel], ref["z"][sel], bank=bank)
+        assert np.array_equal(ref["b"][sel], b)
+    if seed % 2:
+        ref, got = both(table, s, self_timed=True)
+        assert_same(ref, got, f"regress_first seed {seed}, self-timed")
+
+
+@pytest.mark.parametrize("combiner", [1, 2, 3])
+def test_reference_equals_numba_regress_first_corners(combiner):
+    """Corner streams (+-2^31 rate words, clamped proxies, restarts) on a two-bank table whose
+    bank 2 is large: the residual word saturates (flag 128) and both paths agree."""
+    from firmware_ref.vectors import two_bank_table
+    coef = np.array([3e3, -2e3, 1e3, -5e2, 7e2, -3e2, 1e2, 5e2, -4e2, 3e2, -2e2, 1e2, -9e1, 8e1, -7e1, 6e1, -5e1])
+    base = dict(estimator="diffn", n=5, combiner="pair", settle_s=2.0, max_stale_s=25.0)
+    t1 = quantize(make_model(coef=coef, **base), n_random=10).table
+    big = np.zeros(17)
+    big[0] = 2.0 ** 21 * 0.9
+    t2 = quantize(make_model(coef=big, **base), n_random=10).table
+    table = two_bank_table(t1, t2, combiner)
+    s = corner_stream(table, reversal=True)
+    ref, got = both(table, s)
+    assert_same(ref, got, "regress_first corners")
+    assert (ref["flags"] & F.FLAG_SAT).any() and ref["valid"].any()
+
+
+def test_regress_first_outputs_are_the_residual_combination():
+    """Independent check of the order-1 semantics on a warm, settled stream: none gives OUT =
+    RHU(s R 2^11 - B, 11); pair gives OUT = RHU(r 2^10 + W_r[o], 11) with W_r[o] the rounded mean
+    of the other mode's last window of r (computed here in numpy from the reference's B)."""
+    from firmware_ref.vectors import two_bank_table
+    rng = np.random.default_rng(5)
+    from dataclasses import replace
+    t1 = replace(quantize(random_model(rng, reversal=True, estimator="diff"), n_random=10).table, settle_n=0,
+                 max_stale_n=10 ** 6)
+    t2 = quantize(random_model(rng, reversal=True, estimator="diff"), n_random=10).table
+    n, w = 400, 20
+    mode = np.where((np.arange(n) // w) % 2 == 0, 1, 2)
+    s = {"p": np.full(n, t1.p_ref) + rng.integers(-3000, 3000, n), "r": rng.integers(-2 ** 20, 2 ** 20, n),
+         "mode": mode, "restart": np.r_[1, np.zeros(n - 1)].astype(np.uint8), "z": rng.integers(-2 ** 30, 2 ** 30, n)}
+    sign = np.where(mode == 2, -1, 1)
+    for comb in (3, 1):
+        table = two_bank_table(t1, t2, comb)
+        ref, got = both(table, s)
+        assert_same(ref, got, f"combiner {comb}")
+        r = ((sign * s["r"]) * 2 ** 11 - ref["b"] + 1024) >> 11
+        ok = ref["valid"].astype(bool)
+        if comb == 3:
+            assert ok[t1.rate_warmup:].all()
+            assert np.array_equal(ref["out"][ok], r[ok])
+        else:
+            exp = np.zeros(n, np.int64)
+            for i in np.flatnonzero(ok):
+                k = i // w                          # the window of the other mode just before
+                lo, hi = (k - 1) * w, k * w
+                used = np.arange(lo, hi)[np.arange(lo, hi) >= t1.rate_warmup]
+                mean = (int(r[used].sum()) * 2 ** 10 * 2 + len(used)) // (2 * len(used))
+                exp[i] = ((int(r[i]) << 10) + mean + 1024) >> 11
+            assert ok.sum() > n // 2 and np.array_equal(ref["out"][ok], exp[ok])

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from firmware_ref import formats as F
 from firmware_ref.evaluator import evaluate
 from firmware_ref.kernel import evaluate_words
-from firmware_ref.table import MAGIC, N_FIXED, Table, TableError
+from firmware_ref.table import FIELD_INDEX, MAGIC, N_FIXED, Table, TableError
 from firmware_ref.terms import K_AUX, N_TERMS, TERM_POWERS
 from firmware_ref.vectors import make_model
 from host_tools.quantize import QuantizeError, configure_cli, quantize, read_table, run_cli
@@ -148,7 +148,7 @@ def table():
 
 def test_table_roundtrips(table):
     words = table.to_words()
-    assert words[0] == MAGIC and words[1] == 1 and words[2] == len(words) == N_FIXED + 1
+    assert words[0] == MAGIC and words[1] == 2 and words[2] == len(words) == N_FIXED + 1 == 73
     assert Table.from_words(words) == table
     data = table.to_bytes()
     assert data[:4] == b"HDRG" and len(data) == 4 * len(words)
@@ -162,7 +162,7 @@ def test_table_roundtrips(table):
 
 def test_table_readers_refuse_damage(table):
     words = table.to_words()
-    for i, bad, match in [(0, 0x12345678, "magic"), (1, 2, "version"), (2, 99, "length"), (30, words[30] ^ 1, "CRC")]:
+    for i, bad, match in [(0, 0x12345678, "magic"), (1, 3, "version"), (2, 99, "length"), (30, words[30] ^ 1, "CRC")]:
         w = list(words)
         w[i] = bad
         with pytest.raises(TableError, match=match):
@@ -177,6 +177,46 @@ def test_table_readers_refuse_damage(table):
         replace(table, e_acc=table.e_acc + 1, e_row=(table.e_acc,) + table.e_row[1:])
     with pytest.raises(TableError, match="g_v"):
         replace(table, g_v=1 << 31)
+
+
+def _v1_words(table):
+    """The version-1 words of a one-bank order-0 table (the 47-word fixed part, CRC last)."""
+    from firmware_ref.table import N_FIXED_V1, crc32_words
+    w = table.to_words()
+    v1 = [w[0], 1, N_FIXED_V1 + len(table.aux_params) + 1] + w[3:N_FIXED_V1] + w[N_FIXED:-1]
+    return v1 + [crc32_words(v1)]
+
+
+def test_version_1_table_reads_as_combine_first_one_bank(table):
+    v1 = _v1_words(table)
+    t = Table.from_words(v1, "old.memh")
+    assert t == table and t.order == 0 and t.n_banks == 1
+    assert t.to_words()[1] == 2                         # written back as version 2
+    bad = list(v1)
+    bad[2] += 25                                        # a version-1 length that only v2 would fit
+    with pytest.raises(TableError, match="length"):
+        Table.from_words(bad)
+
+
+def test_two_bank_table_fields_and_refusals(table):
+    from dataclasses import replace
+    from firmware_ref.vectors import two_bank_table
+    other = replace(table, mant=tuple(-m for m in table.mant))
+    t2 = two_bank_table(table, other, 3)
+    words = t2.to_words()
+    assert words[FIELD_INDEX["order"]] == 1 and words[FIELD_INDEX["n_banks"]] == 2 and words[FIELD_INDEX["combiner"]] == 3
+    assert [w - (1 << 32) if w >= 1 << 31 else w for w in words[FIELD_INDEX["m2_0"]:FIELD_INDEX["m2_0"] + N_TERMS]] \
+        == list(other.mant)
+    assert Table.from_words(words) == t2 and t2.bank(2).mant == other.mant and t2.bank_of_mode(2) == 2
+    assert t2.bank_of_mode(1) == 1 and t2.bank_of_mode(3) == 1 and table.bank_of_mode(2) == 1
+    for kw, match in [(dict(combiner=3), "none"), (dict(order=1), "n_banks"), (dict(n_banks=2), "n_banks"),
+                      (dict(mant2=(1,) + (0,) * 16), "bank 2 words")]:
+        with pytest.raises(TableError, match=match):
+            replace(table, **kw)
+    with pytest.raises(TableError, match="ftr"):
+        replace(t2, combiner=0)
+    with pytest.raises(TableError, match="bank 2: Horner"):
+        replace(t2, mant2=((1 << 31) - 1,) * N_TERMS)
 
 
 def test_table_json_and_cli(tmp_path, capsys):
@@ -222,3 +262,36 @@ def test_hdrg_quantize_through_the_cli_registry(tmp_path, capsys, monkeypatch):
     capsys.readouterr()
     assert cli.main(["quantize", str(tmp_path / "big.json"), "-o", str(tmp_path / "x.json")]) == 2
     assert "cannot quantize" in capsys.readouterr().err and not (tmp_path / "x.json").exists()
+
+
+# -- two banks (regress_first) -----------------------------------------------------------------------------
+
+def test_two_banks_per_bank_exponents_bounds_and_refusals(tmp_path, capsys):
+    """Each bank gets its own exponents (a bank 1000x smaller keeps ~10 more bits), its own
+    interval bound, and the measured |B_fixed - B_golden| of both banks is within the bound; the
+    residual-path bound grows none < pair < trend; a bank 2 that cannot be held is refused naming
+    bank 2."""
+    coef = np.array([1.5, -4.0, 0.3, 1.1, -1.2, -0.2, 0.9, 0.0, 0.05, 1.8, -0.1, 1.9, 0.7, 0.7, -0.02, -1.1, 0.9])
+    outs = {}
+    for comb in ("none", "pair", "trend"):
+        q = quantize(make_model(combiner=comb, order="regress_first", coef=coef, coef2=coef * 1e-3), n_random=500)
+        t = q.table
+        assert (t.order, t.n_banks, t.combiner) == (1, 2, F.COMBINERS.index(comb))
+        assert all(e2 >= e1 + 9 for e1, e2 in zip(t.e_row, t.e_row2))
+        np.testing.assert_allclose(q.coef_quantized(2), coef * 1e-3, atol=2.0 ** -(min(t.e_row2) - 1))
+        b = q.report["bound_dph"]
+        assert len(b["banks"]) == 2 and q.report["measured_dph"]["random"] <= b["bias_B"]
+        assert len(q.report["interval_bounds"]["banks"]) == 2 and "residual" in q.report["interval_bounds"]
+        outs[comb] = b["out"]
+        d = q.to_dict()
+        assert d["coef_mode2_dph"] == list(coef * 1e-3) and len(d["coef_quantized_mode2_dph"]) == N_TERMS
+    assert outs["none"] < outs["pair"] < outs["trend"] and outs["pair"] < 0.002
+    big = coef.copy()
+    big[0] = 3e9
+    with pytest.raises(QuantizeError, match="bank 2"):
+        quantize(make_model(combiner="pair", order="regress_first", coef=coef, coef2=big))
+    make_model(combiner="trend", order="regress_first").to_json(tmp_path / "m.json")
+    parser = argparse.ArgumentParser()
+    configure_cli(parser)
+    assert run_cli(parser.parse_args([str(tmp_path / "m.json"), "-o", str(tmp_path / "t.json")])) == 0
+    assert "bank 2 rows" in capsys.readouterr().out and read_table(tmp_path / "t.json").n_banks == 2

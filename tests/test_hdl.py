@@ -15,8 +15,8 @@ pytestmark = pytest.mark.skipif(IVERILOG is None or VVP is None,
                                 reason="Icarus Verilog (iverilog, vvp) not installed: the HDL testbench cannot run")
 HDL = V.DEFAULT_DIR / "hdl"
 SOURCES = (HDL / "tb_evaluator.v", HDL / "hdrg_evaluator.v")
-# the record layout the testbench slices (case[183:168] u v z b[71:8] zclamped[7:0])
-TB_RECORD = [("case", 16), ("u", 32), ("v", 32), ("z", 32), ("b", 64), ("zclamped", 8)]
+# the record layout the testbench slices (case[191:176] u v z bank[79:72] b[71:8] zclamped[7:0])
+TB_RECORD = [("case", 16), ("u", 32), ("v", 32), ("z", 32), ("bank", 8), ("b", 64), ("zclamped", 8)]
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +43,7 @@ def run_testbench(tmp_path, meta, defines=()):
 
 def test_record_layout_is_the_testbenchs(evaluator_meta):
     assert [(f["name"], f["bits"]) for f in evaluator_meta["mem_record"]] == TB_RECORD
-    assert evaluator_meta["table_words"] == 48
+    assert evaluator_meta["table_words"] == 73
 
 
 def test_rtl_evaluator_matches_every_vector(tmp_path, evaluator_meta):
@@ -56,3 +56,11 @@ def test_broken_rtl_evaluator_is_caught(tmp_path, evaluator_meta):
     n, bad, out = run_testbench(tmp_path, evaluator_meta, defines=("HDRG_BREAK_ROUNDING",))
     assert n == evaluator_meta["rows"]
     assert bad > n // 10 and "MISMATCH vector" in out
+
+
+def test_rtl_bank_select_is_checked(tmp_path, evaluator_meta):
+    """The evaluator set has bank-2 vectors, and an RTL that ignores bank 2 fails on them."""
+    banks = [c for c in evaluator_meta["cases"] if "two_bank" in c["name"]]
+    assert len(banks) >= 6
+    n, bad, out = run_testbench(tmp_path, evaluator_meta, defines=("HDRG_BREAK_BANK",))
+    assert n == evaluator_meta["rows"] and bad > 100 and ", bank 2)" in out

@@ -18,8 +18,8 @@ def std100(y, t, valid):
     return at_tau(bias_metrics(y, t, valid, taus=(100.0,)), 100.0)["stability_dph"]
 
 
-def heldout(train, test, combiner=None, terms="all"):
-    cfg = fit_config_from_logs([train], reversal={"combiner": combiner} if combiner else None)
+def heldout(train, test, combiner=None, terms="all", order="combine_first"):
+    cfg = fit_config_from_logs([train], reversal={"combiner": combiner, "order": order} if combiner else None)
     model, _ = fit_logs([train], cfg, terms)
     pr = prepare(test, model)
     out = compensate(test, model)
@@ -63,6 +63,14 @@ def test_trend_combiner_beats_the_papers_pairing(runs):
     assert trend_after < 0.6 * pair_after, (trend_after, pair_after)
 
 
+def test_regress_first_pair_beats_combine_first(runs):
+    """The new default (regress, then pair the residuals) against the old one (combine with
+    trend, then regress), held out on another seed."""
+    _, old = heldout(runs["mr4"], runs["mr4b"], "trend")
+    _, new = heldout(runs["mr4"], runs["mr4b"], "pair", order="regress_first")
+    assert new < 0.75 * old, (new, old)
+
+
 def test_fit_compensate_metrics_cli(tmp_path, runs, capsys):
     a, b = tmp_path / "a.csv", tmp_path / "b.npz"
     runlog.write(runs["mr4"], a)
@@ -71,7 +79,9 @@ def test_fit_compensate_metrics_cli(tmp_path, runs, capsys):
                  "--rate-n", "15"]) == 0
     model = BiasModel.from_json(tmp_path / "m.json")
     assert model.config.reversal.combiner == "trend" and model.config.rate.estimator == "lsq"
-    assert model.terms == tuple(k for k in range(17) if k != 7)
+    # defaults (docs/REGRESS_THEN_REVERSE.md): regress_first with two banks, terms selected by CV
+    assert model.config.reversal.order == "regress_first" and model.coef_mode2 is not None
+    assert model.fit["cv"]["method"] == "forward-stepwise+prune" and 0 in model.terms
     assert main(["compensate", str(b), "--model", str(tmp_path / "m.json"), "-o", str(tmp_path / "c.csv")]) == 0
     out = runlog.read(tmp_path / "c.csv")
     assert out.metadata["compensated"] == "yes"
@@ -93,11 +103,11 @@ def test_rank_deficient_design_is_refused_then_dropped(tmp_path, capsys):
     path = tmp_path / "ramp.csv"
     runlog.write(runlog.RunLog.from_arrays(t_s=t, freq_hz=freq, rate_dph=rate), path)
     capsys.readouterr()
-    code = main(["fit", str(path), "-o", str(tmp_path / "m.json")])
+    code = main(["fit", str(path), "-o", str(tmp_path / "m.json"), "--terms", "all"])
     err = capsys.readouterr().err
     assert code == 2 and "collinear" in err and "k4 (v) is collinear with k0 (1)" in err, err
     assert not (tmp_path / "m.json").exists()
-    assert main(["fit", str(path), "-o", str(tmp_path / "m.json"), "--drop-unidentifiable"]) == 0
+    assert main(["fit", str(path), "-o", str(tmp_path / "m.json"), "--terms", "all", "--drop-unidentifiable"]) == 0
     assert "dropped as unidentifiable" in capsys.readouterr().out
     model = BiasModel.from_json(tmp_path / "m.json")
     assert model.terms == (0, 1, 2, 3)
@@ -106,7 +116,7 @@ def test_rank_deficient_design_is_refused_then_dropped(tmp_path, capsys):
 
 
 def test_measured_data_is_honest_about_what_it_cannot_identify(tmp_path, measured_x, capsys):
-    assert main(["fit", str(measured_x), "-o", str(tmp_path / "all.json")]) == 0
+    assert main(["fit", str(measured_x), "-o", str(tmp_path / "all.json"), "--terms", "all"]) == 0
     out = capsys.readouterr().out
     assert "do not identify" in out and "k4" in out
     model = BiasModel.from_json(tmp_path / "all.json")

@@ -167,11 +167,38 @@ def test_sets_cover_what_they_claim(manifest):
     assert meta["table_words"] is None and len({len(e["words"]) for e in meta["tables"]}) > 2
 
 
+def test_sets_cover_regress_first(manifest):
+    """regress_first (table order 1) in the pipeline sets: two-bank tables with every residual
+    combiner (pair, trend, none) in the sequencer and e2e sets, mode-2 samples whose B comes from
+    bank 2, valid outputs, a saturated residual word; the evaluator set asks for bank 2."""
+    for name in ("sequencer", "e2e"):
+        vs = V._load_set(VECTORS, name, manifest["sets"][name])
+        c = vs.columns
+        combs = set()
+        for case in vs.cases:
+            t = vs.tables[case["table"]]
+            if t.order != 1:
+                continue
+            assert t.n_banks == 2 and t.mant2 != t.mant
+            combs.add(F.COMBINERS[t.combiner])
+            lo, hi = case["rows"]
+            m = c["mode"][lo:hi]
+            assert (m == 2).any() and (m == 1).any() and c["valid"][lo:hi].any(), case["name"]
+        assert combs == {"pair", "trend", "none"}, (name, combs)
+    seq = V._load_set(VECTORS, "sequencer", manifest["sets"]["sequencer"])
+    case = next(c for c in seq.cases if c["name"] == "rtr_residual_saturation_log")
+    lo, hi = case["rows"]
+    assert (seq.columns["flags"][lo:hi] & F.FLAG_SAT).any()
+    ev = V._load_set(VECTORS, "evaluator", manifest["sets"]["evaluator"]).columns
+    assert (ev["bank"] == 2).sum() > 500 and set(ev["bank"].tolist()) == {1, 2}
+
+
 def test_pipeline_vectors_equal_python_reference_on_whole_cases(manifest):
     """Independent of the numba kernel: whole short cases replayed by the per-sample reference."""
     for set_name, names in (("sequencer", ("power_on_timed", "dwell1_timed", "stale_edge_log", "slope_clamp_log",
-                                           "bias_saturation_log", "corner_lsq_ftr")),
-                            ("e2e", ("mode_reversal",)),
+                                           "bias_saturation_log", "corner_lsq_ftr", "rtr_none_timed",
+                                           "rtr_residual_saturation_log", "rtr_warmup_log", "rtr_stale_edge_log")),
+                            ("e2e", ("mode_reversal", "regress_first_pair")),
                             ("aux", ("single_decay_exchange_sign", "single_input_temp_long_lag", "osc_k_edges",
                                      "weight_sum_clamp", "coefficient_extremes", "random_5", "sim_aux"))):
         vs = V._load_set(VECTORS, set_name, manifest["sets"][set_name])

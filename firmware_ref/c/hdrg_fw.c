@@ -162,7 +162,9 @@ static const char *const WORD_NAMES[HDRG_N_FIXED + 1u] = {
     "rate_n", "rate_shift", "rate_warmup", "s_bits", "g_v", "sh_v", "fs_q16", "combiner",
     "settle_n", "max_stale_n", "power_on_n", "exchange_n", "dwell_n", "e_0", "e_1", "e_2", "e_3",
     "e_7", "e_acc", "m_0", "m_1", "m_2", "m_3", "m_4", "m_5", "m_6", "m_7", "m_8", "m_9", "m_10",
-    "m_11", "m_12", "m_13", "m_14", "m_15", "m_16", "aux_gen", "aux_nparams", "crc32"
+    "m_11", "m_12", "m_13", "m_14", "m_15", "m_16", "aux_gen", "aux_nparams", "order", "n_banks",
+    "e2_0", "e2_1", "e2_2", "e2_3", "e2_7", "e2_acc", "m2_0", "m2_1", "m2_2", "m2_3", "m2_4", "m2_5",
+    "m2_6", "m2_7", "m2_8", "m2_9", "m2_10", "m2_11", "m2_12", "m2_13", "m2_14", "m2_15", "m2_16", "crc32"
 };
 
 const char *hdrg_word_name(unsigned index)
@@ -226,7 +228,11 @@ static int check_fields(const hdrg_table_t *t, unsigned *bad)
     NEED(t->s_bits >= 1u && t->s_bits <= (unsigned)HDRG_S_BITS_MAX, HDRG_W_S_BITS);
     NEED(t->g_v < P2(62u - t->s_bits), HDRG_W_G_V);
     NEED(t->fs_q16 > 0u, HDRG_W_FS_Q16);
-    NEED(t->combiner <= 2u, HDRG_W_COMBINER);
+    NEED(t->combiner <= 3u, HDRG_W_COMBINER);
+    NEED(t->order <= 1u, HDRG_W_ORDER);
+    NEED(t->n_banks == 1u + t->order, HDRG_W_N_BANKS);
+    NEED(t->combiner != 3u || t->order == 1u, HDRG_W_COMBINER);
+    NEED(t->combiner != 0u || t->order == 0u, HDRG_W_COMBINER);
     NEED(t->settle_n <= HDRG_TIMER_MAX, HDRG_W_SETTLE_N);
     NEED(t->max_stale_n <= HDRG_TIMER_MAX, HDRG_W_MAX_STALE_N);
     NEED(t->power_on_n <= HDRG_TIMER_MAX, HDRG_W_POWER_ON_N);
@@ -243,6 +249,27 @@ static int check_fields(const hdrg_table_t *t, unsigned *bad)
     for (g = 0; g < HDRG_N_TERMS; g++) {
         NEED(t->mant[g] != INT32_MIN, HDRG_W_M_0 + g);
     }
+    if (t->n_banks == 1u) {                         /* bank 2 words all 0 */
+        for (g = 0; g < 4u; g++) {
+            NEED(t->e_row2[g] == 0u, HDRG_W_E2_0 + g);
+        }
+        NEED(t->e_7_2 == 0u, HDRG_W_E2_7);
+        NEED(t->e_acc2 == 0u, HDRG_W_E2_ACC);
+        for (g = 0; g < HDRG_N_TERMS; g++) {
+            NEED(t->mant2[g] == 0, HDRG_W_M2_0 + g);
+        }
+    } else {
+        for (g = 0; g < 5u; g++) {
+            uint32_t e = g < 4u ? t->e_row2[g] : t->e_7_2;
+            unsigned w = g < 4u ? HDRG_W_E2_0 + g : HDRG_W_E2_7;
+            NEED(e <= (unsigned)HDRG_EXP_MAX, w);
+            NEED(e >= t->e_acc2 && e - t->e_acc2 <= (unsigned)HDRG_ALIGN_MAX, w);
+        }
+        NEED(t->e_acc2 <= (unsigned)HDRG_EXP_MAX, HDRG_W_E2_ACC);
+        for (g = 0; g < HDRG_N_TERMS; g++) {
+            NEED(t->mant2[g] != INT32_MIN, HDRG_W_M2_0 + g);
+        }
+    }
     NEED(t->aux_gen <= 1u, HDRG_W_AUX_GEN);
     NEED(t->aux_gen == 1u || t->aux_nparams == 0u, HDRG_W_AUX_NPARAMS);
     return HDRG_OK;
@@ -252,7 +279,7 @@ static int check_fields(const hdrg_table_t *t, unsigned *bad)
  * decoded into t->aux_*; a field outside its range gives HDRG_ERR_FIELD with its word index. */
 static int parse_aux(hdrg_table_t *t, const uint32_t *p, unsigned *bad)
 {
-    const unsigned base = HDRG_N_FIXED;
+    const unsigned base = t->n_fixed;
     uint32_t nt, nc, c, j, i;
     int64_t wsum = 0;
     if (t->aux_gen == 0u) {
@@ -343,36 +370,48 @@ static int parse_aux(hdrg_table_t *t, const uint32_t *p, unsigned *bad)
  * <= 2^31 - 1 and the aligned row bounds plus the k7 bound sum to <= 2^31 - 1.  With |u|, |v|,
  * |z| <= 2^30 (|RHU(x w, 30)| <= |x|) every Horner accumulator then stays within 2^31 - 1 and
  * every product below 2^61: this is what makes the evaluator free of overflow. */
-static int check_horner(const hdrg_table_t *t, unsigned *bad)
+static int check_horner_bank(const uint32_t *e_row, uint32_t e_7, uint32_t e_acc, const int32_t *mant,
+                             unsigned w_e0, unsigned w_eacc, unsigned *bad)
 {
     int64_t total = 0;
     unsigned i, j;
     for (i = 0; i < 4u; i++) {
         int64_t a = 0;
         for (j = 0; j < 4u; j++) {
-            a += abs64(t->mant[POLY[i][j]]);
+            a += abs64(mant[POLY[i][j]]);
         }
         if (a > HDRG_ACC_LIMIT) {
-            *bad = HDRG_W_E_0 + i;
+            *bad = w_e0 + i;
             return HDRG_ERR_HORNER;
         }
-        total += hdrg_rhu(a, t->e_row[i] - t->e_acc);
+        total += hdrg_rhu(a, e_row[i] - e_acc);
     }
-    total += hdrg_rhu(abs64(t->mant[K_AUX]) * HDRG_ONE, HDRG_Q + t->e_7 - t->e_acc);
+    total += hdrg_rhu(abs64(mant[K_AUX]) * HDRG_ONE, HDRG_Q + e_7 - e_acc);
     if (total > HDRG_ACC_LIMIT) {
-        *bad = HDRG_W_E_ACC;
+        *bad = w_eacc;
         return HDRG_ERR_HORNER;
     }
     return HDRG_OK;
+}
+
+/* both banks (each with its own exponents) */
+static int check_horner(const hdrg_table_t *t, unsigned *bad)
+{
+    int err = check_horner_bank(t->e_row, t->e_7, t->e_acc, t->mant, HDRG_W_E_0, HDRG_W_E_ACC, bad);
+    if (err == HDRG_OK && t->n_banks == 2u) {
+        err = check_horner_bank(t->e_row2, t->e_7_2, t->e_acc2, t->mant2, HDRG_W_E2_0, HDRG_W_E2_ACC, bad);
+    }
+    return err;
 }
 
 int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, unsigned *bad_word)
 {
     unsigned dummy = 0, i;
     unsigned *bad = bad_word != NULL ? bad_word : &dummy;
+    unsigned n_fixed;
     int err;
     *bad = 0;
-    if (n_words < HDRG_N_FIXED + 1u) {
+    if (n_words < HDRG_N_FIXED_V1 + 1u) {
         *bad = HDRG_W_LENGTH;
         return HDRG_ERR_LENGTH;
     }
@@ -380,9 +419,14 @@ int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, uns
         *bad = HDRG_W_MAGIC;
         return HDRG_ERR_MAGIC;
     }
-    if (words[HDRG_W_VERSION] != HDRG_LAYOUT_VERSION) {
+    if (words[HDRG_W_VERSION] != HDRG_LAYOUT_VERSION && words[HDRG_W_VERSION] != 1u) {
         *bad = HDRG_W_VERSION;
         return HDRG_ERR_VERSION;
+    }
+    n_fixed = words[HDRG_W_VERSION] == 1u ? HDRG_N_FIXED_V1 : HDRG_N_FIXED;
+    if (n_words < n_fixed + 1u) {
+        *bad = HDRG_W_LENGTH;
+        return HDRG_ERR_LENGTH;
     }
     if (words[HDRG_W_LENGTH] != n_words) {
         *bad = HDRG_W_LENGTH;
@@ -422,7 +466,31 @@ int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, uns
     }
     t->aux_gen = words[HDRG_W_AUX_GEN];
     t->aux_nparams = words[HDRG_W_AUX_NPARAMS];
-    if (I64(HDRG_N_FIXED) + I64(t->aux_nparams) + 1 != I64(n_words)) {
+    t->n_fixed = n_fixed;
+    if (n_fixed == HDRG_N_FIXED) {
+        t->order = words[HDRG_W_ORDER];
+        t->n_banks = words[HDRG_W_N_BANKS];
+        for (i = 0; i < 4u; i++) {
+            t->e_row2[i] = words[HDRG_W_E2_0 + i];
+        }
+        t->e_7_2 = words[HDRG_W_E2_7];
+        t->e_acc2 = words[HDRG_W_E2_ACC];
+        for (i = 0; i < HDRG_N_TERMS; i++) {
+            t->mant2[i] = (int32_t)s32(words[HDRG_W_M2_0 + i]);  /* INT32_MIN is refused by check_fields */
+        }
+    } else {                                        /* version 1: combine_first, one bank */
+        t->order = 0;
+        t->n_banks = 1;
+        for (i = 0; i < 4u; i++) {
+            t->e_row2[i] = 0;
+        }
+        t->e_7_2 = 0;
+        t->e_acc2 = 0;
+        for (i = 0; i < HDRG_N_TERMS; i++) {
+            t->mant2[i] = 0;
+        }
+    }
+    if (I64(n_fixed) + I64(t->aux_nparams) + 1 != I64(n_words)) {
         *bad = HDRG_W_AUX_NPARAMS;
         return HDRG_ERR_LENGTH;
     }
@@ -430,7 +498,7 @@ int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, uns
     t->crc = words[n_words - 1u];
     err = check_fields(t, bad);
     if (err == HDRG_OK) {
-        err = parse_aux(t, words + HDRG_N_FIXED, bad);
+        err = parse_aux(t, words + n_fixed, bad);
     }
     if (err != HDRG_OK) {
         return err;
@@ -617,8 +685,9 @@ static int32_t rate_step(hdrg_state_t *st, uint32_t pw, int restart, int64_t *s_
     return (int32_t)v;
 }
 
-/* sequencer.Combiner.step: returns cvalid, sets st->y_hold, *sat */
-static int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, int *sat)
+/* sequencer.Combiner.step: returns cvalid, sets st->y_hold, *sat; b (the sample's B) and warm
+ * are read by order 1 (the residual r = c - B) only */
+static int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, int64_t b, int warm, int *sat)
 {
     const hdrg_table_t *t = &st->t;
     unsigned cur, o;
@@ -665,6 +734,25 @@ static int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, in
     if (cur != 0u) {
         int64_t c = cur == 1u ? I64(r) : -I64(r);
         if (st->pos >= t->settle_n) {
+            if (t->order == 1u) {
+                int cs = 0;
+                if (warm) {
+                    return 0;                       /* not used */
+                }
+                /* r = symsat32(RHU(c 2^11 - B, 11)): |c 2^11| < 2^42, |B| < 2^52 */
+                c = hdrg_sat_signed(hdrg_rhu(c * P2(HDRG_OUT_SHIFT) - b, HDRG_OUT_SHIFT), 32u, &cs);
+                *sat |= cs;
+                if (t->combiner == 3u) {            /* none: out = r */
+                    if (st->cnt < HDRG_COUNT_MAX) {
+                        st->acc += c;
+                        st->cnt += 1u;
+                    } else {
+                        *sat = 1;
+                    }
+                    st->y_hold = c * P2(HDRG_OUT_SHIFT);
+                    return 1;
+                }
+            }
             if (st->cnt < HDRG_COUNT_MAX) {
                 st->acc += c;                       /* |acc| <= 2^31 cnt < 2^62 */
                 st->cnt += 1u;
@@ -690,30 +778,39 @@ static int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, in
     return cvalid;
 }
 
-/* evaluator.evaluate */
-int64_t hdrg_evaluate(const hdrg_table_t *t, int32_t u, int32_t v, int32_t z, int *z_clamped)
+/* evaluator.evaluate (bank 2: mant2, e_row2, e_7_2, e_acc2) */
+int64_t hdrg_evaluate_bank(const hdrg_table_t *t, unsigned bank, int32_t u, int32_t v, int32_t z, int *z_clamped)
 {
     int64_t a[4], acc, zz;
     unsigned i;
-    int E = (int)t->e_acc;
+    int two = bank == 2u && t->n_banks == 2u;
+    const int32_t *m = two ? t->mant2 : t->mant;
+    const uint32_t *e_row = two ? t->e_row2 : t->e_row;
+    uint32_t e_7 = two ? t->e_7_2 : t->e_7, e_acc = two ? t->e_acc2 : t->e_acc;
+    int E = (int)e_acc;
     zz = hdrg_clamp(z, -HDRG_ONE, HDRG_ONE, z_clamped);
     for (i = 0; i < 4u; i++) {
         const uint8_t *c = POLY[3u - i];
-        int64_t p = t->mant[c[3]];
-        p = hdrg_mul_rhu(p, v, HDRG_Q) + t->mant[c[2]];
-        p = hdrg_mul_rhu(p, v, HDRG_Q) + t->mant[c[1]];
-        p = hdrg_mul_rhu(p, v, HDRG_Q) + t->mant[c[0]];
-        a[3u - i] = hdrg_rhu(p, t->e_row[3u - i] - t->e_acc);
+        int64_t p = m[c[3]];
+        p = hdrg_mul_rhu(p, v, HDRG_Q) + m[c[2]];
+        p = hdrg_mul_rhu(p, v, HDRG_Q) + m[c[1]];
+        p = hdrg_mul_rhu(p, v, HDRG_Q) + m[c[0]];
+        a[3u - i] = hdrg_rhu(p, e_row[3u - i] - e_acc);
     }
     acc = a[3];
     acc = hdrg_mul_rhu(acc, u, HDRG_Q) + a[2];
     acc = hdrg_mul_rhu(acc, u, HDRG_Q) + a[1];
     acc = hdrg_mul_rhu(acc, u, HDRG_Q) + a[0];
-    acc += hdrg_mul_rhu(t->mant[K_AUX], zz, HDRG_Q + t->e_7 - t->e_acc);
+    acc += hdrg_mul_rhu(m[K_AUX], zz, HDRG_Q + e_7 - e_acc);
     if (E >= HDRG_Y_FRAC) {
         return hdrg_rhu(acc, (unsigned)(E - HDRG_Y_FRAC));
     }
     return acc * P2(HDRG_Y_FRAC - E);               /* |acc| < 2^31: below 2^52 */
+}
+
+int64_t hdrg_evaluate(const hdrg_table_t *t, int32_t u, int32_t v, int32_t z, int *z_clamped)
+{
+    return hdrg_evaluate_bank(t, 1u, u, v, z, z_clamped);
 }
 
 /* aux.normalize: q = clamp(RHU(clamp(x - REF) G + OFF, SH), +-2^30) */
@@ -835,7 +932,6 @@ int hdrg_step_aux(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input
         state = mode == 0u ? HDRG_ST_FTR : mode == 1u ? HDRG_ST_MODE_1 : mode == 2u ? HDRG_ST_MODE_2
               : st->last_window == 1u ? HDRG_ST_EXCH_TO_2 : HDRG_ST_EXCH_TO_1;
     }
-    cvalid = comb_step(st, mode, in->r, restart, &sat);
     /* 2. proxy, 3. rate */
     pw = t->proxy_kind == 0u ? in->f : (uint32_t)in->t;   /* bit pattern, decoded by pword */
     u = proxy_u(t, pword(st, pw), &uc);
@@ -846,14 +942,17 @@ int hdrg_step_aux(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input
     z = t->aux_gen == 1u ? aux_step(st, in, ax, k, mode, restart || st->fresh, s, warm) : I64(in->z);
     st->fresh = 0;
     z = hdrg_clamp(z, -HDRG_ONE, HDRG_ONE, &zc);
-    /* 5. evaluator */
-    b = hdrg_evaluate(t, u, v, (int32_t)z, NULL);
+    /* 5. evaluator: bank 2 on mode-2 samples of a two-bank table */
+    b = hdrg_evaluate_bank(t, mode == 2u ? 2u : 1u, u, v, (int32_t)z, NULL);
+    /* 5b. combiner (order 1 reads B) */
+    cvalid = comb_step(st, mode, in->r, restart, b, warm, &sat);
     /* 6. compensate */
     valid = cvalid && !warm && mode != 3u;
     if (valid) {
         int s1 = 0, s2 = 0;
-        /* |y| < 2^47, |B| < 2^52 */
-        st->out_hold = (int32_t)hdrg_sat_signed(hdrg_rhu(st->y_hold - b, HDRG_OUT_SHIFT), 32u, &s1);
+        /* |y| < 2^47, |B| < 2^52; order 1: B is in y already */
+        st->out_hold = (int32_t)hdrg_sat_signed(hdrg_rhu(t->order == 0u ? st->y_hold - b : st->y_hold,
+                                                         HDRG_OUT_SHIFT), 32u, &s1);
         st->bias_hold = (int32_t)hdrg_sat_signed(hdrg_rhu(b, HDRG_OUT_SHIFT), 32u, &s2);
         sat = sat || s1 || s2;
     }

@@ -38,10 +38,12 @@
 #error "HDRG_N_HIST_MAX must be in 2..4096"
 #endif
 
-/* ---- table layout (version 1) ---------------------------------------------------------- */
+/* ---- table layout (version 2; version 1 is read as order 0 with one bank) --------------- */
 #define HDRG_MAGIC 0x47524448u          /* 'HDRG' as little-endian bytes */
-#define HDRG_LAYOUT_VERSION 1u
-#define HDRG_N_FIXED 47u                /* words 0..46: header, config, mantissas, aux header */
+#define HDRG_LAYOUT_VERSION 2u
+#define HDRG_N_FIXED 72u                /* words 0..71: header, config, bank 1, aux header, order,
+                                           n_banks, bank 2 */
+#define HDRG_N_FIXED_V1 47u             /* words 0..46 of a version-1 table */
 #define HDRG_N_TERMS 17u
 /* aux generators (aux_gen 1 'sum'): parameters n_terms, n_chan, AF_c per channel, 11 words per term */
 #define HDRG_AUX_MAX_TERMS 6u
@@ -49,7 +51,7 @@
 #define HDRG_AUX_TERM_WORDS 11u
 #define HDRG_AUX_FRAC_MAX 48u
 #define HDRG_AUX_PARAMS_MAX (2u + HDRG_AUX_MAX_CH + HDRG_AUX_MAX_TERMS * HDRG_AUX_TERM_WORDS)   /* 72 */
-#define HDRG_TABLE_WORDS_MAX (HDRG_N_FIXED + HDRG_AUX_PARAMS_MAX + 1u)                     /* 120 */
+#define HDRG_TABLE_WORDS_MAX (HDRG_N_FIXED + HDRG_AUX_PARAMS_MAX + 1u)                     /* 145 */
 
 enum hdrg_word {
     HDRG_W_MAGIC = 0, HDRG_W_VERSION, HDRG_W_LENGTH, HDRG_W_PROXY_KIND, HDRG_W_P_REF, HDRG_W_G_U,
@@ -57,7 +59,8 @@ enum hdrg_word {
     HDRG_W_S_BITS, HDRG_W_G_V, HDRG_W_SH_V, HDRG_W_FS_Q16, HDRG_W_COMBINER, HDRG_W_SETTLE_N,
     HDRG_W_MAX_STALE_N, HDRG_W_POWER_ON_N, HDRG_W_EXCHANGE_N, HDRG_W_DWELL_N, HDRG_W_E_0,
     HDRG_W_E_7 = HDRG_W_E_0 + 4, HDRG_W_E_ACC, HDRG_W_M_0,
-    HDRG_W_AUX_GEN = HDRG_W_M_0 + 17, HDRG_W_AUX_NPARAMS
+    HDRG_W_AUX_GEN = HDRG_W_M_0 + 17, HDRG_W_AUX_NPARAMS,
+    HDRG_W_ORDER, HDRG_W_N_BANKS, HDRG_W_E2_0, HDRG_W_E2_7 = HDRG_W_E2_0 + 4, HDRG_W_E2_ACC, HDRG_W_M2_0
 };
 
 /* ---- formats (firmware_ref/formats.py) ------------------------------------------------- */
@@ -110,9 +113,9 @@ enum hdrg_seq_state {
 /* ---- errors ---------------------------------------------------------------------------- */
 enum hdrg_error {
     HDRG_OK = 0,
-    HDRG_ERR_LENGTH,    /* fewer than 48 words, or the length word disagrees with the count */
+    HDRG_ERR_LENGTH,    /* fewer than 73 (version 1: 48) words, or the length word disagrees with the count */
     HDRG_ERR_MAGIC,     /* word 0 is not 0x47524448 */
-    HDRG_ERR_VERSION,   /* word 1 is not 1 */
+    HDRG_ERR_VERSION,   /* word 1 is not 1 or 2 */
     HDRG_ERR_CRC,       /* the last word is not the CRC-32 of the others */
     HDRG_ERR_FIELD,     /* a field outside its legal range (which: *bad_word) */
     HDRG_ERR_HORNER,    /* the mantissas break the Horner interval bound (|acc| <= 2^31 - 1) */
@@ -137,11 +140,16 @@ typedef struct hdrg_table {
     uint32_t rate_n, rate_shift, rate_warmup, s_bits;
     int64_t g_v;
     uint32_t sh_v, fs_q16;
-    uint32_t combiner;          /* 0 ftr, 1 pair, 2 trend */
+    uint32_t combiner;          /* 0 ftr, 1 pair, 2 trend, 3 none (order 1 only) */
     uint32_t settle_n, max_stale_n, power_on_n, exchange_n, dwell_n;
     uint32_t e_row[4], e_7, e_acc;
     int32_t mant[HDRG_N_TERMS];
     uint32_t aux_gen, aux_nparams;
+    uint32_t order;             /* 0 combine_first (and FTR), 1 regress_first (residual combiner) */
+    uint32_t n_banks;           /* 1, or 2 with order 1: bank 2 on mode-2 samples */
+    uint32_t e_row2[4], e_7_2, e_acc2;          /* bank 2 (0 when n_banks = 1) */
+    int32_t mant2[HDRG_N_TERMS];
+    uint32_t n_fixed;           /* fixed words of the table read: 72 (version 2) or 47 (version 1) */
     uint32_t aux_nterms, aux_nch;               /* aux_gen 1 */
     uint32_t aux_frac[HDRG_AUX_MAX_CH];
     hdrg_aux_term_t aux_term[HDRG_AUX_MAX_TERMS];
@@ -176,10 +184,10 @@ typedef struct hdrg_sample {
     int8_t sign;        /* rate sign of the state: 1, -1, 0 (sense loop open) */
     int32_t u, v, z;    /* Q1.30 (clamped; z: the Z word (aux_gen 0) or the generated z) */
     int64_t s;          /* rate-estimator sum before its clamp (P LSB; iir: 2^-24 P LSB) */
-    int64_t acc;        /* window sum after this sample (LSB 2^-10 deg/h) */
+    int64_t acc;        /* window sum after this sample (LSB 2^-10 deg/h; order 1: of r = c - B) */
     uint32_t cnt;       /* window count after this sample */
     int64_t y;          /* combined output (held), LSB 2^-21 deg/h */
-    int64_t b;          /* bias B, LSB 2^-21 deg/h */
+    int64_t b;          /* bias B of the sample's bank, LSB 2^-21 deg/h */
     int32_t out, bias;  /* output words (held), LSB 2^-10 deg/h */
     uint8_t valid, flags;
 } hdrg_sample_t;
@@ -261,5 +269,7 @@ int hdrg_step_aux(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input
 /* The bias B (LSB 2^-21 deg/h) at u, v in [-2^30, 2^30] (precondition) and any z (clamped;
  * *z_clamped may be NULL). */
 int64_t hdrg_evaluate(const hdrg_table_t *t, int32_t u, int32_t v, int32_t z, int *z_clamped);
+/* The same with coefficient bank 1 or 2 (bank 2 of a one-bank table: bank 1). */
+int64_t hdrg_evaluate_bank(const hdrg_table_t *t, unsigned bank, int32_t u, int32_t v, int32_t z, int *z_clamped);
 
 #endif /* HDRG_FW_H */

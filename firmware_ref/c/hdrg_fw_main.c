@@ -294,10 +294,18 @@ static void req_sample(char **tok, int ntok)
 
 static void req_eval(char **tok, int ntok)
 {
-    static const char usage[] = "EVAL <U> <V> <Z>";
-    int64_t a[3], b;
+    static const char usage[] = "EVAL <U> <V> <Z> [<BANK>]";
+    int64_t a[4] = {0, 0, 0, 1}, b;
     int zc = 0;
-    if (!need_args(ntok, 4, usage) || !parse_args(tok + 1, 3, a, usage)) {
+    if (ntok == 5) {
+        if (!parse_args(tok + 1, 4, a, usage)) {
+            return;
+        }
+        if (a[3] != 1 && a[3] != 2) {
+            err("RANGE", "BANK must be 1 or 2");
+            return;
+        }
+    } else if (!need_args(ntok, 4, usage) || !parse_args(tok + 1, 3, a, usage)) {
         return;
     }
     if (!g_have_table) {
@@ -312,7 +320,7 @@ static void req_eval(char **tok, int ntok)
         err("RANGE", "Z outside int32");
         return;
     }
-    b = hdrg_evaluate(&g_st.t, (int32_t)a[0], (int32_t)a[1], (int32_t)a[2], &zc);
+    b = hdrg_evaluate_bank(&g_st.t, (unsigned)a[3], (int32_t)a[0], (int32_t)a[1], (int32_t)a[2], &zc);
     printf("E %" PRId64 " %d\n", b, zc);
 }
 

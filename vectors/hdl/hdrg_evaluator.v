@@ -12,19 +12,32 @@
 //
 // c[i][j] = m[POLY_INDEX[i][j]]: row u^0 = (k0, k4, k5, k6), u^1 = (k1, k8, k9, k10),
 // u^2 = (k2, k11, k12, k13), u^3 = (k3, k14, k15, k16) (v^0..v^3).  The mantissas and exponents
-// are the coefficient table's words 28..44 and 22..27 (FORMATS.md "Coefficient table layout").
+// are the coefficient table's words 28..44 and 22..27 (FORMATS.md "Coefficient table layout",
+// version 2); bank 2 (a regress_first table, order 1) is words 55..71 and 49..54.
 //
-// `define HDRG_BREAK_ROUNDING builds a deliberately wrong evaluator (RHU truncates) that the
-// testbench must catch.
+// Bank select (regress, then reverse): `bank` = 1 evaluates bank 2 (mant2, e2_*; the firmware
+// sets it on mode-2 samples of a two-bank table), 0 bank 1; the datapath is shared (one Horner
+// evaluation per sample), only the coefficient/exponent multiplexer is added.
+//
+// `define HDRG_BREAK_ROUNDING builds a deliberately wrong evaluator (RHU truncates), `define
+// HDRG_BREAK_BANK one that ignores bank 2's mantissas; the testbench must catch both.
 `timescale 1ns / 1ns
 module hdrg_evaluator (
-    input  wire [17*32-1:0]   mant,     // m_k in bits [32k+31 : 32k], two's complement
-    input  wire [5:0]         e_0,      // exponent of row u^0 (0..52)
-    input  wire [5:0]         e_1,
-    input  wire [5:0]         e_2,
-    input  wire [5:0]         e_3,
-    input  wire [5:0]         e_7,      // exponent of k7
-    input  wire [5:0]         e_acc,    // accumulator exponent E; e_g - E in 0..31
+    input  wire               bank,     // 0: bank 1 (mant, e_*), 1: bank 2 (mant2, e2_*)
+    input  wire [17*32-1:0]   mant1,    // bank 1: m_k in bits [32k+31 : 32k], two's complement
+    input  wire [5:0]         e1_0,     // bank 1: exponent of row u^0 (0..52)
+    input  wire [5:0]         e1_1,
+    input  wire [5:0]         e1_2,
+    input  wire [5:0]         e1_3,
+    input  wire [5:0]         e1_7,     // bank 1: exponent of k7
+    input  wire [5:0]         e1_acc,   // bank 1: accumulator exponent E; e_g - E in 0..31
+    input  wire [17*32-1:0]   mant2,    // bank 2 (words 55..71), same formats
+    input  wire [5:0]         e2_0,
+    input  wire [5:0]         e2_1,
+    input  wire [5:0]         e2_2,
+    input  wire [5:0]         e2_3,
+    input  wire [5:0]         e2_7,
+    input  wire [5:0]         e2_acc,
     input  wire signed [31:0] u,        // Q1.30 proxy, in [-2^30, 2^30]
     input  wire signed [31:0] v,        // Q1.30 proxy rate, in [-2^30, 2^30]
     input  wire signed [31:0] z,        // Q1.30 aux word, any int32 (clamped to [-2^30, 2^30])
@@ -32,6 +45,19 @@ module hdrg_evaluator (
     output wire               z_clamped // z was outside [-2^30, 2^30]
 );
     localparam signed [31:0] ONE = 32'sd1073741824;   // 2^30
+
+    // the selected bank (`define HDRG_BREAK_BANK: bank 2's mantissas are ignored, on purpose)
+`ifdef HDRG_BREAK_BANK
+    wire [17*32-1:0] mant  = mant1;
+`else
+    wire [17*32-1:0] mant  = bank ? mant2  : mant1;
+`endif
+    wire [5:0]       e_0   = bank ? e2_0   : e1_0;
+    wire [5:0]       e_1   = bank ? e2_1   : e1_1;
+    wire [5:0]       e_2   = bank ? e2_2   : e1_2;
+    wire [5:0]       e_3   = bank ? e2_3   : e1_3;
+    wire [5:0]       e_7   = bank ? e2_7   : e1_7;
+    wire [5:0]       e_acc = bank ? e2_acc : e1_acc;
 
     // RHU(x, s) = floor(x / 2^s + 1/2), s in 0..63
     function signed [63:0] rhu;
