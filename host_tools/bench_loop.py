@@ -80,7 +80,8 @@ def _named(kind: str, family: str) -> bool:
 
 def _base_model(train):
     """The loop's starting model: 16 terms, diff rate estimator, trend combiner for MR."""
-    cfg = fit_config_from_logs([train], reversal={"combiner": "trend", "settle_s": 0.0} if train.reversal else None)
+    cfg = fit_config_from_logs([train], reversal={"combiner": "trend", "settle_s": 0.0, "order": "combine_first"}
+                               if train.reversal else None)
     return fit_logs([train], cfg, "all", drop_unidentifiable=True)[0]
 
 
