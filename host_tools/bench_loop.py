@@ -13,8 +13,8 @@ Runs ``i = 0 .. N-1`` (``--runs``, default 120), device seed ``S * 100000 + i`` 
   defaults (single training run: CV over time blocks; every step confirmed on the held-out run).
 
 Per run the record holds the verdict, every step (effect, parameters, held-out before/after,
-confirmed), and ``effect_ratio``: the held-out error of the base model (16 terms, fitted on the
-training run) on the run WITH the effect over that on the same run without it (same device,
+confirmed), and ``effect_ratio``: the held-out error of the base model (the loop's starting
+model = the product default of ``hdrg fit``, fitted on the training run) on the run WITH the effect over that on the same run without it (same device,
 power-ons and noise: the foreign simulator draws the noise independently of the effects).
 ``effect_ratio >= 2`` means that modelling the true effect perfectly would halve the held-out
 error: the runs where the loop must find it.  Error = std of 100-s averages of the compensated
@@ -22,12 +22,15 @@ output (diagnose.error_stats).
 
 Summary (the targets of issue #11):
 
-* ``detection``: among effect runs with effect_ratio >= 2, the fraction whose CONFIRMED steps
-  name the true family (aux: any aux_* column);
+* ``detection``: among effect runs with effect_ratio >= 2, the fraction whose CONFIRMED EFFECT
+  steps name the true family (aux: any aux_* column); ``detection_or_structure`` also counts a
+  confirmed STRUCTURE step of the same family (the lag-state block of the proxy for thermal_lag,
+  the second thermometer for board_temp: the structure phase of diagnose runs first and may
+  take the injected effect as the device's structure);
 * ``false_discovery``: among clean runs, the fraction with verdict "effect found"; also split by
   run type (``mr_control``: clean MR runs) and ``structural_only`` (clean runs whose confirmed
   steps are all structural, verdict "model structure improved": another rate estimator or
-  regress-then-reverse, not an effect);
+  the lag-state block, the second thermometer or the combiner, not an effect);
 * ``clean_found_not_generalizing``: clean runs with "effect found" whose final model is not
   better than the base model on an independent THIRD run (3 degC/min, power-on 2, noise 2):
   a found "effect" that does not generalize is a false discovery in the strict sense; one that
@@ -46,9 +49,7 @@ import warnings
 
 import numpy as np
 
-from host_tools.compensate import fit_config_from_logs
-from host_tools.diagnose import _score, diagnose, error_stats
-from host_tools.fit import fit_logs
+from host_tools.diagnose import _score, base_model, base_options, diagnose, error_stats
 from host_tools.sim_foreign import EFFECTS, EFFECT_KINDS, foreign_device, simulate_foreign
 
 SEED_STRIDE = 100000
@@ -79,10 +80,8 @@ def _named(kind: str, family: str) -> bool:
 
 
 def _base_model(train):
-    """The loop's starting model: 16 terms, diff rate estimator, trend combiner for MR."""
-    cfg = fit_config_from_logs([train], reversal={"combiner": "trend", "settle_s": 0.0, "order": "combine_first"}
-                               if train.reversal else None)
-    return fit_logs([train], cfg, "all", drop_unidentifiable=True)[0]
+    """The loop's starting model: the product default of ``hdrg fit`` (diagnose.base_model)."""
+    return base_model([train], base_options(reversal=train.reversal))[0]
 
 
 def _base_error(train, hold) -> float:
@@ -108,13 +107,15 @@ def run_one(spec: dict, duration_s=None, n_surrogates=None) -> dict:
             ctrain = simulate_foreign(dev, 4.0, rev, 0, 0, duration_s=duration_s)
             chold = simulate_foreign(dev, 2.0, rev, 1, 1, duration_s=duration_s)
             ratio = _score(rep["baseline"]["holdout"])[0] / _base_error(ctrain, chold)
-    steps = [{"effect": it["effect"], "params": it["params"], "confirmed": it["confirmed"],
+    steps = [{"effect": it["effect"], "params": it["params"], "kind": it["kind"], "confirmed": it["confirmed"],
               "before": _score(it["before"])[0], "after": _score(it["after"])[0]} for it in rep["iterations"]]
     return {**spec, "verdict": rep["verdict"], "steps": steps,
             "base": _score(rep["baseline"]["holdout"])[0], "final": _score(rep["final"])[0],
             "third_base": base3, "third_final": final3,
-            "effect_ratio": ratio, "named": bool(eff and any(s["confirmed"] and _named(eff, s["effect"])
-                                                           for s in steps)),
+            "effect_ratio": ratio,
+            "named": bool(eff and any(s["confirmed"] and s["kind"] == "effect" and _named(eff, s["effect"])
+                                      for s in steps)),
+            "named_or_structure": bool(eff and any(s["confirmed"] and _named(eff, s["effect"]) for s in steps)),
             "artifacts": [a["period_s"] for a in (rep["artifacts"] or {}).get("lines", [])],
             "seconds": round(time.time() - t0, 2)}
 
@@ -131,12 +132,15 @@ def summarize(records: list) -> dict:
     structural = [r for r in records if r["verdict"] == "model structure improved"]
     confirmed = [s for r in records for s in r["steps"] if s["confirmed"]]
     struct = [r for r in clean if r["verdict"] == "model structure improved"]
-    per_kind = {}
+    per_kind, per_kind_s = {}, {}
     for kind in EFFECT_KINDS:
         rs = [r for r in matters if r["effect"] == kind]
         per_kind[kind] = _frac(sum(r["named"] for r in rs), len(rs))
+        per_kind_s[kind] = _frac(sum(r.get("named_or_structure", r["named"]) for r in rs), len(rs))
     return {"runs": len(records), "effect_runs": sum(1 for r in records if r["effect"]),
             "detection": _frac(sum(r["named"] for r in matters), len(matters)), "detection_per_kind": per_kind,
+            "detection_or_structure": _frac(sum(r.get("named_or_structure", r["named"]) for r in matters), len(matters)),
+            "detection_or_structure_per_kind": per_kind_s,
             "false_discovery": _frac(sum(r["verdict"] == "effect found" for r in clean), len(clean)),
             "false_discovery_ftr": _frac(sum(r["verdict"] == "effect found" for r in clean if not r["reversal"]),
                                          sum(1 for r in clean if not r["reversal"])),
@@ -241,10 +245,13 @@ def run_cli(args) -> int:
     print(_line("detection (ratio >= 2)", s["detection"]))
     for kind, f in s["detection_per_kind"].items():
         print(_line(f"  {kind}", f))
+    print(_line("detection, effect or structure", s["detection_or_structure"]))
+    for kind, f in s["detection_or_structure_per_kind"].items():
+        print(_line(f"  {kind}", f))
     print(_line("false discovery (clean)", s["false_discovery"]))
     print(_line("  FTR clean", s["false_discovery_ftr"]))
     print(_line("  MR control", s["mr_control"]))
-    print(f"  clean runs with 'model structure improved' (rate estimator / regress-then-reverse): {s['structural_only']}")
+    print(f"  clean runs with 'model structure improved' (rate estimator, lag block, board_temp, combiner): {s['structural_only']}")
     print(f"  clean runs with 'effect found' that do NOT improve an independent third run: "
           f"{s['clean_found_not_generalizing']}; their third-run gains (base/final): {s['clean_found_third_run_gain']}")
     print(f"  'effect found' runs worse on the third run: {s['found_third_run_worse']}")
@@ -360,8 +367,7 @@ def measured_study(out_dir: str, root: str = MEASURED_ROOT, progress=None) -> di
 
 
 def _measured_base(train):
-    cfg = fit_config_from_logs([train])
-    return fit_logs([train], cfg, "all", drop_unidentifiable=True)[0]
+    return _base_model(train)
 
 
 def _measured_figure(key, hold, base_model, final_model, out_dir) -> str:
@@ -374,7 +380,7 @@ def _measured_figure(key, hold, base_model, final_model, out_dir) -> str:
     from host_tools import metrics
     from host_tools.compensate import compensate
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
-    for label, m, style in (("base model (16 terms)", base_model, "--"), ("after the loop", final_model, "-")):
+    for label, m, style in (("base model (hdrg fit default)", base_model, "--"), ("after the loop", final_model, "-")):
         out = compensate(hold, m)
         v = np.asarray(out["valid"]) == 1
         a = metrics.allan(out.rate_dph, hold.t_s, v)

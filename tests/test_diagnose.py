@@ -82,6 +82,11 @@ def run_case(name, seeds=(1, 3, 2)):
     return rep, model, hold
 
 
+def first_effect(rep):
+    """The first kept step the loop reports as an EFFECT (the structure phase runs first)."""
+    return next(e for e in rep["iterations"] if e["kind"] == "effect" and e["confirmed"] is not False)
+
+
 def drop(rep, key="std100_dph"):
     """before (base model) / after (final model) on the held-out runs."""
     return rep["baseline"]["holdout"][key] / rep["final"][key]
@@ -102,7 +107,7 @@ def case(results, name):
 
 def test_thermal_lag(results):
     rep, _, _ = case(results, "thermal_lag")
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "thermal_lag", rep["iterations"]
     assert 1800 / 1.5 <= it["params"]["tau_s"] <= 1800 * 1.5
     assert drop(rep) >= 2.0
@@ -110,7 +115,7 @@ def test_thermal_lag(results):
 
 def test_turn_on(results):
     rep, _, _ = case(results, "turn_on")
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "turn_on"
     assert 300 / 1.5 <= it["params"]["tau_s"] <= 300 * 1.5
     assert drop(rep) >= 2.0
@@ -120,7 +125,7 @@ def test_exchange_transient(results):
     """A transient after each exchange that flips like a true rate (sign False); judged at 1 s (it
     lasts ~15 s of every 150 s)."""
     rep, _, _ = case(results, "exchange_transient")
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "exchange_transient" and it["params"]["sign"] is False
     assert 15 / 1.5 <= it["params"]["tau_s"] <= 15 * 1.5
     assert drop(rep, "std_dph") >= 2.0
@@ -131,7 +136,7 @@ def test_exchange_transient_that_does_not_flip():
     window): found as the signed candidate."""
     und = {"exchange_transient": {"amp_dph": 3.0, "tau_s": 15.0, "flips": False}}
     rep, _ = diagnose([world(1, und), world(3, und)], [world(2, und)], plots=False, max_iter=1)
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "exchange_transient" and it["params"]["sign"] is True
     assert 10 <= it["params"]["tau_s"] <= 22.5
     assert drop(rep, "std_dph") >= 2.0
@@ -142,14 +147,14 @@ def test_imperfect_reversal(results):
     that survives follows the mode sign times the temperature change between the windows (s * v);
     the trend combiner cancels it to first order (only its curvature remains, like B_D's)."""
     rep, _, _ = case(results, "imperfect_reversal")
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "imperfect_reversal" and it["params"]["which"] in ("s*v", "s*u")
     assert drop(rep) >= 2.0
 
 
 def test_proxy_high_order(results):
     rep, _, _ = case(results, "proxy_high_order")
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "proxy_high_order" and it["params"]["power"] == 4
     assert drop(rep) >= 2.0
 
@@ -158,7 +163,7 @@ def test_board_temp(results):
     """Bias driven by the board node logged as temp_c (true lag 0: the column itself; a short
     filter only averages the sensor's noise)."""
     rep, _, _ = case(results, "board_temp")
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "board_temp" and it["params"]["column"] == "temp_c"
     assert it["params"]["tau_s"] <= 120
     assert drop(rep) >= 2.0
@@ -166,21 +171,21 @@ def test_board_temp(results):
 
 def test_aux_vdd(results):
     rep, _, _ = case(results, "aux_vdd")
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "aux_vdd" and it["params"]["tau_s"] <= 120
     assert drop(rep) >= 2.0
 
 
 def test_aging(results):
     rep, _, _ = case(results, "aging")
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "aging"
     assert drop(rep) >= 2.0
 
 
 def test_periodic(results):
     rep, _, _ = case(results, "periodic")
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "periodic"
     assert abs(it["params"]["period_s"] / 600 - 1) < 0.02
     assert drop(rep) >= 2.0
@@ -301,7 +306,7 @@ def test_a_step_the_held_out_run_does_not_confirm_is_reverted():
     on held-out', and the final model is the base model (never worse)."""
     und = {"periodic": {"amp_dph": 0.5, "period_s": 600.0}}
     rep, model = diagnose([world(1, und), world(3, und)], [world(2)], plots=False, max_iter=1)
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "periodic" and it["confirmed"] is False
     assert it["after"]["std100_dph"] > it["before"]["std100_dph"] * (1 - 0.05)
     assert rep["verdict"] != "effect found" and "step 1 periodic: not confirmed on held-out" in rep["verdict_detail"]
