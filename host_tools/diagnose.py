@@ -116,12 +116,13 @@ REPORT_TAUS = (1.0, 100.0)
 TOP_RANKING = 12
 CONFIRM_MIN_DROP = 0.05      # a confirmed step lowers the held-out error by >= 5 % ...
 CONFIRM_TOL_1S = 0.01        # ... and raises the held-out 1-s std by at most 1 %
-CONFIRM_TOL_RMS = 0.05      # ... and raises no held-out leg's rms (mean offset included) by more than 5 %
+CONFIRM_TOL_RMS = 0.05      # ... and raises no held-out run's leg rms (mean offsets included) by more than 5 %
 RMS_MIN_SAMPLES = 10         # a leg (gap-free segment) needs this many valid samples to count
 CONFIRM_RULE = ("a step is confirmed iff, on the held-out runs, the std of 100-s averages (1-s where "
-                "100 s is undefined) drops by >= 5 %, the std of 1-s averages rises by at most 1 % and the "
-                "rms including the mean offset of every held-out run and leg (gap-free segment) rises by at "
-                "most 5 %; an unconfirmed step is reverted and its family not offered again")
+                "100 s is undefined) drops by >= 5 %, the std of 1-s averages rises by at most 1 % and, per "
+                "held-out run, the leg rms (quadratic mean over its gap-free segments of each segment's rms, "
+                "mean offset included) rises by at most 5 %; an unconfirmed step is reverted and its family "
+                "not offered again")
 SCORE_TAU_S = 1.0            # the CV scores bin means of this many seconds (the report's shortest tau)
 TIE_TOLERANCE = 0.05         # gains within 5 % (relative) of the best are a tie: prefer the proxy
 
@@ -800,16 +801,24 @@ def confirmed_on_holdout(before, after) -> bool:
                 and offsets_hold(before, after))
 
 
+def _leg_rms(run) -> float | None:
+    """Quadratic mean over a run's legs of their rms (mean offsets included), each leg weighted
+    equally (a short leg moved by tens of deg/h counts as much as a long one)."""
+    legs = [x for x in (run.get("rms_legs_dph") or []) if x is not None]
+    return float(np.sqrt(np.mean(np.square(legs)))) if legs else run.get("rms_dph")
+
+
 def offsets_hold(before, after) -> bool:
     """The mean-offset part of CONFIRM_RULE: per held-out run (``runs`` of error_stats, same order)
-    the rms including the mean offset of the run and of each of its legs rises by at most
-    CONFIRM_TOL_RMS (a step that moves a held-out leg by tens of deg/h while its std drops is not
-    an improvement).  True when no run carries the rms (older reports)."""
+    the leg rms (:func:`_leg_rms`: each gap-free segment's rms with its mean offset, quadratic mean
+    over the segments; one segment: the run's rms) rises by at most CONFIRM_TOL_RMS: a step that
+    moves a held-out leg by tens of deg/h while the std drops is not an improvement.  (Each leg
+    on its own is not required to improve: on a blocks split a step that halves the run's rms
+    may still move one quiet block by a few deg/h.)  True when no run carries the rms."""
     for b, a in zip(before.get("runs", []), after.get("runs", [])):
-        pairs = [(b.get("rms_dph"), a.get("rms_dph"))] + list(zip(b.get("rms_legs_dph") or [], a.get("rms_legs_dph") or []))
-        for r0, r1 in pairs:
-            if r0 is not None and r1 is not None and r1 > r0 * (1.0 + CONFIRM_TOL_RMS):
-                return False
+        r0, r1 = _leg_rms(b), _leg_rms(a)
+        if r0 is not None and r1 is not None and r1 > r0 * (1.0 + CONFIRM_TOL_RMS):
+            return False
     return True
 
 

@@ -454,8 +454,11 @@ def test_a_step_that_shifts_a_held_out_leg_is_not_confirmed():
     assert confirmed_on_holdout(before, better)
     assert after_shift["runs"][0]["rms_legs_dph"][0] > 3 * before["runs"][0]["rms_legs_dph"][0]
     assert not confirmed_on_holdout(before, after_shift)
-    # the leg rule alone: the same std statistics with the legs' rms raised by 6 % is refused
-    worse_leg = dict(better, runs=[dict(better["runs"][0],
-                                        rms_legs_dph=[better["runs"][0]["rms_legs_dph"][0],
-                                                      before["runs"][0]["rms_legs_dph"][1] * 1.06])])
-    assert not confirmed_on_holdout(before, worse_leg)
+    # the leg rule alone (the std statistics of `better`): legs' quadratic-mean rms up 6 % is
+    # refused; one leg up, the other down more (the run's leg rms falls) is confirmed
+    l0, l1 = before["runs"][0]["rms_legs_dph"]
+
+    def with_legs(legs):
+        return dict(better, runs=[dict(better["runs"][0], rms_legs_dph=legs)])
+    assert not confirmed_on_holdout(before, with_legs([1.06 * l0, 1.06 * l1]))
+    assert confirmed_on_holdout(before, with_legs([1.3 * l0, 0.5 * l1]))
