@@ -4,9 +4,13 @@ model lacks, add that effect through the auxiliary term k7, and report the error
 
 Procedure (:func:`diagnose`)
 ----------------------------
-1. **Fit** the current model on the training runs (host_tools.fit.fit_logs; default the paper's 16
-   terms, the trend combiner for mode-reversal logs; ``--proxy``, ``--rate-estimator``,
-   ``--terms``, ``--combiner`` as in ``hdrg fit``).
+1. **Fit** the starting model on the training runs exactly as ``hdrg fit`` does with its defaults
+   (:func:`base_options` / :func:`base_model`: the options not given are None, so
+   host_tools.compensate's DEFAULT_RATE / DEFAULT_ORDER / DEFAULT_COMBINER / DEFAULT_TERMS apply:
+   one place); ``--proxy``, ``--rate-estimator``, ``--terms``, ``--order``, ``--combiner`` as in
+   ``hdrg fit``.  A regress_first model (two coefficient banks by mode) is scanned with the banked
+   design: every column once per mode, on the per-mode used samples, target c = s * rate, raw
+   noise surrogates (no combiner in the target).
 2. **Residual** = the model's target (FTR output or mode-reversal combined output) minus the
    model, on the valid samples; characterized per run (:func:`characterize`): Allan deviation
    against the white-noise line extrapolated from the shortest tau (taus where it is > 2x that line
@@ -62,9 +66,16 @@ Procedure (:func:`diagnose`)
    (A rate_estimator winner changes the model's rate estimator instead.)  **Confirm** it on the
    held-out runs (:data:`CONFIRM_RULE`): if the held-out error does not drop, the step is
    reported ``confirmed: false`` and reverted, its family is not offered again.  Iterate while a
-   candidate passes the rule, at most ``max_iter`` (3) times.  Then, for mode-reversal logs, the
-   structural candidate regress-then-reverse (:func:`_order_step`: per-mode banks, each combiner,
-   whole-model CV), confirmed the same way.
+   candidate passes the rule, at most ``max_iter`` (3) times per phase.  **Structure first**
+   (:data:`PHASES`): phase 1 offers only the structural candidates (:func:`kind_of`: the rate
+   estimator, the lag-state block of the proxy, board_temp = the second thermometer, lags <=
+   STRUCT_TAU_FRACTION of the run), then for mode-reversal logs the order/combiner
+   (:func:`_order_step`: regress_first with each other combiner, whole-model CV), confirmed the
+   same way; phase 2 offers the effect families on the residual of the structured base.  Steps
+   carry ``kind`` 'structure' / 'effect'; the verdict is "effect found" only for a kept effect
+   step.  The confirmation (:data:`CONFIRM_RULE`) also counts the mean offset: per held-out run,
+   the quadratic mean over its legs (gap-free segments) of their rms with the mean may rise by at
+   most CONFIRM_TOL_RMS (:func:`offsets_hold`).
 6. **Report**: per iteration the effect, its parameters, the evidence (CV gain, threshold, folds,
    ranking; PNG: residual vs the candidate, Allan deviation and spectrum before/after) and the
    error before and after (:func:`error_stats`: stability 1 sigma and variation p-p of 1-s and
