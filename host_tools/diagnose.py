@@ -855,11 +855,13 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
              terms=None, combiner=None, order=None, settle_s=0.0, proxy_range=None, rate_range=None,
              max_iter=MAX_ITER, n_surrogates=N_SURROGATES, g_min=G_MIN, cv_blocks=CV_BLOCKS,
              cv_folds=CV_FOLDS, seed=0, families=None, rate_alternatives=True, out_dir=None,
-             plots=True, progress=None) -> tuple:
+             plots=True, progress=None, phases=None) -> tuple:
     """Run the closed loop (module doc) on RunLogs.  Returns ``(report, model)``: the report dict
     (the JSON of the module doc) and the final BiasModel (the last step confirmed on the held-out
     runs; without held-out runs the last accepted one).  With ``out_dir`` the files are written
-    there (:func:`write_report`).  ``progress``: a callable(str) told what is being done."""
+    there (:func:`write_report`).  ``progress``: a callable(str) told what is being done.
+    ``phases``: the phases to run (default both, structure first; ``("effect",)`` searches the
+    effects on the starting model as it is, e.g. to test one effect family)."""
     say = progress or (lambda msg: None)
     train = list(train_logs)
     hold = list(holdout_logs)
@@ -896,7 +898,11 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     stops = {}
     # structure first (module doc): the model's own structure (rate estimator, lag-state block of
     # the proxy, second thermometer, order/combiner), then the effects on the structured base
-    for phase in PHASES:
+    phases = PHASES if phases is None else tuple(phases)
+    unknown = set(phases) - set(PHASES)
+    if unknown:
+        raise ValueError(f"unknown diagnose phases {sorted(unknown)}: choose from {PHASES}")
+    for phase in [p for p in PHASES if p in phases]:
         stopped = None
         for _ in range(max_iter):
             it += 1

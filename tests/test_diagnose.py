@@ -52,10 +52,11 @@ CASES = {
                     dict(tau_pkg_s=1.0, tau_res_s=60.0), {}),
     "turn_on": ({"turn_on": {"amp_dph": -3.0, "tau_s": 300.0}}, {}, {}),
     "exchange_transient": ({"exchange_transient": {"amp_dph": 3.0, "tau_s": 15.0}}, {}, {}),
-    # the product default (regress_first, per-mode banks) represents a mode-only term by itself
-    # (test_default_banks_absorb_imperfect_reversal): the legacy combine-first pipeline here
+    # the effect candidate on the legacy combine-first pipeline (pair), effect phase only: the
+    # structure phase would move to per-mode banks, which represent a mode-only term by themselves
+    # (test_imperfect_reversal_is_taken_by_per_mode_banks)
     "imperfect_reversal": ({"imperfect_reversal": {"coef_dph_per_c": 0.5}}, {},
-                           {"combiner": "pair", "order": "combine_first"}),
+                           {"combiner": "pair", "order": "combine_first", "phases": ("effect",)}),
     "proxy_high_order": ({"proxy_high_order": {"amp_dph": 6.0, "scale_c": 20.0}},
                          dict(profile=STAIRCASE, t_ref_c=0.0, tau_pkg_s=1.0, tau_res_s=200.0), {}),
     # with the default diff rate estimator a noise-free rate (lsq) competes with the board sensor's lead
@@ -156,16 +157,23 @@ def test_exchange_transient_that_does_not_flip():
 
 
 def test_imperfect_reversal(results):
-    """A temperature term present only in mode 2, started from the legacy combine-first pipeline
-    (pair): what survives the combiner follows the mode sign.  Per-mode coefficient banks
-    (regress-then-reverse, the product default) represent a mode-only term exactly, so the
-    structure phase takes it as 'reversal_order' (model structure, not an effect) and halves the
-    held-out error; an imperfect_reversal k7 term is the effect-level alternative."""
+    """A temperature term present only in mode 2: after the paper's pairing combiner the part
+    that survives follows the mode sign times the temperature change between the windows (s * v)."""
     rep, _, _ = case(results, "imperfect_reversal")
+    it = first_effect(rep)
+    assert it["effect"] == "imperfect_reversal" and it["params"]["which"] in ("s*v", "s*u")
+    assert drop(rep) >= 2.0
+
+
+def test_imperfect_reversal_is_taken_by_per_mode_banks():
+    """The same run with both phases: per-mode coefficient banks (regress-then-reverse, the product
+    default) represent a mode-only term exactly, so the structure phase moves there
+    ('reversal_order', kind structure) and halves the held-out error."""
+    und, sim_kw, diag_kw = CASES["imperfect_reversal"]
+    kw = {k: v for k, v in diag_kw.items() if k != "phases"}
+    rep, _ = diagnose([world(1, und), world(3, und)], [world(2, und)], plots=False, max_iter=1, **kw)
     kept = [e for e in rep["iterations"] if e["confirmed"] is not False]
-    assert kept and kept[0]["effect"] in ("reversal_order", "imperfect_reversal"), kept
-    if kept[0]["effect"] == "reversal_order":
-        assert kept[0]["kind"] == "structure" and rep["verdict"] in ("model structure improved", "effect found")
+    assert kept and kept[0]["effect"] == "reversal_order" and kept[0]["kind"] == "structure", kept
     assert drop(rep) >= 2.0
 
 
