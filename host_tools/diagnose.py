@@ -638,14 +638,14 @@ def leg_rms(y, valid, segments) -> list:
     return out
 
 
-def _stats_one(y, t, valid, segments=(0,)) -> dict:
+def _stats_one(y, t, valid) -> dict:
+    """STAT_KEYS of one output: std / pp of 1-s and 100-s averages, rms with the mean [deg/h]."""
     m = metrics.bias_metrics(y, t, valid, taus=REPORT_TAUS)
     r1, r100 = metrics.at_tau(m, 1.0), metrics.at_tau(m, 100.0)
     ok = np.asarray(valid, bool) & np.isfinite(y)
     return {"std_dph": r1["stability_dph"], "pp_dph": r1["variation_dph"],
             "std100_dph": r100["stability_dph"], "pp100_dph": r100["variation_dph"],
-            "rms_dph": float(np.sqrt(np.mean(np.asarray(y)[ok] ** 2))) if ok.any() else None,
-            "rms_legs_dph": leg_rms(y, valid, segments)}
+            "rms_dph": float(np.sqrt(np.mean(np.asarray(y)[ok] ** 2))) if ok.any() else None}
 
 
 def _mean_stats(rows) -> dict:
@@ -668,7 +668,8 @@ def error_stats(logs, model: BiasModel, other: BiasModel | None = None) -> dict:
         valid = np.asarray(out["valid"]) == 1
         if other is not None:
             valid &= np.asarray(compensate(log, other)["valid"]) == 1
-        rows.append({"run": log.source, **_stats_one(out.rate_dph, log.t_s, valid, log.segments)})
+        rows.append({"run": log.source, **_stats_one(out.rate_dph, log.t_s, valid),
+                     "rms_legs_dph": leg_rms(out.rate_dph, valid, log.segments)})
     return {**_mean_stats(rows), "runs": rows}
 
 

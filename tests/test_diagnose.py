@@ -50,7 +50,10 @@ CASES = {
                     # fast package/resonator nodes: the proxy follows the chamber within ~60 s, so the
                     # hidden node lags the proxy itself by ~1800 s
                     dict(tau_pkg_s=1.0, tau_res_s=60.0), {}),
-    "turn_on": ({"turn_on": {"amp_dph": -3.0, "tau_s": 300.0}}, {}, {}),
+    # the legacy start (combine_first + trend, 16 terms), effect phase only: the model
+    # tests/test_fixed_aux.py's acceptance test quantizes; the default start: test_turn_on_from_the_default_start
+    "turn_on": ({"turn_on": {"amp_dph": -3.0, "tau_s": 300.0}}, {},
+                {"combiner": "trend", "order": "combine_first", "terms": "all", "phases": ("effect",)}),
     "exchange_transient": ({"exchange_transient": {"amp_dph": 3.0, "tau_s": 15.0}}, {}, {}),
     # the effect candidate on the legacy combine-first pipeline (pair), effect phase only: the
     # structure phase would move to per-mode banks, which represent a mode-only term by themselves
@@ -131,6 +134,17 @@ def test_turn_on(results):
     it = first_effect(rep)
     assert it["effect"] == "turn_on"
     assert 300 / 1.5 <= it["params"]["tau_s"] <= 300 * 1.5
+    assert drop(rep) >= 2.0
+
+
+def test_turn_on_from_the_default_start():
+    """The same turn-on from the product-default start with both phases: whatever the structure
+    phase takes first, the effect phase names turn_on (tau near 300 s) and the held-out error
+    halves."""
+    und = CASES["turn_on"][0]
+    rep, _ = diagnose([world(1, und), world(3, und)], [world(2, und)], plots=False)
+    it = first_effect(rep)
+    assert it["effect"] == "turn_on" and 300 / 1.5 <= it["params"]["tau_s"] <= 300 * 1.5
     assert drop(rep) >= 2.0
 
 
@@ -442,7 +456,7 @@ def test_a_step_that_shifts_a_held_out_leg_is_not_confirmed():
     """Confirmation includes the rms WITH the mean offset per held-out run and leg: a step whose
     std drops but which moves one leg by tens of deg/h (tofupilot x heat->cool) is refused; the
     same std drop without the shift is confirmed."""
-    from host_tools.diagnose import _stats_one, confirmed_on_holdout
+    from host_tools.diagnose import _stats_one, confirmed_on_holdout, leg_rms
     rng = np.random.default_rng(3)
     n = 4000
     t = np.arange(n, dtype=float)
@@ -452,7 +466,8 @@ def test_a_step_that_shifts_a_held_out_leg_is_not_confirmed():
     white = rng.standard_normal(n)
 
     def stats(y):
-        return {"runs": [_stats_one(y, t, valid, legs)], **_stats_one(y, t, valid, legs)}
+        one = _stats_one(y, t, valid)
+        return {"runs": [{**one, "rms_legs_dph": leg_rms(y, valid, legs)}], **one}
 
     before = stats(slow + white)
     better = stats(0.5 * slow + white)
