@@ -1447,11 +1447,13 @@ def _plots(k, plot_info, train, evals, out_dir) -> list:
         if best["terms"]:
             cols = np.column_stack([generator_values(log, t, after_model.config.rate.fs) for t in best["terms"]])
             weights = [t2["weight"] for t2 in after_aux.terms[-len(best["terms"]):]]
-            x = cols @ np.asarray(weights) * after_model.coef[K_AUX]
+            k7 = after_model.coef[K_AUX]
+            if after_model.coef_mode2 is not None:      # two banks: the k7 of the sample's mode
+                k7 = np.where(np.asarray(log.mode) == 2, after_model.coef_mode2[K_AUX], k7)
+            x = cols @ np.asarray(weights) * k7
             xlabel = f"fitted {best['label']} [deg/h]"
         else:
-            pa = prepare(log, after_model)
-            x = (pr.y - after_model.evaluate(pa.u, pa.v, pa.z)) - r
+            x = residual(prepare(log, after_model), after_model)[0] - r
             xlabel = f"{best['label']}: change of the residual [deg/h]"
         v = pr.valid
         ax.plot(x[v], r[v], ",", alpha=0.4, label=os.path.basename(log.source))
