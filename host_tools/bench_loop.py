@@ -13,8 +13,8 @@ Runs ``i = 0 .. N-1`` (``--runs``, default 120), device seed ``S * 100000 + i`` 
   defaults (single training run: CV over time blocks; every step confirmed on the held-out run).
 
 Per run the record holds the verdict, every step (effect, parameters, held-out before/after,
-confirmed), and ``effect_ratio``: the held-out error of the base model (16 terms, fitted on the
-training run) on the run WITH the effect over that on the same run without it (same device,
+confirmed), and ``effect_ratio``: the held-out error of the base model (the loop's starting
+model = the product default of ``hdrg fit``, fitted on the training run) on the run WITH the effect over that on the same run without it (same device,
 power-ons and noise: the foreign simulator draws the noise independently of the effects).
 ``effect_ratio >= 2`` means that modelling the true effect perfectly would halve the held-out
 error: the runs where the loop must find it.  Error = std of 100-s averages of the compensated
@@ -22,12 +22,15 @@ output (diagnose.error_stats).
 
 Summary (the targets of issue #11):
 
-* ``detection``: among effect runs with effect_ratio >= 2, the fraction whose CONFIRMED steps
-  name the true family (aux: any aux_* column);
+* ``detection``: among effect runs with effect_ratio >= 2, the fraction whose CONFIRMED EFFECT
+  steps name the true family (aux: any aux_* column); ``detection_or_structure`` also counts a
+  confirmed STRUCTURE step of the same family (the lag-state block of the proxy for thermal_lag,
+  the second thermometer for board_temp: the structure phase of diagnose runs first and may
+  take the injected effect as the device's structure);
 * ``false_discovery``: among clean runs, the fraction with verdict "effect found"; also split by
   run type (``mr_control``: clean MR runs) and ``structural_only`` (clean runs whose confirmed
   steps are all structural, verdict "model structure improved": another rate estimator or
-  regress-then-reverse, not an effect);
+  the lag-state block, the second thermometer or the combiner, not an effect);
 * ``clean_found_not_generalizing``: clean runs with "effect found" whose final model is not
   better than the base model on an independent THIRD run (3 degC/min, power-on 2, noise 2):
   a found "effect" that does not generalize is a false discovery in the strict sense; one that
@@ -46,9 +49,7 @@ import warnings
 
 import numpy as np
 
-from host_tools.compensate import fit_config_from_logs
-from host_tools.diagnose import _score, diagnose, error_stats
-from host_tools.fit import fit_logs
+from host_tools.diagnose import _score, base_model, base_options, diagnose, error_stats
 from host_tools.sim_foreign import EFFECTS, EFFECT_KINDS, foreign_device, simulate_foreign
 
 SEED_STRIDE = 100000
@@ -79,9 +80,8 @@ def _named(kind: str, family: str) -> bool:
 
 
 def _base_model(train):
-    """The loop's starting model: 16 terms, diff rate estimator, trend combiner for MR."""
-    cfg = fit_config_from_logs([train], reversal={"combiner": "trend", "settle_s": 0.0} if train.reversal else None)
-    return fit_logs([train], cfg, "all", drop_unidentifiable=True)[0]
+    """The loop's starting model: the product default of ``hdrg fit`` (diagnose.base_model)."""
+    return base_model([train], base_options(reversal=train.reversal))[0]
 
 
 def _base_error(train, hold) -> float:
@@ -107,13 +107,15 @@ def run_one(spec: dict, duration_s=None, n_surrogates=None) -> dict:
             ctrain = simulate_foreign(dev, 4.0, rev, 0, 0, duration_s=duration_s)
             chold = simulate_foreign(dev, 2.0, rev, 1, 1, duration_s=duration_s)
             ratio = _score(rep["baseline"]["holdout"])[0] / _base_error(ctrain, chold)
-    steps = [{"effect": it["effect"], "params": it["params"], "confirmed": it["confirmed"],
+    steps = [{"effect": it["effect"], "params": it["params"], "kind": it["kind"], "confirmed": it["confirmed"],
               "before": _score(it["before"])[0], "after": _score(it["after"])[0]} for it in rep["iterations"]]
     return {**spec, "verdict": rep["verdict"], "steps": steps,
             "base": _score(rep["baseline"]["holdout"])[0], "final": _score(rep["final"])[0],
             "third_base": base3, "third_final": final3,
-            "effect_ratio": ratio, "named": bool(eff and any(s["confirmed"] and _named(eff, s["effect"])
-                                                           for s in steps)),
+            "effect_ratio": ratio,
+            "named": bool(eff and any(s["confirmed"] and s["kind"] == "effect" and _named(eff, s["effect"])
+                                      for s in steps)),
+            "named_or_structure": bool(eff and any(s["confirmed"] and _named(eff, s["effect"]) for s in steps)),
             "artifacts": [a["period_s"] for a in (rep["artifacts"] or {}).get("lines", [])],
             "seconds": round(time.time() - t0, 2)}
 
@@ -130,12 +132,15 @@ def summarize(records: list) -> dict:
     structural = [r for r in records if r["verdict"] == "model structure improved"]
     confirmed = [s for r in records for s in r["steps"] if s["confirmed"]]
     struct = [r for r in clean if r["verdict"] == "model structure improved"]
-    per_kind = {}
+    per_kind, per_kind_s = {}, {}
     for kind in EFFECT_KINDS:
         rs = [r for r in matters if r["effect"] == kind]
         per_kind[kind] = _frac(sum(r["named"] for r in rs), len(rs))
+        per_kind_s[kind] = _frac(sum(r.get("named_or_structure", r["named"]) for r in rs), len(rs))
     return {"runs": len(records), "effect_runs": sum(1 for r in records if r["effect"]),
             "detection": _frac(sum(r["named"] for r in matters), len(matters)), "detection_per_kind": per_kind,
+            "detection_or_structure": _frac(sum(r.get("named_or_structure", r["named"]) for r in matters), len(matters)),
+            "detection_or_structure_per_kind": per_kind_s,
             "false_discovery": _frac(sum(r["verdict"] == "effect found" for r in clean), len(clean)),
             "false_discovery_ftr": _frac(sum(r["verdict"] == "effect found" for r in clean if not r["reversal"]),
                                          sum(1 for r in clean if not r["reversal"])),
@@ -185,6 +190,8 @@ def configure_cli(parser) -> None:
                         help="instead: summarize the records of these --json files together")
     parser.add_argument("--duration", type=float, default=None, help="cut every run to this many seconds")
     parser.add_argument("--json", default=None, metavar="FILE", help="write records and summary to FILE")
+    parser.add_argument("--hdrg-clean", action="store_true",
+                        help="instead: false discovery on 20 clean runs of hdrg's own simulator (FTR/MR, 1 and 2 cycles)")
     parser.add_argument("--measured", default=None, metavar="DIR",
                         help="instead: run the loop on the measured logs (held out by leg and by blocks), "
                              "figures and measured.json into DIR")
@@ -196,6 +203,16 @@ def _line(name, f):
 
 
 def run_cli(args) -> int:
+    if args.hdrg_clean:
+        rows = hdrg_clean_study(progress=lambda m: print(m, file=sys.stderr, flush=True))
+        fd = sum(r["verdict"] == "effect found" for r in rows)
+        st = sum(r["verdict"] == "model structure improved" for r in rows)
+        print(f"hdrg-sim clean runs: {len(rows)}, 'effect found' {fd} ({100 * fd / len(rows):.1f} %), "
+              f"'model structure improved' {st}")
+        if args.json:
+            with open(args.json, "w", encoding="utf-8") as fh:
+                json.dump(rows, fh, indent=1)
+        return 0
     if args.measured:
         import os
         res = measured_study(args.measured, progress=lambda m: print(m, file=sys.stderr, flush=True))
@@ -228,10 +245,13 @@ def run_cli(args) -> int:
     print(_line("detection (ratio >= 2)", s["detection"]))
     for kind, f in s["detection_per_kind"].items():
         print(_line(f"  {kind}", f))
+    print(_line("detection, effect or structure", s["detection_or_structure"]))
+    for kind, f in s["detection_or_structure_per_kind"].items():
+        print(_line(f"  {kind}", f))
     print(_line("false discovery (clean)", s["false_discovery"]))
     print(_line("  FTR clean", s["false_discovery_ftr"]))
     print(_line("  MR control", s["mr_control"]))
-    print(f"  clean runs with 'model structure improved' (rate estimator / regress-then-reverse): {s['structural_only']}")
+    print(f"  clean runs with 'model structure improved' (rate estimator, lag block, board_temp, combiner): {s['structural_only']}")
     print(f"  clean runs with 'effect found' that do NOT improve an independent third run: "
           f"{s['clean_found_not_generalizing']}; their third-run gains (base/final): {s['clean_found_third_run_gain']}")
     print(f"  'effect found' runs worse on the third run: {s['found_third_run_worse']}")
@@ -242,6 +262,34 @@ def run_cli(args) -> int:
             json.dump(res, fh, indent=1)
             fh.write("\n")
     return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# hdrg's own simulator, clean runs (`hdrg bench loop --hdrg-clean`)
+# ---------------------------------------------------------------------------------------------
+
+HDRG_OFF = ("turn_on", "electronics", "damping_asym")      # the clean world of tests/test_diagnose.py
+
+
+def hdrg_clean_study(progress=None) -> list:
+    """False discovery on clean runs of host_tools.sim: FTR and MR (paper-ftr-cycle-4dpm,
+    paper-mr-cycle-4dpm), short (one 2-degC/min cycle, 4800 s) and long (two, 9600 s), 5 seed
+    triples each (seeds b+1, b+3 train, b+2 held out; b = 100, 110, .., 140)."""
+    from host_tools import sim
+    rows = []
+    for scen in ("paper-ftr-cycle-4dpm", "paper-mr-cycle-4dpm"):
+        for n_cyc in (1, 2):
+            prof = sim.cycle_profile(2.0, hold_s=1200, n_cycles=n_cyc)
+            for base in range(100, 150, 10):
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    logs = [sim.simulate(scen, seed=base + k, off=list(HDRG_OFF), profile=prof) for k in (1, 3, 2)]
+                    rep, _ = diagnose(logs[:2], logs[2:], plots=False)
+                rows.append({"scenario": scen, "cycles": n_cyc, "seed": base, "verdict": rep["verdict"],
+                             "steps": [(i["effect"], i["confirmed"]) for i in rep["iterations"]]})
+                if progress:
+                    progress(str(rows[-1]))
+    return rows
 
 
 # ---------------------------------------------------------------------------------------------
@@ -319,8 +367,7 @@ def measured_study(out_dir: str, root: str = MEASURED_ROOT, progress=None) -> di
 
 
 def _measured_base(train):
-    cfg = fit_config_from_logs([train])
-    return fit_logs([train], cfg, "all", drop_unidentifiable=True)[0]
+    return _base_model(train)
 
 
 def _measured_figure(key, hold, base_model, final_model, out_dir) -> str:
@@ -333,7 +380,7 @@ def _measured_figure(key, hold, base_model, final_model, out_dir) -> str:
     from host_tools import metrics
     from host_tools.compensate import compensate
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
-    for label, m, style in (("base model (16 terms)", base_model, "--"), ("after the loop", final_model, "-")):
+    for label, m, style in (("base model (hdrg fit default)", base_model, "--"), ("after the loop", final_model, "-")):
         out = compensate(hold, m)
         v = np.asarray(out["valid"]) == 1
         a = metrics.allan(out.rate_dph, hold.t_s, v)

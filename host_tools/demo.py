@@ -73,14 +73,14 @@ def _close_the_loop(args) -> None:
     out_dir = os.path.join(args.out, "diagnose")
     rep, _ = diagnose(train, hold, out_dir=out_dir, progress=lambda msg: print(f"   ... {msg}", flush=True))
     keys = ("std_dph", "pp_dph", "std100_dph", "pp100_dph")
-    print("| iteration | effect added | parameters | held-out before: std 1 s, p-p 1 s, std 100 s, p-p 100 s "
+    print("| iteration | step (structure / effect) | parameters | held-out before: std 1 s, p-p 1 s, std 100 s, p-p 100 s "
           "| after | held-out |\n|---|---|---|---|---|---|")
     for k, it in enumerate(rep["iterations"], 1):
         params = ", ".join(f"{key}={val:.4g}" if isinstance(val, float) else f"{key}={val}"
                            for key, val in it["params"].items())
         before = " / ".join(f"{it['before'][key]:.3f}" for key in keys)
         after = " / ".join(f"{it['after'][key]:.3f}" for key in keys)
-        print(f"| {k} | {it['effect']} | {params} | {before} | {after} | {it['status']} |")
+        print(f"| {k} | {it['effect']} ({it.get('kind', 'effect')}) | {params} | {before} | {after} | {it['status']} |")
     print(f"   {rep['verdict_detail']}")
     print(f"   verdict: {rep['verdict']}; final held-out: "
           + ", ".join(f"{key} {rep['final'][key]:.3f}" for key in keys) + " deg/h")

@@ -4,9 +4,13 @@ model lacks, add that effect through the auxiliary term k7, and report the error
 
 Procedure (:func:`diagnose`)
 ----------------------------
-1. **Fit** the current model on the training runs (host_tools.fit.fit_logs; default the paper's 16
-   terms, the trend combiner for mode-reversal logs; ``--proxy``, ``--rate-estimator``,
-   ``--terms``, ``--combiner`` as in ``hdrg fit``).
+1. **Fit** the starting model on the training runs exactly as ``hdrg fit`` does with its defaults
+   (:func:`base_options` / :func:`base_model`: the options not given are None, so
+   host_tools.compensate's DEFAULT_RATE / DEFAULT_ORDER / DEFAULT_COMBINER / DEFAULT_TERMS apply:
+   one place); ``--proxy``, ``--rate-estimator``, ``--terms``, ``--order``, ``--combiner`` as in
+   ``hdrg fit``.  A regress_first model (two coefficient banks by mode) is scanned with the banked
+   design: every column once per mode, on the per-mode used samples, target c = s * rate, raw
+   noise surrogates (no combiner in the target).
 2. **Residual** = the model's target (FTR output or mode-reversal combined output) minus the
    model, on the valid samples; characterized per run (:func:`characterize`): Allan deviation
    against the white-noise line extrapolated from the shortest tau (taus where it is > 2x that line
@@ -62,9 +66,16 @@ Procedure (:func:`diagnose`)
    (A rate_estimator winner changes the model's rate estimator instead.)  **Confirm** it on the
    held-out runs (:data:`CONFIRM_RULE`): if the held-out error does not drop, the step is
    reported ``confirmed: false`` and reverted, its family is not offered again.  Iterate while a
-   candidate passes the rule, at most ``max_iter`` (3) times.  Then, for mode-reversal logs, the
-   structural candidate regress-then-reverse (:func:`_order_step`: per-mode banks, each combiner,
-   whole-model CV), confirmed the same way.
+   candidate passes the rule, at most ``max_iter`` (3) times per phase.  **Structure first**
+   (:data:`PHASES`): phase 1 offers only the structural candidates (:func:`kind_of`: the rate
+   estimator, the lag-state block of the proxy, board_temp = the second thermometer, lags <=
+   STRUCT_TAU_FRACTION of the run), then for mode-reversal logs the order/combiner
+   (:func:`_order_step`: regress_first with each other combiner, whole-model CV), confirmed the
+   same way; phase 2 offers the effect families on the residual of the structured base.  Steps
+   carry ``kind`` 'structure' / 'effect'; the verdict is "effect found" only for a kept effect
+   step.  The confirmation (:data:`CONFIRM_RULE`) also counts the mean offset: per held-out run,
+   the quadratic mean over its legs (gap-free segments) of their rms with the mean may rise by at
+   most CONFIRM_TOL_RMS (:func:`offsets_hold`).
 6. **Report**: per iteration the effect, its parameters, the evidence (CV gain, threshold, folds,
    ranking; PNG: residual vs the candidate, Allan deviation and spectrum before/after) and the
    error before and after (:func:`error_stats`: stability 1 sigma and variation p-p of 1-s and
@@ -94,7 +105,7 @@ from firmware_ref.terms import K_AUX, TERM_NAMES
 from host_tools import effects, metrics
 from host_tools import runlog as rl
 from host_tools.atomic import atomic_open, atomic_path
-from host_tools.compensate import compensate, fit_config_from_logs, prepare
+from host_tools.compensate import compensate, fit_config_from_logs, prepare, residual
 from host_tools.fit import fit_logs
 from host_tools.model import BiasModel, jsonable
 from host_tools.regressors import AuxConfig, generator_values, regressor_matrix
@@ -117,9 +128,13 @@ REPORT_TAUS = (1.0, 100.0)
 TOP_RANKING = 12
 CONFIRM_MIN_DROP = 0.05      # a confirmed step lowers the held-out error by >= 5 % ...
 CONFIRM_TOL_1S = 0.01        # ... and raises the held-out 1-s std by at most 1 %
+CONFIRM_TOL_RMS = 0.05      # ... and raises no held-out run's leg rms (mean offsets included) by more than 5 %
+RMS_MIN_SAMPLES = 10         # a leg (gap-free segment) needs this many valid samples to count
 CONFIRM_RULE = ("a step is confirmed iff, on the held-out runs, the std of 100-s averages (1-s where "
-                "100 s is undefined) drops by >= 5 % and the std of 1-s averages rises by at most 1 %; an "
-                "unconfirmed step is reverted and its family not offered again")
+                "100 s is undefined) drops by >= 5 %, the std of 1-s averages rises by at most 1 % and, per "
+                "held-out run, the leg rms (quadratic mean over its gap-free segments of each segment's rms, "
+                "mean offset included) rises by at most 5 %; an unconfirmed step is reverted and its family "
+                "not offered again")
 SCORE_TAU_S = 1.0            # the CV scores bin means of this many seconds (the report's shortest tau)
 TIE_TOLERANCE = 0.05         # gains within 5 % (relative) of the best are a tie: prefer the proxy
 
@@ -452,6 +467,12 @@ def _noise_series(nm, n, count, rng) -> np.ndarray:
     return out
 
 
+def _combined(cfg) -> bool:
+    """The model's target is a combiner output (mode reversal, order combine_first); regress_first
+    regresses the per-sample signed output (the noise is raw)."""
+    return cfg.reversal is not None and cfg.reversal.order != "regress_first"
+
+
 def surrogates(nm, log, cfg, count, rng, project=None):
     """``(noise, residual)``: ``count`` surrogate noise series (n, count) of a training log from
     its noise model ``nm`` (:func:`noise_model`; absolute level, not rescaled to the residual)
@@ -463,7 +484,7 @@ def surrogates(nm, log, cfg, count, rng, project=None):
         z = np.zeros((n, count))
         return z, z
     w = _noise_series(nm, n, count, rng)
-    if cfg.reversal is not None:
+    if _combined(cfg):
         from host_tools.reversal import combine_values
         mode = np.asarray(log.mode, np.int64)
         ok = np.ones(n, np.bool_)
@@ -601,14 +622,31 @@ def characterize(log, resid, valid, fs, v=None) -> dict:
 # error statistics
 # ---------------------------------------------------------------------------------------------
 
-STAT_KEYS = ("std_dph", "pp_dph", "std100_dph", "pp100_dph")
+STAT_KEYS = ("std_dph", "pp_dph", "std100_dph", "pp100_dph", "rms_dph")
+
+
+def leg_rms(y, valid, segments) -> list:
+    """rms [deg/h] of the valid samples of ``y`` per gap-free segment (a held-out leg), the MEAN
+    OFFSET INCLUDED (a static record's compensated output should be 0 after the fit's k0); None
+    for a segment with fewer than RMS_MIN_SAMPLES valid samples."""
+    y = np.asarray(y, np.float64)
+    ok = np.asarray(valid, bool) & np.isfinite(y)
+    bounds = list(np.asarray(segments, np.int64)) + [len(y)]
+    out = []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        v = y[a:b][ok[a:b]]
+        out.append(float(np.sqrt(np.mean(v ** 2))) if len(v) >= RMS_MIN_SAMPLES else None)
+    return out
 
 
 def _stats_one(y, t, valid) -> dict:
+    """STAT_KEYS of one output: std / pp of 1-s and 100-s averages, rms with the mean [deg/h]."""
     m = metrics.bias_metrics(y, t, valid, taus=REPORT_TAUS)
     r1, r100 = metrics.at_tau(m, 1.0), metrics.at_tau(m, 100.0)
+    ok = np.asarray(valid, bool) & np.isfinite(y)
     return {"std_dph": r1["stability_dph"], "pp_dph": r1["variation_dph"],
-            "std100_dph": r100["stability_dph"], "pp100_dph": r100["variation_dph"]}
+            "std100_dph": r100["stability_dph"], "pp100_dph": r100["variation_dph"],
+            "rms_dph": float(np.sqrt(np.mean(np.asarray(y)[ok] ** 2))) if ok.any() else None}
 
 
 def _mean_stats(rows) -> dict:
@@ -631,7 +669,8 @@ def error_stats(logs, model: BiasModel, other: BiasModel | None = None) -> dict:
         valid = np.asarray(out["valid"]) == 1
         if other is not None:
             valid &= np.asarray(compensate(log, other)["valid"]) == 1
-        rows.append({"run": log.source, **_stats_one(out.rate_dph, log.t_s, valid)})
+        rows.append({"run": log.source, **_stats_one(out.rate_dph, log.t_s, valid),
+                     "rms_legs_dph": leg_rms(out.rate_dph, valid, log.segments)})
     return {**_mean_stats(rows), "runs": rows}
 
 
@@ -639,7 +678,7 @@ def _residuals(logs, model):
     res = []
     for log in logs:
         pr = prepare(log, model)
-        res.append((pr, pr.y - model.evaluate(pr.u, pr.v, pr.z)))
+        res.append((pr, residual(pr, model)[0]))
     return res
 
 
@@ -675,9 +714,24 @@ def _poly_terms(model) -> tuple:
     return tuple(k for k in model.terms if k != K_AUX)
 
 
+def _banked(pr, A):
+    """A regress_first model has one coefficient bank per mode: the columns of A (n, m) become
+    (n, 2m), A on mode-1 samples then A on mode-2 samples (zero elsewhere); other orders: A."""
+    A = np.asarray(A, np.float64)
+    if getattr(pr, "order", None) != "regress_first":
+        return A
+    A = A.reshape(len(A), -1)
+    return np.column_stack([A * (pr.mode == 1)[:, None], A * (pr.mode == 2)[:, None]])
+
+
+def _fit_mask(pr):
+    """The samples a fit uses: the combined valid samples, or the per-mode used samples of regress_first."""
+    return pr.used if getattr(pr, "order", None) == "regress_first" else pr.valid
+
+
 def _design(pr, poly, gen_cols):
     X = regressor_matrix(pr.u, pr.v)[:, list(poly)]
-    return np.column_stack([X] + list(gen_cols)) if gen_cols else X
+    return _banked(pr, np.column_stack([X] + list(gen_cols)) if gen_cols else X)
 
 
 def _explicit_weights(train, cfg, poly, gen_terms) -> list:
@@ -689,14 +743,16 @@ def _explicit_weights(train, cfg, poly, gen_terms) -> list:
         pr = prepare(log, replace(cfg, aux=AuxConfig()))
         cols = [generator_values(log, t, fs) for t in gen_terms]
         X = _design(pr, poly, cols)
-        Xs.append(X[pr.valid])
-        ys.append(pr.y[pr.valid])
+        Xs.append(X[_fit_mask(pr)])
+        ys.append(pr.y[_fit_mask(pr)])
     X = np.concatenate(Xs)
     y = np.concatenate(ys)
     norms = np.sqrt(np.einsum("ij,ij->j", X, X))
     norms[norms == 0] = 1.0
     c = np.linalg.lstsq(X / norms, y, rcond=None)[0] / norms
-    cg = c[len(poly):]
+    m = len(poly) + len(gen_terms)
+    banks = [c[b * m + len(poly):(b + 1) * m] for b in range(len(c) // m)]
+    cg = max(banks, key=lambda b: float(np.sum(np.abs(b))))   # regress_first: the larger bank's ratios
     total = float(np.sum(np.abs(cg)))
     if not total > 0:
         raise ValueError("the accepted generators have zero weight in the explicit refit")
@@ -746,37 +802,79 @@ def _score(stats):
 
 def confirmed_on_holdout(before, after) -> bool:
     """CONFIRM_RULE: the held-out std of 100-s averages (1-s where 100 s is undefined) drops by at
-    least CONFIRM_MIN_DROP and the held-out std of 1-s averages does not rise by more than
-    CONFIRM_TOL_1S (relative)."""
+    least CONFIRM_MIN_DROP, the held-out std of 1-s averages does not rise by more than
+    CONFIRM_TOL_1S (relative) and no held-out run or leg has its rms, mean offset included, raised
+    by more than CONFIRM_TOL_RMS (:func:`offsets_hold`)."""
     p0, s0 = _score(before)
     p1, s1 = _score(after)
     if p0 is None or p1 is None:
         return False
     return bool(p1 <= p0 * (1.0 - CONFIRM_MIN_DROP)
-                and (s0 is None or s1 is None or s1 <= s0 * (1.0 + CONFIRM_TOL_1S)))
+                and (s0 is None or s1 is None or s1 <= s0 * (1.0 + CONFIRM_TOL_1S))
+                and offsets_hold(before, after))
 
 
-def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator="diff", rate_n=8, rate_shift=4,
-             terms="all", combiner="trend", settle_s=0.0, proxy_range=None, rate_range=None,
+def _leg_rms(run) -> float | None:
+    """Quadratic mean over a run's legs of their rms (mean offsets included), each leg weighted
+    equally (a short leg moved by tens of deg/h counts as much as a long one)."""
+    legs = [x for x in (run.get("rms_legs_dph") or []) if x is not None]
+    return float(np.sqrt(np.mean(np.square(legs)))) if legs else run.get("rms_dph")
+
+
+def offsets_hold(before, after) -> bool:
+    """The mean-offset part of CONFIRM_RULE: per held-out run (``runs`` of error_stats, same order)
+    the leg rms (:func:`_leg_rms`: each gap-free segment's rms with its mean offset, quadratic mean
+    over the segments; one segment: the run's rms) rises by at most CONFIRM_TOL_RMS: a step that
+    moves a held-out leg by tens of deg/h while the std drops is not an improvement.  (Each leg
+    on its own is not required to improve: on a blocks split a step that halves the run's rms
+    may still move one quiet block by a few deg/h.)  True when no run carries the rms."""
+    for b, a in zip(before.get("runs", []), after.get("runs", [])):
+        r0, r1 = _leg_rms(b), _leg_rms(a)
+        if r0 is not None and r1 is not None and r1 > r0 * (1.0 + CONFIRM_TOL_RMS):
+            return False
+    return True
+
+
+def base_options(*, proxy=None, rate_estimator=None, rate_n=None, rate_shift=None, combiner=None, order=None,
+                 settle_s=0.0, proxy_range=None, rate_range=None, reversal=False) -> dict:
+    """The keyword arguments of host_tools.compensate.fit_config_from_logs for the loop's starting
+    model: every option the user did not give is None there, so the starting model is the product
+    default of ``hdrg fit`` (compensate.DEFAULT_RATE / DEFAULT_ORDER / DEFAULT_COMBINER, the one
+    place those are defined)."""
+    return dict(proxy_kind=proxy, rate_estimator=rate_estimator, n=rate_n, shift=rate_shift,
+                proxy_range=proxy_range, rate_range=rate_range,
+                reversal={"combiner": combiner, "settle_s": settle_s, "order": order} if reversal else None)
+
+
+def base_model(train, opts, terms=None):
+    """(model, config): the loop's starting model, fitted like ``hdrg fit`` (host_tools.fit.fit_logs;
+    ``terms`` None -> compensate.DEFAULT_TERMS; terms the data cannot identify are dropped)."""
+    cfg = _config(train, opts)
+    return fit_logs(train, cfg, terms, drop_unidentifiable=True)[0], cfg
+
+
+def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, rate_n=None, rate_shift=None,
+             terms=None, combiner=None, order=None, settle_s=0.0, proxy_range=None, rate_range=None,
              max_iter=MAX_ITER, n_surrogates=N_SURROGATES, g_min=G_MIN, cv_blocks=CV_BLOCKS,
              cv_folds=CV_FOLDS, seed=0, families=None, rate_alternatives=True, out_dir=None,
-             plots=True, progress=None) -> tuple:
+             plots=True, progress=None, phases=None) -> tuple:
     """Run the closed loop (module doc) on RunLogs.  Returns ``(report, model)``: the report dict
     (the JSON of the module doc) and the final BiasModel (the last step confirmed on the held-out
     runs; without held-out runs the last accepted one).  With ``out_dir`` the files are written
-    there (:func:`write_report`).  ``progress``: a callable(str) told what is being done."""
+    there (:func:`write_report`).  ``progress``: a callable(str) told what is being done.
+    ``phases``: the phases to run (default both, structure first; ``("effect",)`` searches the
+    effects on the starting model as it is, e.g. to test one effect family)."""
     say = progress or (lambda msg: None)
     train = list(train_logs)
     hold = list(holdout_logs)
     if not train:
         raise ValueError("no training runs")
     rev = any(log.reversal for log in train)
-    opts = dict(proxy_kind=proxy, rate_estimator=rate_estimator, n=rate_n, shift=rate_shift,
-                proxy_range=proxy_range, rate_range=rate_range,
-                reversal={"combiner": combiner, "settle_s": settle_s, "order": "combine_first"} if rev else None)
-    cfg = _config(train, opts)
+    opts = base_options(proxy=proxy, rate_estimator=rate_estimator, rate_n=rate_n, rate_shift=rate_shift,
+                        combiner=combiner, order=order, settle_s=settle_s, proxy_range=proxy_range,
+                        rate_range=rate_range, reversal=rev)
     say(f"fitting the base model on {len(train)} training run(s)")
-    model, _ = fit_logs(train, cfg, terms, drop_unidentifiable=True)
+    model, cfg = base_model(train, opts, terms)
     poly = _poly_terms(model)
     evals = hold if hold else train
     rng = np.random.default_rng(seed)
@@ -798,81 +896,100 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator="diff", 
               "noise_floor": noise_floor(evals, model)}
     characterization = None
     artifacts = None
-    for it in range(1, max_iter + 1):
-        say(f"iteration {it}: scoring the candidate effects (CV, {n_surrogates} noise-model surrogates)")
-        scan = _scan(train, cfg, model, poly, gen_terms, rng, n_surrogates, g_min, cv_blocks, cv_folds,
-                     families, rate_alternatives and rate_choice is None, frozenset(excluded))
-        if characterization is None:
-            characterization = {"train": scan["characterization"],
-                                "holdout": [characterize(log, r, pr.valid, cfg.rate.fs, pr.v)
-                                            for log, (pr, r) in zip(hold, _residuals(hold, model))],
-                                "noise_models": [jsonable(nm, skip_private=True) if nm else None
-                                                 for nm in scan["noise_models"]]}
-            artifacts = {"lines": scan["artifacts"], "combiner_lines": scan["combiner_lines"]}
-        if not scan["accept"]:
-            stopped = {k: scan[k] for k in ("best", "threshold", "ranking", "reason", "null_max")}
-            break
-        best = scan["winner"]
-        say(f"iteration {it}: {best['label']} passes (CV gain {best['gain']:.3f} >= {scan['threshold']:.3f}); "
-            f"refitting and checking it on the {'held-out' if hold else 'training'} runs")
-        before_model, before_cfg, before_gen, before_rate = model, cfg, gen_terms, rate_choice
-        before = error_stats(evals, model)
-        if best["family"] == "rate_estimator":
-            bp = best["params"]
-            rate_choice = {"estimator": bp["estimator"], "n": bp.get("n", rate_n), "shift": bp.get("shift", rate_shift)}
-            acc = _Accepted("rate_estimator", dict(best["params"]), [], rate_choice)
-        else:
-            acc = _Accepted(best["family"], dict(best["params"]), [dict(t) for t in best["terms"]])
-            gen_terms = gen_terms + acc.terms
-        cfg = _config(train, opts, rate=rate_choice)
-        if gen_terms:
-            weighted = _explicit_weights(train, cfg, poly, gen_terms)
-            cfg = replace(cfg, aux=AuxConfig.from_terms(weighted, cfg.rate.fs))
-            model, _ = fit_logs(train, cfg, tuple(poly) + (K_AUX,), drop_unidentifiable=True)
-        else:
-            model, _ = fit_logs(train, cfg, tuple(poly), drop_unidentifiable=True)
-        after = error_stats(evals, model)
-        if model.config.rate != before_model.config.rate:      # compare on the common valid samples
-            confirmed = confirmed_on_holdout(error_stats(evals, before_model, model),
-                                             error_stats(evals, model, before_model)) if hold else None
-        else:
-            confirmed = confirmed_on_holdout(before, after) if hold else None
-        entry = {"effect": acc.family, "params": acc.params, "before": _clean(before), "after": _clean(after),
-                 "confirmed": confirmed,
-                 "train_before": _clean(error_stats(train, before_model)) if hold else _clean(before),
-                 "train_after": _clean(error_stats(train, model)) if hold else _clean(after),
-                 "cv_gain": best["gain"], "threshold": scan["threshold"], "refined_from": best["coarse"],
-                 "folds_improved": best["folds_improved"], "folds": best["folds"],
-                 "ranking": scan["ranking"], "null_max": scan["null_max"],
-                 "aux": model.config.aux.to_dict(), "rate": model.config.rate.to_dict(),
-                 "before_runs": before["runs"], "after_runs": after["runs"]}
-        entry["_plot"] = (before_model, model, best)
-        iterations.append(entry)
-        if confirmed is False:
-            say(f"iteration {it}: {acc.family} NOT confirmed on the held-out runs "
-                f"({_fmt(_score(before)[0])} -> {_fmt(_score(after)[0])} deg/h): reverted")
-            entry["status"] = "not confirmed on held-out: reverted (the model stays the last confirmed one)"
-            model, cfg, gen_terms, rate_choice = before_model, before_cfg, before_gen, before_rate
-            excluded.add(acc.family)
-        else:
-            entry["status"] = "confirmed on held-out" if confirmed else "accepted (no held-out runs)"
-            accepted.append(acc)
-    else:
-        if max_iter > 0:
-            stopped = {"reason": f"max_iter ({max_iter}) reached", "best": None, "threshold": None,
-                       "ranking": [], "null_max": []}
-    if rev and max_iter > 0:
-        say("structural candidates: regress-then-reverse (per-mode banks) with each combiner, by CV")
-        entry, alt_model = _order_step(train, hold, evals, cfg, model, cv_blocks, cv_folds)
-        if entry is not None:
+    it = 0
+    stops = {}
+    # structure first (module doc): the model's own structure (rate estimator, lag-state block of
+    # the proxy, second thermometer, order/combiner), then the effects on the structured base
+    phases = PHASES if phases is None else tuple(phases)
+    unknown = set(phases) - set(PHASES)
+    if unknown:
+        raise ValueError(f"unknown diagnose phases {sorted(unknown)}: choose from {PHASES}")
+    for phase in [p for p in PHASES if p in phases]:
+        stopped = None
+        for _ in range(max_iter):
+            it += 1
+            say(f"iteration {it} ({phase}): scoring the {phase} candidates (CV, {n_surrogates} noise-model surrogates)")
+            scan = _scan(train, cfg, model, poly, gen_terms, rng, n_surrogates, g_min, cv_blocks, cv_folds,
+                         families, rate_alternatives and rate_choice is None, frozenset(excluded), phase=phase)
+            if characterization is None:
+                characterization = {"train": scan["characterization"],
+                                    "holdout": [characterize(log, r, pr.valid, cfg.rate.fs, pr.v)
+                                                for log, (pr, r) in zip(hold, _residuals(hold, model))],
+                                    "noise_models": [jsonable(nm, skip_private=True) if nm else None
+                                                     for nm in scan["noise_models"]]}
+                artifacts = {"lines": scan["artifacts"], "combiner_lines": scan["combiner_lines"]}
+            if not scan["accept"]:
+                stopped = {k: scan[k] for k in ("best", "threshold", "ranking", "reason", "null_max")}
+                stopped["phase"] = phase
+                break
+            best = scan["winner"]
+            say(f"iteration {it}: {best['label']} passes (CV gain {best['gain']:.3f} >= {scan['threshold']:.3f}); "
+                f"refitting and checking it on the {'held-out' if hold else 'training'} runs")
+            before_model, before_cfg, before_gen, before_rate = model, cfg, gen_terms, rate_choice
+            before = error_stats(evals, model)
+            if best["family"] == "rate_estimator":
+                bp = best["params"]
+                rate_choice = {"estimator": bp["estimator"], "n": bp.get("n", cfg.rate.n), "shift": bp.get("shift", cfg.rate.shift)}
+                acc = _Accepted("rate_estimator", dict(best["params"]), [], rate_choice)
+            else:
+                acc = _Accepted(best["family"], dict(best["params"]), [dict(t) for t in best["terms"]])
+                gen_terms = gen_terms + acc.terms
+            cfg = _config(train, opts, rate=rate_choice)
+            if gen_terms:
+                weighted = _explicit_weights(train, cfg, poly, gen_terms)
+                cfg = replace(cfg, aux=AuxConfig.from_terms(weighted, cfg.rate.fs))
+                model, _ = fit_logs(train, cfg, tuple(poly) + (K_AUX,), drop_unidentifiable=True)
+            else:
+                model, _ = fit_logs(train, cfg, tuple(poly), drop_unidentifiable=True)
+            after = error_stats(evals, model)
+            if model.config.rate != before_model.config.rate:      # compare on the common valid samples
+                confirmed = confirmed_on_holdout(error_stats(evals, before_model, model),
+                                                 error_stats(evals, model, before_model)) if hold else None
+            else:
+                confirmed = confirmed_on_holdout(before, after) if hold else None
+            entry = {"effect": acc.family, "params": acc.params, "kind": kind_of(acc.family, acc.params),
+                     "before": _clean(before), "after": _clean(after), "confirmed": confirmed,
+                     "train_before": _clean(error_stats(train, before_model)) if hold else _clean(before),
+                     "train_after": _clean(error_stats(train, model)) if hold else _clean(after),
+                     "cv_gain": best["gain"], "threshold": scan["threshold"], "refined_from": best["coarse"],
+                     "folds_improved": best["folds_improved"], "folds": best["folds"],
+                     "ranking": scan["ranking"], "null_max": scan["null_max"],
+                     "aux": model.config.aux.to_dict(), "rate": model.config.rate.to_dict(),
+                     "before_runs": before["runs"], "after_runs": after["runs"]}
+            entry["_plot"] = (before_model, model, best)
             iterations.append(entry)
-            if entry["confirmed"] is not False:
-                model = alt_model
-                accepted.append(_Accepted(entry["effect"], entry["params"]))
-            say(f"structural: {entry['effect']} {entry['params']}: {entry['status']}")
+            if confirmed is False:
+                say(f"iteration {it}: {acc.family} NOT confirmed on the held-out runs "
+                    f"({_fmt(_score(before)[0])} -> {_fmt(_score(after)[0])} deg/h): reverted")
+                entry["status"] = "not confirmed on held-out: reverted (the model stays the last confirmed one)"
+                model, cfg, gen_terms, rate_choice = before_model, before_cfg, before_gen, before_rate
+                excluded.add(_step_key(acc.family, acc.params))
+            else:
+                entry["status"] = "confirmed on held-out" if confirmed else "accepted (no held-out runs)"
+                accepted.append(acc)
+        else:
+            if max_iter > 0:
+                stopped = {"reason": f"max_iter ({max_iter}) reached", "best": None, "threshold": None,
+                           "ranking": [], "null_max": [], "phase": phase}
+        if phase == "structure" and rev and max_iter > 0:
+            say("structural candidates: regress-then-reverse (per-mode banks) with each combiner, by CV")
+            entry, alt_model = _order_step(train, hold, evals, cfg, model, cv_blocks, cv_folds)
+            if entry is not None and "skipped" in entry:
+                report["structural_skipped"] = entry["skipped"]
+                say(entry["skipped"])
+            elif entry is not None:
+                iterations.append(entry)
+                if entry["confirmed"] is not False:
+                    model = alt_model
+                    cfg = replace(cfg, reversal=alt_model.config.reversal)
+                    opts = {**opts, "reversal": {**opts["reversal"], **entry["params"]}}
+                    accepted.append(_Accepted(entry["effect"], entry["params"]))
+                say(f"structural: {entry['effect']} {entry['params']}: {entry['status']}")
+        stops[phase] = stopped
+    stopped = stops.get("effect") or stops.get("structure")
     final = error_stats(evals, model)
     kept = [e for e in iterations if e["confirmed"] is not False]
-    if any(e["effect"] not in STRUCTURAL for e in kept):
+    if any(e["kind"] == "effect" for e in kept):
         verdict = "effect found"
     elif kept:
         verdict = "model structure improved"
@@ -894,7 +1011,21 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator="diff", 
 
 
 ORDER_ALTERNATIVES = ("none", "pair", "trend")   # regress_first with each combiner
-STRUCTURAL = ("rate_estimator", "reversal_order")  # steps that change the model's structure, not an effect
+STRUCTURAL = ("rate_estimator", "reversal_order", "board_temp")  # families that are the model's structure
+PHASES = ("structure", "effect")
+STRUCT_TAU_FRACTION = 0.25   # structure phase: lags (block, second thermometer) <= this x the longest run
+
+
+def kind_of(family, params) -> str:
+    """'structure' for a step that changes the model's own structure (rate estimator, order /
+    combiner, the lag-state polynomial block of the proxy, the second thermometer and its lag),
+    'effect' for an added effect regressor (module doc, step 3)."""
+    return "structure" if family in STRUCTURAL or (family == "thermal_lag" and "order" in params) else "effect"
+
+
+def _step_key(family, params) -> str:
+    """The name under which a reverted step is not offered again: the family; the lag block apart."""
+    return "thermal_lag_block" if family == "thermal_lag" and "order" in params else family
 
 
 def _fold_logs(train, cv_blocks, cv_folds) -> list:
@@ -936,6 +1067,8 @@ def _order_step(train, hold, evals, cfg, model, cv_blocks, cv_folds):
         return None, None
     rows = []
     for comb in ORDER_ALTERNATIVES:
+        if rc.order == "regress_first" and comb == rc.combiner:
+            continue
         alt = replace(cfg, reversal=ReversalConfig(comb, rc.max_stale_s, rc.settle_s, order="regress_first"))
         e = cv(alt)
         if e is not None:
@@ -947,9 +1080,16 @@ def _order_step(train, hold, evals, cfg, model, cv_blocks, cv_folds):
     if not (best["gain"] >= CONFIRM_MIN_DROP and best["folds_improved"] > len(folds) // 2):
         return None, None
     alt_model, _ = fit_logs(train, best["cfg"], terms, drop_unidentifiable=True)
+    try:        # the model the loop writes must go to the firmware path (hdrg quantize)
+        from host_tools.quantize import quantize
+        quantize(alt_model, n_random=100)
+    except (ValueError, ArithmeticError) as exc:
+        return {"skipped": f"regress-then-reverse ({best['combiner']}) gains {best['gain']:.3f} in CV but "
+                           f"does not quantize on this build: {exc}"}, None
     before, after = error_stats(evals, model), error_stats(evals, alt_model)
     confirmed = confirmed_on_holdout(before, after) if hold else None
     entry = {"effect": "reversal_order", "params": {"order": "regress_first", "combiner": best["combiner"]},
+             "kind": "structure",
              "before": _clean(before), "after": _clean(after), "confirmed": confirmed,
              "train_before": _clean(error_stats(train, model)), "train_after": _clean(error_stats(train, alt_model)),
              "cv_gain": best["gain"], "threshold": CONFIRM_MIN_DROP, "refined_from": None,
@@ -982,14 +1122,14 @@ def _clean(stats) -> dict:
 
 
 def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_folds, families, rate_alt,
-          excluded=frozenset()):
+          excluded=frozenset(), phase=None):
     """Score every candidate (module doc, steps 3-4) against the current base; returns a dict with
     the ranking, the null, the decision and the (refined) winner."""
     fs = cfg.rate.fs
     preps = [prepare(log, replace(cfg, aux=AuxConfig())) for log in train]
     gen_cols = [[generator_values(log, t, fs) for t in gen_terms] for log in train]
     X_logs = [_design(pr, poly, gc) for pr, gc in zip(preps, gen_cols)]
-    valid = [pr.valid for pr in preps]
+    valid = [_fit_mask(pr) for pr in preps]
     # base fit on all training data: residual per log
     Xv = np.concatenate([X[v] for X, v in zip(X_logs, valid)])
     yv = np.concatenate([pr.y[v] for pr, v in zip(preps, valid)])
@@ -1021,7 +1161,7 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
             out[v] = Qv @ (Qv.T @ W[v])
             return out
 
-        nm = noise_model(r, log.t_s, v, fs, reversal=cfg.reversal is not None)
+        nm = noise_model(r, log.t_s, v, fs, reversal=_combined(cfg))
         noise_models.append(nm)
         sur, sur_resid = surrogates(nm, log, cfg, n_sur, rng, project)
         Y_logs.append(np.column_stack([pr.y, f[:, None] + sur]))
@@ -1037,7 +1177,7 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
     for c in cands:
         if c.family == "periodic":
             c.extra["line"] = True
-    if families is None or "periodic" in families:      # a period grid too: a line may hide under slow residual
+    if (families is None or "periodic" in families) and phase != "structure":      # a period grid too: a line may hide under slow residual
         dur = max(float(log.t_s[-1] - log.t_s[0]) for log in train)
         grid = PERIOD_GRID_MIN_S * PERIOD_GRID_RATIO ** np.arange(64)
         cands += [effects.periodic(float(p)) for p in grid[grid <= dur / 3.0]
@@ -1045,19 +1185,24 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
     # drop candidates equal to an accepted generator
     have = [json.dumps(t, sort_keys=True) for t in gen_terms]
     cands = [c for c in cands if not any(json.dumps(t, sort_keys=True) in have for t in c.terms)
-             and c.family not in excluded]
+             and _step_key(c.family, c.params) not in excluded
+             and (phase is None or (kind_of(c.family, c.params) == "structure") == (phase == "structure"))]
+    dur = max(float(log.t_s[-1] - log.t_s[0]) for log in train)
+    tau_max = STRUCT_TAU_FRACTION * dur if phase == "structure" else dur
+    # a structural lag longer than a quarter of the run is a ramp (aging), not the device's dynamics
+    cands = [c for c in cands if c.params.get("tau_s", 0.0) <= tau_max]
     rows = []
     nsur = Y_logs[0].shape[1] - 1
 
     def evaluate(c):
-        e1 = scanner.score([b.mean(c.columns(log, fs)) for b, log in zip(binners, train)])
+        e1 = scanner.score([b.mean(_banked(pr, c.columns(log, fs))) for b, log, pr in zip(binners, train, preps)])
         g = _gain(e1, e0)
         return {"family": c.family, "label": c.label, "params": dict(c.params), "terms": list(c.terms),
                 "gain": float(g[0]), "folds_improved": int(np.sum(e1[:, 0] < e0[:, 0])), "folds": nfold,
                 "_cand": c, "_null": g[1:]}
 
     rows = [evaluate(c) for c in cands]
-    if gapfree and (families is None or "periodic" in families) and nsur:
+    if gapfree and any(r["family"] == "periodic" for r in rows) and nsur:
         # the periodic candidates are chosen from the residual's own spectrum: repeat that choice
         # on every surrogate (its lines, scored on it; 0 when it has none), so the null of the
         # periodic family counts the selection
@@ -1070,7 +1215,7 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
         for r in rows:
             if r["family"] == "periodic" and r["_cand"].extra.get("line"):
                 r["_null"] = pnull
-    if rate_alt and "rate_estimator" not in excluded:
+    if rate_alt and "rate_estimator" not in excluded and phase != "effect":
         for alt in _rate_alternatives(train, cfg):
             try:
                 acfg = _config_like(train, cfg, alt)
@@ -1079,7 +1224,7 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
             apreps = [prepare(log, replace(acfg, aux=AuxConfig())) for log in train]
             AX = [_design(pr, poly, gc) for pr, gc in zip(apreps, gen_cols)]
             # a longer warm-up changes the valid set: both bases are scored on the common samples
-            cb = [_Binner(log, v & a.valid, fs) for log, v, a in zip(train, valid, apreps)]
+            cb = [_Binner(log, v & _fit_mask(a), fs) for log, v, a in zip(train, valid, apreps)]
             cgroups = cv_groups([np.ones(b.n, bool) for b in cb], cv_blocks, cv_folds)
             Yc = [b.mean(Y) for b, Y in zip(cb, Y_logs)]
             g_base = _Scanner([b.mean(X) for b, X in zip(cb, X_logs)], Yc, cgroups).e0
@@ -1143,9 +1288,8 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
     coarse = best
     cand = best["_cand"]
     if cand is not None and cand.scan:
-        dur = max(float(log.t_s[-1] - log.t_s[0]) for log in train)
         for ratios in (_ratios(cand.scan, 1), _ratios(cand.scan, 2)):
-            trial = [best] + [evaluate(c) for c in effects.refine(cand, ratios, max_value=dur)]
+            trial = [best] + [evaluate(c) for c in effects.refine(cand, ratios, max_value=tau_max)]
             best = max(trial, key=lambda r: r["gain"])
             cand = best["_cand"]
     best = {k: v for k, v in best.items() if not k.startswith("_")}
@@ -1304,11 +1448,13 @@ def _plots(k, plot_info, train, evals, out_dir) -> list:
         if best["terms"]:
             cols = np.column_stack([generator_values(log, t, after_model.config.rate.fs) for t in best["terms"]])
             weights = [t2["weight"] for t2 in after_aux.terms[-len(best["terms"]):]]
-            x = cols @ np.asarray(weights) * after_model.coef[K_AUX]
+            k7 = after_model.coef[K_AUX]
+            if after_model.coef_mode2 is not None:      # two banks: the k7 of the sample's mode
+                k7 = np.where(np.asarray(log.mode) == 2, after_model.coef_mode2[K_AUX], k7)
+            x = cols @ np.asarray(weights) * k7
             xlabel = f"fitted {best['label']} [deg/h]"
         else:
-            pa = prepare(log, after_model)
-            x = (pr.y - after_model.evaluate(pa.u, pa.v, pa.z)) - r
+            x = residual(prepare(log, after_model), after_model)[0] - r
             xlabel = f"{best['label']}: change of the residual [deg/h]"
         v = pr.valid
         ax.plot(x[v], r[v], ",", alpha=0.4, label=os.path.basename(log.source))
@@ -1391,7 +1537,7 @@ def run_cli(args) -> int:
         raise ValueError("--max-iter and --surrogates must be >= 0")
     report, model = diagnose(train, hold, proxy=args.proxy, rate_estimator=args.rate_estimator,
                              rate_n=args.rate_n, rate_shift=args.rate_shift, terms=args.terms,
-                             combiner=args.combiner, settle_s=args.settle, proxy_range=args.proxy_range,
+                             combiner=args.combiner, order=args.order, settle_s=args.settle, proxy_range=args.proxy_range,
                              rate_range=args.rate_range, max_iter=args.max_iter, n_surrogates=args.surrogates,
                              g_min=args.g_min, cv_blocks=args.cv_blocks, cv_folds=args.cv_folds,
                              seed=args.seed, out_dir=args.out, plots=not args.no_plots,

@@ -50,9 +50,16 @@ CASES = {
                     # fast package/resonator nodes: the proxy follows the chamber within ~60 s, so the
                     # hidden node lags the proxy itself by ~1800 s
                     dict(tau_pkg_s=1.0, tau_res_s=60.0), {}),
-    "turn_on": ({"turn_on": {"amp_dph": -3.0, "tau_s": 300.0}}, {}, {}),
+    # the legacy start (combine_first + trend, 16 terms), effect phase only: the model
+    # tests/test_fixed_aux.py's acceptance test quantizes; the default start: test_turn_on_from_the_default_start
+    "turn_on": ({"turn_on": {"amp_dph": -3.0, "tau_s": 300.0}}, {},
+                {"combiner": "trend", "order": "combine_first", "terms": "all", "phases": ("effect",)}),
     "exchange_transient": ({"exchange_transient": {"amp_dph": 3.0, "tau_s": 15.0}}, {}, {}),
-    "imperfect_reversal": ({"imperfect_reversal": {"coef_dph_per_c": 0.5}}, {}, {"combiner": "pair"}),
+    # the effect candidate on the legacy combine-first pipeline (pair), effect phase only: the
+    # structure phase would move to per-mode banks, which represent a mode-only term by themselves
+    # (test_imperfect_reversal_is_taken_by_per_mode_banks)
+    "imperfect_reversal": ({"imperfect_reversal": {"coef_dph_per_c": 0.5}}, {},
+                           {"combiner": "pair", "order": "combine_first", "phases": ("effect",)}),
     "proxy_high_order": ({"proxy_high_order": {"amp_dph": 6.0, "scale_c": 20.0}},
                          dict(profile=STAIRCASE, t_ref_c=0.0, tau_pkg_s=1.0, tau_res_s=200.0), {}),
     # with the default diff rate estimator a noise-free rate (lsq) competes with the board sensor's lead
@@ -82,6 +89,16 @@ def run_case(name, seeds=(1, 3, 2)):
     return rep, model, hold
 
 
+def first_effect(rep, kept=True):
+    """The first (kept) step the loop reports as an EFFECT (the structure phase runs first)."""
+    return next(e for e in rep["iterations"] if e["kind"] == "effect" and (e["confirmed"] is not False or not kept))
+
+
+def first_named(rep, family):
+    """The first kept step of ``family``, structure or effect."""
+    return next(e for e in rep["iterations"] if e["effect"] == family and e["confirmed"] is not False)
+
+
 def drop(rep, key="std100_dph"):
     """before (base model) / after (final model) on the held-out runs."""
     return rep["baseline"]["holdout"][key] / rep["final"][key]
@@ -101,18 +118,33 @@ def case(results, name):
 # -- one test per family -------------------------------------------------------------------------
 
 def test_thermal_lag(results):
+    """A node lagging the proxy by 1800 s: the structure phase takes it as the lag-state block of
+    the proxy (kind 'structure'; the bench counts it as thermal_lag only in its effect-or-structure
+    number)."""
     rep, _, _ = case(results, "thermal_lag")
-    it = rep["iterations"][0]
-    assert it["effect"] == "thermal_lag", rep["iterations"]
-    assert 1800 / 1.5 <= it["params"]["tau_s"] <= 1800 * 1.5
+    it = first_named(rep, "thermal_lag")
+    assert it["kind"] == ("structure" if "order" in it["params"] else "effect")
+    # the structure phase caps lags at a quarter of the run (4800 s / 4 = 1200 s: longer is a ramp)
+    assert 1800 / 2 <= it["params"]["tau_s"] <= 1800 * 1.5
     assert drop(rep) >= 2.0
 
 
 def test_turn_on(results):
     rep, _, _ = case(results, "turn_on")
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "turn_on"
     assert 300 / 1.5 <= it["params"]["tau_s"] <= 300 * 1.5
+    assert drop(rep) >= 2.0
+
+
+def test_turn_on_from_the_default_start():
+    """The same turn-on from the product-default start with both phases: whatever the structure
+    phase takes first, the effect phase names turn_on (tau near 300 s) and the held-out error
+    halves."""
+    und = CASES["turn_on"][0]
+    rep, _ = diagnose([world(1, und), world(3, und)], [world(2, und)], plots=False)
+    it = first_effect(rep)
+    assert it["effect"] == "turn_on" and 300 / 1.5 <= it["params"]["tau_s"] <= 300 * 1.5
     assert drop(rep) >= 2.0
 
 
@@ -120,7 +152,7 @@ def test_exchange_transient(results):
     """A transient after each exchange that flips like a true rate (sign False); judged at 1 s (it
     lasts ~15 s of every 150 s)."""
     rep, _, _ = case(results, "exchange_transient")
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "exchange_transient" and it["params"]["sign"] is False
     assert 15 / 1.5 <= it["params"]["tau_s"] <= 15 * 1.5
     assert drop(rep, "std_dph") >= 2.0
@@ -130,8 +162,9 @@ def test_exchange_transient_that_does_not_flip():
     """A non-flipping transient survives the combiner as s * (decay - its mean over the other
     window): found as the signed candidate."""
     und = {"exchange_transient": {"amp_dph": 3.0, "tau_s": 15.0, "flips": False}}
-    rep, _ = diagnose([world(1, und), world(3, und)], [world(2, und)], plots=False, max_iter=1)
-    it = rep["iterations"][0]
+    rep, _ = diagnose([world(1, und), world(3, und)], [world(2, und)], plots=False, max_iter=1,
+                      combiner="trend", order="combine_first")
+    it = first_effect(rep)
     assert it["effect"] == "exchange_transient" and it["params"]["sign"] is True
     assert 10 <= it["params"]["tau_s"] <= 22.5
     assert drop(rep, "std_dph") >= 2.0
@@ -139,17 +172,28 @@ def test_exchange_transient_that_does_not_flip():
 
 def test_imperfect_reversal(results):
     """A temperature term present only in mode 2: after the paper's pairing combiner the part
-    that survives follows the mode sign times the temperature change between the windows (s * v);
-    the trend combiner cancels it to first order (only its curvature remains, like B_D's)."""
+    that survives follows the mode sign times the temperature change between the windows (s * v)."""
     rep, _, _ = case(results, "imperfect_reversal")
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "imperfect_reversal" and it["params"]["which"] in ("s*v", "s*u")
+    assert drop(rep) >= 2.0
+
+
+def test_imperfect_reversal_is_taken_by_per_mode_banks():
+    """The same run with both phases: per-mode coefficient banks (regress-then-reverse, the product
+    default) represent a mode-only term exactly, so the structure phase moves there
+    ('reversal_order', kind structure) and halves the held-out error."""
+    und, sim_kw, diag_kw = CASES["imperfect_reversal"]
+    kw = {k: v for k, v in diag_kw.items() if k != "phases"}
+    rep, _ = diagnose([world(1, und), world(3, und)], [world(2, und)], plots=False, max_iter=1, **kw)
+    kept = [e for e in rep["iterations"] if e["confirmed"] is not False]
+    assert kept and kept[0]["effect"] == "reversal_order" and kept[0]["kind"] == "structure", kept
     assert drop(rep) >= 2.0
 
 
 def test_proxy_high_order(results):
     rep, _, _ = case(results, "proxy_high_order")
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "proxy_high_order" and it["params"]["power"] == 4
     assert drop(rep) >= 2.0
 
@@ -158,29 +202,29 @@ def test_board_temp(results):
     """Bias driven by the board node logged as temp_c (true lag 0: the column itself; a short
     filter only averages the sensor's noise)."""
     rep, _, _ = case(results, "board_temp")
-    it = rep["iterations"][0]
-    assert it["effect"] == "board_temp" and it["params"]["column"] == "temp_c"
+    it = first_named(rep, "board_temp")
+    assert it["kind"] == "structure" and it["params"]["column"] == "temp_c"     # a second thermometer
     assert it["params"]["tau_s"] <= 120
     assert drop(rep) >= 2.0
 
 
 def test_aux_vdd(results):
     rep, _, _ = case(results, "aux_vdd")
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "aux_vdd" and it["params"]["tau_s"] <= 120
     assert drop(rep) >= 2.0
 
 
 def test_aging(results):
     rep, _, _ = case(results, "aging")
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "aging"
     assert drop(rep) >= 2.0
 
 
 def test_periodic(results):
     rep, _, _ = case(results, "periodic")
-    it = rep["iterations"][0]
+    it = first_effect(rep)
     assert it["effect"] == "periodic"
     assert abs(it["params"]["period_s"] / 600 - 1) < 0.02
     assert drop(rep) >= 2.0
@@ -217,12 +261,14 @@ def test_two_undeclared_effects_are_both_found():
 
 def test_default_mode_reversal_run_has_a_mode_sign_residual():
     """The default simulator (B_D on): the trend combiner leaves a residual that follows the mode
-    sign at the ramp corners; the diagnosis traces it to imperfect_reversal."""
+    sign at the ramp corners; the diagnosis traces it to the mode: per-mode banks
+    (reversal_order, structure) or imperfect_reversal."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         logs = [sim.simulate("paper-mr-cycle-4dpm", seed=s, profile=ONE_CYCLE, off=["turn_on"]) for s in (1, 3, 2)]
-    rep, _ = diagnose(logs[:2], logs[2:], plots=False, max_iter=1)
-    assert rep["iterations"][0]["effect"] == "imperfect_reversal"
+    rep, _ = diagnose(logs[:2], logs[2:], plots=False, max_iter=1, combiner="trend", order="combine_first")
+    kept = [e["effect"] for e in rep["iterations"] if e["confirmed"] is not False]
+    assert {"imperfect_reversal", "reversal_order"} & set(kept), rep["iterations"]
     assert rep["final"]["std100_dph"] < rep["baseline"]["holdout"]["std100_dph"]
 
 
@@ -257,8 +303,8 @@ def test_cli_writes_report_model_and_figures(tmp_path, capsys, monkeypatch):
     doc = json.loads((tmp_path / "r.json").read_text())
     assert set(doc) >= {"iterations", "final", "verdict"}
     assert doc["verdict"] == "effect found"
-    it = doc["iterations"][0]
-    keys = {"std_dph", "pp_dph", "std100_dph", "pp100_dph"}
+    it = first_effect(doc)
+    keys = {"std_dph", "pp_dph", "std100_dph", "pp100_dph", "rms_dph"}
     assert it["effect"] == "periodic" and set(it["before"]) == keys and set(it["after"]) == keys
     assert set(doc["final"]) == keys and doc["rule"] == RULE
     for f in it["figures"]:
@@ -283,7 +329,8 @@ def test_measured_data_runs_and_records_its_verdict(axis, measured_x, measured_y
     burst = np.searchsorted(log.segments, np.arange(len(log)), side="right") - 1
     train, hold = log.select(burst % 2 == 0), log.select(burst % 2 == 1)
     rep, model = diagnose([train], [hold], out_dir=tmp_path, plots=False)
-    assert rep["verdict"] in ("effect found", "no significant missing effect")
+    assert rep["verdict"] in ("effect found", "model structure improved", "no confirmed effect",
+                              "no significant missing effect")
     assert model.config.proxy.kind == "temp"
     base = rep["baseline"]["holdout"]
     assert base["std_dph"] > rep["noise_floor"]["std_dph"] > 0        # structure above white noise at 1 s
@@ -301,12 +348,13 @@ def test_a_step_the_held_out_run_does_not_confirm_is_reverted():
     on held-out', and the final model is the base model (never worse)."""
     und = {"periodic": {"amp_dph": 0.5, "period_s": 600.0}}
     rep, model = diagnose([world(1, und), world(3, und)], [world(2)], plots=False, max_iter=1)
-    it = rep["iterations"][0]
+    it = first_effect(rep, kept=False)
     assert it["effect"] == "periodic" and it["confirmed"] is False
     assert it["after"]["std100_dph"] > it["before"]["std100_dph"] * (1 - 0.05)
-    assert rep["verdict"] != "effect found" and "step 1 periodic: not confirmed on held-out" in rep["verdict_detail"]
-    assert all(e["effect"] == "reversal_order" for e in rep["iterations"][1:])
-    assert model.config.aux.generator == "none"
+    assert rep["verdict"] != "effect found" and "periodic: not confirmed on held-out" in rep["verdict_detail"]
+    assert all(e["kind"] == "structure" or e["confirmed"] is False for e in rep["iterations"])
+    assert not any(e["kind"] == "structure" and e["confirmed"] for e in rep["iterations"]) or \
+        rep["verdict"] == "model structure improved"
 
 
 def test_confirmed_steps_lower_the_held_out_error(results):
@@ -376,3 +424,64 @@ def test_cli_prints_progress(tmp_path, capsys):
     assert "iteration 1" in text.err and "fitting the base model" in text.err
     doc = json.loads((tmp_path / "o" / "diagnose.json").read_text())
     assert all("confirmed" in it for it in doc["iterations"])
+
+
+# -- the starting model, the mean-offset confirmation ------------------------------------------------
+
+@pytest.mark.parametrize("mr", [False, True])
+def test_the_loops_base_model_is_hdrg_fits_default(mr, tmp_path):
+    """No options: the loop starts from exactly the model `hdrg fit` writes with its defaults
+    (compensate.DEFAULT_*: rate estimator, terms auto, regress_first + pair for mode reversal)."""
+    from host_tools import compensate as comp
+    scen = "paper-mr-cycle-4dpm" if mr else "paper-ftr-cycle-4dpm"
+    paths = []
+    for s in (1, 2):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            log = sim.simulate(scen, seed=s, off=OFF, profile=ONE_CYCLE)
+        paths.append(str(tmp_path / f"r{s}.csv"))
+        runlog.write(log, paths[-1])
+    assert main(["fit", paths[0], "-o", str(tmp_path / "fit.json"), "--drop-unidentifiable"]) == 0
+    want = BiasModel.from_json(tmp_path / "fit.json")
+    rep, got = diagnose([runlog.read(paths[0])], [runlog.read(paths[1])], plots=False, max_iter=0)
+    assert got.config == want.config and got.terms == want.terms
+    np.testing.assert_allclose(got.coef, want.coef, rtol=1e-9, atol=1e-12)
+    assert got.config.rate.estimator == comp.DEFAULT_RATE["estimator"]
+    if mr:
+        assert (got.config.reversal.order, got.config.reversal.combiner) == (comp.DEFAULT_ORDER, comp.DEFAULT_COMBINER)
+    assert rep["settings"]["terms"] == [k for k in want.terms if k != 7]
+
+
+def test_a_step_that_shifts_a_held_out_leg_is_not_confirmed():
+    """Confirmation includes the rms WITH the mean offset per held-out run and leg: a step whose
+    std drops but which moves one leg by tens of deg/h (tofupilot x heat->cool) is refused; the
+    same std drop without the shift is confirmed."""
+    from host_tools.diagnose import _stats_one, confirmed_on_holdout, leg_rms
+    rng = np.random.default_rng(3)
+    n = 4000
+    t = np.arange(n, dtype=float)
+    valid = np.ones(n, bool)
+    legs = np.array([0, 2000])                       # two gap-free segments (legs)
+    slow = 10.0 * np.sin(2 * np.pi * t / 1500.0)
+    white = rng.standard_normal(n)
+
+    def stats(y):
+        one = _stats_one(y, t, valid)
+        return {"runs": [{**one, "rms_legs_dph": leg_rms(y, valid, legs)}], **one}
+
+    before = stats(slow + white)
+    better = stats(0.5 * slow + white)
+    shifted = 0.5 * slow + white
+    shifted[:2000] -= 35.0                           # leg 1 moved by 35 deg/h
+    after_shift = stats(shifted)
+    assert confirmed_on_holdout(before, better)
+    assert after_shift["runs"][0]["rms_legs_dph"][0] > 3 * before["runs"][0]["rms_legs_dph"][0]
+    assert not confirmed_on_holdout(before, after_shift)
+    # the leg rule alone (the std statistics of `better`): legs' quadratic-mean rms up 6 % is
+    # refused; one leg up, the other down more (the run's leg rms falls) is confirmed
+    l0, l1 = before["runs"][0]["rms_legs_dph"]
+
+    def with_legs(legs):
+        return dict(better, runs=[dict(better["runs"][0], rms_legs_dph=legs)])
+    assert not confirmed_on_holdout(before, with_legs([1.06 * l0, 1.06 * l1]))
+    assert confirmed_on_holdout(before, with_legs([1.3 * l0, 0.5 * l1]))
