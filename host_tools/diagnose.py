@@ -106,7 +106,7 @@ from host_tools import effects, metrics
 from host_tools import runlog as rl
 from host_tools.atomic import atomic_open, atomic_path
 from host_tools.compensate import compensate, fit_config_from_logs, prepare, residual
-from host_tools.fit import fit_logs
+from host_tools.fit import fit_default, fit_logs
 from host_tools.model import BiasModel, jsonable
 from host_tools.regressors import AuxConfig, generator_values, regressor_matrix
 
@@ -836,7 +836,7 @@ def offsets_hold(before, after) -> bool:
 
 
 def base_options(*, proxy=None, rate_estimator=None, rate_n=None, rate_shift=None, combiner=None, order=None,
-                 settle_s=0.0, proxy_range=None, rate_range=None, reversal=False) -> dict:
+                 settle_s=None, proxy_range=None, rate_range=None, reversal=False) -> dict:
     """The keyword arguments of host_tools.compensate.fit_config_from_logs for the loop's starting
     model: every option the user did not give is None there, so the starting model is the product
     default of ``hdrg fit`` (compensate.DEFAULT_RATE / DEFAULT_ORDER / DEFAULT_COMBINER, the one
@@ -848,13 +848,20 @@ def base_options(*, proxy=None, rate_estimator=None, rate_n=None, rate_shift=Non
 
 def base_model(train, opts, terms=None):
     """(model, config): the loop's starting model, fitted like ``hdrg fit`` (host_tools.fit.fit_logs;
-    ``terms`` None -> compensate.DEFAULT_TERMS; terms the data cannot identify are dropped)."""
+    ``terms`` None -> compensate.DEFAULT_TERMS; terms the data cannot identify are dropped).  With no
+    rate option given, mode-reversal runs get the rate estimator `hdrg fit` chooses by default
+    (host_tools.fit.fit_default: compensate.DEFAULT_RATE_SELECTION_MR), so the loop starts from
+    exactly the model `hdrg fit` writes."""
+    if all(opts.get(k) is None for k in ("rate_estimator", "n", "shift")):
+        kw = {k: v for k, v in opts.items() if k not in ("rate_estimator", "n", "shift")}
+        model = fit_default(train, terms, drop_unidentifiable=True, **kw)[0]
+        return model, model.config
     cfg = _config(train, opts)
     return fit_logs(train, cfg, terms, drop_unidentifiable=True)[0], cfg
 
 
 def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, rate_n=None, rate_shift=None,
-             terms=None, combiner=None, order=None, settle_s=0.0, proxy_range=None, rate_range=None,
+             terms=None, combiner=None, order=None, settle_s=None, proxy_range=None, rate_range=None,
              max_iter=MAX_ITER, n_surrogates=N_SURROGATES, g_min=G_MIN, cv_blocks=CV_BLOCKS,
              cv_folds=CV_FOLDS, seed=0, families=None, rate_alternatives=True, out_dir=None,
              plots=True, progress=None, phases=None) -> tuple:

@@ -1017,17 +1017,18 @@ def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, 
     return model, res
 
 
-def fit_default(logs, terms=None, **config_kw):
+def fit_default(logs, terms=None, *, drop_unidentifiable=None, **config_kw):
     """What `hdrg fit` does without rate flags: mode-reversal logs with
     host_tools.compensate.DEFAULT_RATE_SELECTION_MR 'auto' -> :func:`fit_auto_rate`, else
     :func:`fit_logs` with the default configuration (host_tools.compensate.fit_config_from_logs
-    with ``config_kw``).  Returns (model, FitResult)."""
+    with ``config_kw``).  ``drop_unidentifiable`` None: each path's own default (auto True, else
+    False).  Returns (model, FitResult)."""
     from host_tools.compensate import DEFAULT_RATE_SELECTION_MR, fit_config_from_logs
 
     logs = list(logs)
     if DEFAULT_RATE_SELECTION_MR == "auto" and logs and all(log.reversal for log in logs):
-        return fit_auto_rate(logs, terms, **config_kw)
-    return fit_logs(logs, fit_config_from_logs(logs, **config_kw), terms)
+        return fit_auto_rate(logs, terms, drop_unidentifiable=drop_unidentifiable is not False, **config_kw)
+    return fit_logs(logs, fit_config_from_logs(logs, **config_kw), terms, drop_unidentifiable=bool(drop_unidentifiable))
 
 
 def add_model_options(parser, what: str = "the model") -> None:

@@ -446,7 +446,10 @@ def test_the_loops_base_model_is_hdrg_fits_default(mr, tmp_path):
     rep, got = diagnose([runlog.read(paths[0])], [runlog.read(paths[1])], plots=False, max_iter=0)
     assert got.config == want.config and got.terms == want.terms
     np.testing.assert_allclose(got.coef, want.coef, rtol=1e-9, atol=1e-12)
-    assert got.config.rate.estimator == comp.DEFAULT_RATE["estimator"]
+    if mr and comp.DEFAULT_RATE_SELECTION_MR == "auto":   # chosen by cross-validation, as hdrg fit does
+        assert got.fit["rate_selection"]["chosen"] == want.fit["rate_selection"]["chosen"]
+    else:
+        assert got.config.rate.estimator == comp.DEFAULT_RATE["estimator"]
     if mr:
         assert (got.config.reversal.order, got.config.reversal.combiner) == (comp.DEFAULT_ORDER, comp.DEFAULT_COMBINER)
     assert rep["settings"]["terms"] == [k for k in want.terms if k != 7]
