@@ -48,6 +48,7 @@ import time
 import warnings
 
 import numpy as np
+from pathlib import Path
 
 from host_tools.diagnose import _score, base_model, base_options, diagnose, error_stats
 from host_tools.sim_foreign import EFFECTS, EFFECT_KINDS, foreign_device, simulate_foreign
@@ -299,7 +300,11 @@ def hdrg_clean_study(progress=None) -> list:
 MEASURED = {"tofupilot-x": "tofupilot-imu-thermal/tofupilot-imu-x.csv",
             "tofupilot-y": "tofupilot-imu-thermal/tofupilot-imu-y.csv",
             "psim-x": "psim-tvac-lsm6dsm/psim-tvac-x.csv", "psim-y": "psim-tvac-lsm6dsm/psim-tvac-y.csv"}
-MEASURED_ROOT = "/work/shared/data/measured"
+# the measured logs the project carries (tests/data, each with its README and LICENSE); the
+# shared folder beside a checkout otherwise
+MEASURED_ROOT = next((str(p) for p in (Path(__file__).resolve().parents[1] / "tests" / "data",
+                                       Path(__file__).resolve().parents[2] / "shared" / "data" / "measured")
+                      if (p / "tofupilot-imu-thermal").is_dir()), "tests/data")
 SPLIT_BLOCKS = 8
 
 

@@ -85,7 +85,9 @@ def run_case(name, seeds=(1, 3, 2)):
     hold = [world(seeds[2], und, **sim_kw)]
     for log in train + hold:        # undeclared: the metadata does not list it
         assert not set(und) & set(log.metadata["effects"].split(","))
-    rep, model = diagnose(train, hold, plots=False, **diag_kw)
+    # the family cases were set up from the diff-rate, no-settling start; the default start (rate auto, settle 5 s for mode
+    # reversal, as hdrg fit) is test_the_loops_base_model_is_hdrg_fits_default / ..._from_the_default_start
+    rep, model = diagnose(train, hold, plots=False, **{"rate_estimator": "diff", "settle_s": 0.0, **diag_kw})
     return rep, model, hold
 
 
@@ -138,11 +140,14 @@ def test_turn_on(results):
 
 
 def test_turn_on_from_the_default_start():
-    """The same turn-on from the product-default start with both phases: whatever the structure
+    """The same turn-on from the regress-first start with both phases: whatever the structure
     phase takes first, the effect phase names turn_on (tau near 300 s) and the held-out error
     halves."""
     und = CASES["turn_on"][0]
-    rep, _ = diagnose([world(1, und), world(3, und)], [world(2, und)], plots=False)
+    # the regress-first + pair start with the diff rate estimator and no settling (the default before
+    # the rate estimator became 'auto' for mode reversal)
+    rep, _ = diagnose([world(1, und), world(3, und)], [world(2, und)], plots=False, rate_estimator="diff",
+                      settle_s=0.0)
     it = first_effect(rep)
     assert it["effect"] == "turn_on" and 300 / 1.5 <= it["params"]["tau_s"] <= 300 * 1.5
     assert drop(rep) >= 2.0
@@ -163,7 +168,7 @@ def test_exchange_transient_that_does_not_flip():
     window): found as the signed candidate."""
     und = {"exchange_transient": {"amp_dph": 3.0, "tau_s": 15.0, "flips": False}}
     rep, _ = diagnose([world(1, und), world(3, und)], [world(2, und)], plots=False, max_iter=1,
-                      combiner="trend", order="combine_first")
+                      combiner="trend", order="combine_first", rate_estimator="diff")
     it = first_effect(rep)
     assert it["effect"] == "exchange_transient" and it["params"]["sign"] is True
     assert 10 <= it["params"]["tau_s"] <= 22.5

@@ -330,7 +330,7 @@ def test_fixed_vs_golden_on_diagnosed_models(family):
     und, sim_kw, diag_kw = CASES[family]
     train = [world(s, und, **sim_kw) for s in (1, 3)]
     hold = world(2, und, **sim_kw)
-    rep, model = diagnose(train, [hold], plots=False, **diag_kw)
+    rep, model = diagnose(train, [hold], plots=False, **{"rate_estimator": "diff", "settle_s": 0.0, **diag_kw})
     assert rep["iterations"] and model.config.aux.generator == "sum"
     check_close(hold, model, f"diagnosed {family} ({[t['gen'] for t in model.config.aux.terms]})")
 
@@ -351,7 +351,7 @@ def test_acceptance_effect_found_exported_quantized_and_run_in_fixed_point(tmp_p
     und, sim_kw, diag_kw = CASES["turn_on"]
     train = [world(s, und, **sim_kw) for s in (1, 3)]
     hold = world(2, und, **sim_kw)
-    rep, final = diagnose(train, [hold], plots=False, **diag_kw)
+    rep, final = diagnose(train, [hold], plots=False, **{"rate_estimator": "diff", "settle_s": 0.0, **diag_kw})
     assert rep["iterations"][0]["effect"] == "turn_on"
     # the starting model of the loop (diagnose's defaults: trend combiner, settle 0, all 16 terms;
     # diagnose passes the reversal as a dict without "order", which reads as combine_first)

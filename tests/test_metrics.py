@@ -6,13 +6,14 @@ import os
 import warnings
 
 import numpy as np
+from pathlib import Path
 import pytest
 
 from host_tools import metrics
 from host_tools.cli import main
 from host_tools.runlog import RunLog, RunLogError, RunLogWarning, write
 
-MEASURED = "/work/shared/data/measured/psim-tvac-lsm6dsm"
+MEASURED = str(Path(__file__).parent / "data" / "psim-tvac-lsm6dsm")
 MEASURED_X = os.path.join(MEASURED, "psim-tvac-x.csv")
 MEASURED_Y = os.path.join(MEASURED, "psim-tvac-y.csv")
 
