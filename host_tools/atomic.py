@@ -82,22 +82,9 @@ def atomic_open(path, mode: str = "w", **kwargs):
     after a successful write (flushed and fsync'ed first); removed on any exception."""
     if not any(c in mode for c in "wx"):
         raise ValueError(f"atomic_open writes a whole file: mode must be 'w' or 'wb', not {mode!r}")
-    path = os.path.realpath(os.fspath(path))    # a symlink: its target is replaced, the link kept
-    if _special(path):
-        with open(path, mode.replace("x", "w"), **kwargs) as fh:
+    with atomic_path(path) as target:     # the same temporary file, fsync, rename and clean-up
+        with open(target, mode.replace("x", "w"), **kwargs) as fh:
             yield fh
-        return
-    fd, tmp = _tmp_in_dir(path)
-    try:
-        with os.fdopen(fd, mode.replace("x", "w"), **kwargs) as fh:
-            yield fh
-            fh.flush()
-            os.fsync(fh.fileno())
-        _finish(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
 
 
 def same_file(a, b) -> bool:
