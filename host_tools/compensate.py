@@ -80,6 +80,7 @@ DEFAULT_SIGNIFICANCE = 1.0   # of terms 'auto' in fit_logs: keep the smallest mo
 # candidate of least cross-validated rms, host_tools.fit.fit_auto_rate) or 'fixed' (DEFAULT_RATE).
 # FTR logs always get DEFAULT_RATE (on the measured FTR logs 'auto' picks iir and extrapolates badly).
 DEFAULT_RATE_SELECTION_MR = "auto"
+DEFAULT_LAG_BLOCK = "auto"   # hdrg fit: lag-state block of the proxy as k7 when CV supports it (host_tools.fit_lag); "off"
 IMPLS = ("float", "fixed")
 
 

@@ -647,14 +647,23 @@ def fit_default(logs, terms=None, *, drop_unidentifiable=None, **config_kw):
     """What `hdrg fit` does without rate flags: mode-reversal logs with
     host_tools.compensate.DEFAULT_RATE_SELECTION_MR 'auto' -> :func:`fit_auto_rate`, else
     :func:`fit_logs` with the default configuration (host_tools.compensate.fit_config_from_logs
-    with ``config_kw``).  ``drop_unidentifiable`` None: each path's own default (auto True, else
-    False).  Returns (model, FitResult)."""
-    from host_tools.compensate import DEFAULT_RATE_SELECTION_MR, fit_config_from_logs
+    with ``config_kw``).  Then, with host_tools.compensate.DEFAULT_LAG_BLOCK 'auto' and no aux given,
+    the lag-state block of the proxy as k7 when cross-validation supports it
+    (host_tools.fit_lag.add_lag_block).  ``drop_unidentifiable`` None: each path's own default
+    (auto True, else False).  Returns (model, FitResult)."""
+    from host_tools.compensate import DEFAULT_LAG_BLOCK, DEFAULT_RATE_SELECTION_MR, fit_config_from_logs
 
     logs = list(logs)
+    lag = DEFAULT_LAG_BLOCK == "auto" and config_kw.get("aux") is None
     if DEFAULT_RATE_SELECTION_MR == "auto" and logs and all(log.reversal for log in logs):
-        return fit_auto_rate(logs, terms, drop_unidentifiable=drop_unidentifiable is not False, **config_kw)
-    return fit_logs(logs, fit_config_from_logs(logs, **config_kw), terms, drop_unidentifiable=bool(drop_unidentifiable))
+        model, res = fit_auto_rate(logs, terms, drop_unidentifiable=drop_unidentifiable is not False, **config_kw)
+    else:
+        model, res = fit_logs(logs, fit_config_from_logs(logs, **config_kw), terms, blocks=True if lag else None,
+                              drop_unidentifiable=bool(drop_unidentifiable))
+    if lag:
+        from host_tools.fit_lag import add_lag_block
+        model, res = add_lag_block(logs, model, res, terms, drop_unidentifiable=drop_unidentifiable is not False)
+    return model, res
 
 
 def add_model_options(parser, what: str = "the model") -> None:
