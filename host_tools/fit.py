@@ -128,8 +128,10 @@ def _solve_terms(fac: _Factor, terms, rcond, explain=True):
     norms = np.sqrt(np.einsum("ij,ij->j", W, W))
     keep = [j for j in range(len(terms)) if norms[j] > 0]
     dropped = [j for j in range(len(terms)) if norms[j] == 0]
+    Q = Rk = None
     while keep:
-        diag = np.abs(np.diag(np.linalg.qr(W[:, keep] / norms[keep], mode="r")))
+        Q, Rk = np.linalg.qr(W[:, keep] / norms[keep])   # kept when no column is dropped
+        diag = np.abs(np.diag(Rk))
         bad = np.flatnonzero(diag <= rcond)
         if len(bad):
             dropped.append(keep.pop(int(bad[0])))
@@ -139,10 +141,10 @@ def _solve_terms(fac: _Factor, terms, rcond, explain=True):
             break
     coef = np.zeros(N_TERMS)
     kept = [terms[j] for j in keep]
-    Rk = np.zeros((0, 0))
     qt = np.zeros(0)
-    if keep:
-        Q, Rk = np.linalg.qr(W[:, keep] / norms[keep])
+    if not keep:
+        Rk = np.zeros((0, 0))
+    else:
         qt = Q.T @ fac.t
         coef[kept] = np.linalg.solve(Rk, qt) / norms[keep]
     collinear = {}
