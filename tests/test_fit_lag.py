@@ -86,6 +86,7 @@ def test_block_found_on_a_lagged_device_and_holds_out(monkeypatch):
     assert info["cv_rms"] < (1 - FL.LAG_MARGIN) * info["base_cv_rms"]
     assert _std_held_out(model, ho) < 0.7 * _std_held_out(base, ho)
     assert model.to_dict()["fit"]["lag_block"]["chosen"] == info["chosen"]
+    check_close(ho, model, "lag block, FTR")   # the FTR block (up to two taus) in fixed point too
 
 
 def test_block_not_taken_when_the_proxy_sees_every_bias(monkeypatch):

@@ -1,0 +1,56 @@
+# Measurement script of docs/ACCURACY.md "Lag-state block" (not part of the package).
+# Usage: PYTHONPATH=. python docs/lag/sweep.py START END OUT.jsonl; then python docs/lag/analyze.py OUT*.jsonl
+"""Per foreign device: base default fit (lag off) and every lag candidate forced; held-out ratios. args: start end out"""
+import time, sys, json
+import numpy as np
+import host_tools.compensate as C
+from host_tools import fit_lag as FL
+from host_tools.sim_foreign import foreign_device, simulate_foreign, damping_bias
+from host_tools.fit import fit_default, fit_logs
+from host_tools.compensate import compensate
+from host_tools.bench_accuracy import floor_of
+a, b, outp = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
+C.DEFAULT_LAG_BLOCK = "off"
+def ratio(m, ho, fl):
+    out = compensate(ho, m); v = out["valid"] > 0
+    return float(np.std(out.rate_dph[v]) / fl)
+fo = open(outp, "w")
+for seed in range(a, b):
+    dev = foreign_device(seed)
+    sc0, _ = dev.damping_change(0); sc1, _ = dev.damping_change(1)
+    rec = {"seed": seed, "dc": float(abs(sc1 - sc0) * np.std(damping_bias(dev, 2.0, None)))}
+    for rev in (False, True):
+        key = "mr" if rev else "ftr"
+        tr = simulate_foreign(dev, 4.0, rev, 0, 0, None)
+        ho = simulate_foreign(dev, 2.0, rev, 1, 1, None)
+        fl = floor_of(simulate_foreign(dev, 2.0, rev, 1, 1, None, thermal=False))
+        t = time.time()
+        m, r = fit_default([tr])
+        if r.cv is None:
+            m, r = fit_logs([tr], m.config, None, blocks=True)
+        d = {"base": ratio(m, ho, fl), "base_cv": r.cv["cv_rms"], "t_base": time.time() - t}
+        t = time.time()
+        sc = FL.screen([tr], m)
+        d["t_screen"] = time.time() - t
+        d["screen_base"] = sc["base"]
+        rows = sc["rows"]
+        singles = [x for x in rows if len(x["cand"]) == 1]
+        pairs = sorted([x for x in rows if len(x["cand"]) == 2], key=lambda x: x["screen_cv_rms"])[:6]
+        d["cands"] = []
+        for x in singles + pairs:
+            e = {"block": x["block"], "screen": x["screen_cv_rms"]}
+            cfg2 = FL.lag_config(m.config, x["cand"], sc["coefs"](x["cand"]))
+            if cfg2 is None:
+                e["err"] = "too many terms"
+            else:
+                try:
+                    t = time.time()
+                    m2, r2 = fit_logs([tr], cfg2, None, blocks=True, drop_unidentifiable=True)
+                    e["t"] = time.time() - t
+                    e["cv"] = r2.cv["cv_rms"]; e["ratio"] = ratio(m2, ho, fl); e["k7"] = 7 in m2.terms
+                except ValueError as exc:
+                    e["err"] = str(exc)[:100]
+            d["cands"].append(e)
+        rec[key] = d
+    fo.write(json.dumps(rec) + "\n"); fo.flush()
+    print(seed, "done", flush=True)
