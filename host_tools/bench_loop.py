@@ -35,7 +35,9 @@ Summary (the targets of issue #11):
   better than the base model on an independent THIRD run (3 degC/min, power-on 2, noise 2):
   a found "effect" that does not generalize is a false discovery in the strict sense; one that
   does is physics of the device the 16 terms lack (the foreign devices' lagged thermal nodes);
-* ``worse_confirmed``: confirmed steps whose held-out error went UP (target 0);
+* ``worse_confirmed``: confirmed steps whose held-out error went UP (target 0); a step's held-out
+  error is the one the loop confirms it by (diagnose.step_errors, diagnose.HELDOUT_METRIC: std of
+  100-s averages on the samples valid under both models), recorded in ``iterations[].heldout_error``;
 * ``found_without_drop``: "effect found" runs whose final held-out error is not below the base
   model's (target 0).
 """
@@ -109,7 +111,8 @@ def run_one(spec: dict, duration_s=None, n_surrogates=None) -> dict:
             chold = simulate_foreign(dev, 2.0, rev, 1, 1, duration_s=duration_s)
             ratio = _score(rep["baseline"]["holdout"])[0] / _base_error(ctrain, chold)
     steps = [{"effect": it["effect"], "params": it["params"], "kind": it["kind"], "confirmed": it["confirmed"],
-              "before": _score(it["before"])[0], "after": _score(it["after"])[0]} for it in rep["iterations"]]
+              "before": it["heldout_error"]["before"], "after": it["heldout_error"]["after"]}
+             for it in rep["iterations"]]
     return {**spec, "verdict": rep["verdict"], "steps": steps,
             "base": _score(rep["baseline"]["holdout"])[0], "final": _score(rep["final"])[0],
             "third_base": base3, "third_final": final3,

@@ -106,6 +106,7 @@ from host_tools import effects, metrics
 from host_tools import runlog as rl
 from host_tools.atomic import atomic_open, atomic_path
 from host_tools.compensate import compensate, fit_config_from_logs, prepare, residual
+from host_tools.cv import fold_ids, heldout_sse
 from host_tools.fit import fit_default, fit_logs
 from host_tools.model import BiasModel, jsonable
 from host_tools.regressors import AuxConfig, generator_values, regressor_matrix
@@ -191,8 +192,7 @@ class _Scanner:
         for f in range(len(groups)):
             b = _solve_sym(eye - self.A[f], -self.B[f])
             self._base.append(b)
-            self.e0[f] = self.S[f] - 2.0 * np.einsum("ij,ij->j", b, self.B[f]) + \
-                np.einsum("ij,ij->j", b, self.A[f] @ b)
+            self.e0[f] = heldout_sse(b, self.S[f], self.B[f], self.A[f])
 
     def _slices(self):
         return [(int(self.bounds[g]), int(self.bounds[g + 1])) for g in range(len(self.groups))]
@@ -228,11 +228,9 @@ class _Scanner:
                 sol = np.linalg.solve(M, rhs)
             except np.linalg.LinAlgError:
                 continue
-            b, c = sol[:p], sol[p:]
-            Ab = self.A[f] @ b + D[f] @ c
-            Ec = D[f].T @ b + E[f] @ c
-            out[f] = (self.S[f] - 2.0 * (np.einsum("ij,ij->j", b, self.B[f]) + np.einsum("ij,ij->j", c, F[f]))
-                      + np.einsum("ij,ij->j", b, Ab) + np.einsum("ij,ij->j", c, Ec))
+            # held-out sums of the fold in the joint basis [Q, C]: (A D; D^T E), (B; F), S
+            out[f] = heldout_sse(sol, self.S[f], np.vstack([self.B[f], F[f]]),
+                                 np.block([[self.A[f], D[f]], [D[f].T, E[f]]]))
         return out
 
 
@@ -287,12 +285,8 @@ def cv_groups(valid_masks, cv_blocks=CV_BLOCKS, cv_folds=CV_FOLDS) -> list:
     if len(valid_masks) >= 2:
         return [(j, np.flatnonzero(v)) for j, v in enumerate(valid_masks)]
     v = valid_masks[0]
-    n = len(v)
-    if cv_folds < 2 or cv_blocks < cv_folds:
-        raise ValueError(f"a single training run needs cv_folds >= 2 and cv_blocks >= cv_folds "
-                         f"(got {cv_blocks} blocks, {cv_folds} folds)")
-    block = (np.arange(n) * cv_blocks) // max(n, 1)
-    groups = [(0, np.flatnonzero(v & (block % cv_folds == k))) for k in range(cv_folds)]
+    fold = fold_ids(len(v), cv_blocks, cv_folds)
+    groups = [(0, np.flatnonzero(v & (fold == k))) for k in range(cv_folds)]
     if any(len(idx) == 0 for _, idx in groups):
         raise ValueError("a CV fold holds no valid sample: the run is too short for the blocks")
     return groups
@@ -800,6 +794,19 @@ def _score(stats):
     return (stats["std100_dph"] if stats["std100_dph"] is not None else stats["std_dph"]), stats["std_dph"]
 
 
+HELDOUT_METRIC = ("held-out error: std of 100-s averages of the compensated output (1-s where 100 s is "
+                  "undefined) [deg/h], mean over the held-out runs; two models are compared on the samples "
+                  "valid under both")
+
+
+def step_errors(logs, before: BiasModel, after: BiasModel) -> tuple:
+    """THE held-out error of a step (:data:`HELDOUT_METRIC`), used both to confirm a step here and
+    by host_tools.bench_loop to score it: ``(stats_before, stats_after)`` of :func:`error_stats` on
+    ``logs``, each restricted to the samples valid under BOTH models (a longer rate warm-up or
+    settle window must not win or lose by hiding samples); ``_score(stats)[0]`` is the number."""
+    return error_stats(logs, before, after), error_stats(logs, after, before)
+
+
 def confirmed_on_holdout(before, after) -> bool:
     """CONFIRM_RULE: the held-out std of 100-s averages (1-s where 100 s is undefined) drops by at
     least CONFIRM_MIN_DROP, the held-out std of 1-s averages does not rise by more than
@@ -882,6 +889,11 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                         rate_range=rate_range, reversal=rev)
     say(f"fitting the base model on {len(train)} training run(s)")
     model, cfg = base_model(train, opts, terms)
+    if all(opts.get(k) is None for k in ("rate_estimator", "n", "shift")):
+        # keep the rate estimator `hdrg fit` chose (auto on MR): every later refit builds its config
+        # from opts, which must not fall back to DEFAULT_RATE behind the step's back
+        r = cfg.rate
+        opts = {**opts, "rate_estimator": r.estimator, "n": r.n, "shift": r.shift}
     poly = _poly_terms(model)
     evals = hold if hold else train
     rng = np.random.default_rng(seed)
@@ -916,8 +928,13 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
         for _ in range(max_iter):
             it += 1
             say(f"iteration {it} ({phase}): scoring the {phase} candidates (CV, {n_surrogates} noise-model surrogates)")
+            # the structure phase scores the effect candidates too (same CV, same max-T): when an effect
+            # explains more than every structural candidate, the structure phase ends and the effect
+            # phase takes it (a long lag or second thermometer must not swallow an aging or turn-on)
+            compete = phase == "structure" and "effect" in phases
             scan = _scan(train, cfg, model, poly, gen_terms, rng, n_surrogates, g_min, cv_blocks, cv_folds,
-                         families, rate_alternatives and rate_choice is None, frozenset(excluded), phase=phase)
+                         families, rate_alternatives and rate_choice is None, frozenset(excluded),
+                         phase=None if compete else phase)
             if characterization is None:
                 characterization = {"train": scan["characterization"],
                                     "holdout": [characterize(log, r, pr.valid, cfg.rate.fs, pr.v)
@@ -925,6 +942,11 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                                     "noise_models": [jsonable(nm, skip_private=True) if nm else None
                                                      for nm in scan["noise_models"]]}
                 artifacts = {"lines": scan["artifacts"], "combiner_lines": scan["combiner_lines"]}
+            if scan["accept"] and compete and kind_of(scan["winner"]["family"], scan["winner"]["params"]) == "effect":
+                w = scan["winner"]
+                scan = {**scan, "accept": False,
+                        "reason": f"an effect candidate ({w['label']}, CV gain {w['gain']:.3f}) explains more than "
+                                  f"every structural candidate: the effect phase takes it"}
             if not scan["accept"]:
                 stopped = {k: scan[k] for k in ("best", "threshold", "ranking", "reason", "null_max")}
                 stopped["phase"] = phase
@@ -949,13 +971,11 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
             else:
                 model, _ = fit_logs(train, cfg, tuple(poly), drop_unidentifiable=True)
             after = error_stats(evals, model)
-            if model.config.rate != before_model.config.rate:      # compare on the common valid samples
-                confirmed = confirmed_on_holdout(error_stats(evals, before_model, model),
-                                                 error_stats(evals, model, before_model)) if hold else None
-            else:
-                confirmed = confirmed_on_holdout(before, after) if hold else None
+            cb, ca = step_errors(evals, before_model, model)     # the one metric (HELDOUT_METRIC)
+            confirmed = confirmed_on_holdout(cb, ca) if hold else None
             entry = {"effect": acc.family, "params": acc.params, "kind": kind_of(acc.family, acc.params),
                      "before": _clean(before), "after": _clean(after), "confirmed": confirmed,
+                     "heldout_error": _step_metric(cb, ca),
                      "train_before": _clean(error_stats(train, before_model)) if hold else _clean(before),
                      "train_after": _clean(error_stats(train, model)) if hold else _clean(after),
                      "cv_gain": best["gain"], "threshold": scan["threshold"], "refined_from": best["coarse"],
@@ -979,19 +999,21 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                 stopped = {"reason": f"max_iter ({max_iter}) reached", "best": None, "threshold": None,
                            "ranking": [], "null_max": [], "phase": phase}
         if phase == "structure" and rev and max_iter > 0:
-            say("structural candidates: regress-then-reverse (per-mode banks) with each combiner, by CV")
-            entry, alt_model = _order_step(train, hold, evals, cfg, model, cv_blocks, cv_folds)
-            if entry is not None and "skipped" in entry:
-                report["structural_skipped"] = entry["skipped"]
-                say(entry["skipped"])
-            elif entry is not None:
-                iterations.append(entry)
-                if entry["confirmed"] is not False:
-                    model = alt_model
-                    cfg = replace(cfg, reversal=alt_model.config.reversal)
-                    opts = {**opts, "reversal": {**opts["reversal"], **entry["params"]}}
-                    accepted.append(_Accepted(entry["effect"], entry["params"]))
-                say(f"structural: {entry['effect']} {entry['params']}: {entry['status']}")
+            say("structural candidates: regress-then-reverse (per-mode banks) with each combiner, and the "
+                "settling window after each exchange, by CV")
+            for step in (_order_step, _settle_step):
+                entry, alt_model = step(train, hold, evals, cfg, model, cv_blocks, cv_folds)
+                if entry is not None and "skipped" in entry:
+                    report.setdefault("structural_skipped", []).append(entry["skipped"])
+                    say(entry["skipped"])
+                elif entry is not None:
+                    iterations.append(entry)
+                    if entry["confirmed"] is not False:
+                        model = alt_model
+                        cfg = replace(cfg, reversal=alt_model.config.reversal)
+                        opts = {**opts, "reversal": {**opts["reversal"], **entry["params"]}}
+                        accepted.append(_Accepted(entry["effect"], entry["params"]))
+                    say(f"structural: {entry['effect']} {entry['params']}: {entry['status']}")
         stops[phase] = stopped
     stopped = stops.get("effect") or stops.get("structure")
     final = error_stats(evals, model)
@@ -1018,16 +1040,18 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
 
 
 ORDER_ALTERNATIVES = ("none", "pair", "trend")   # regress_first with each combiner
-STRUCTURAL = ("rate_estimator", "reversal_order", "board_temp")  # families that are the model's structure
+STRUCTURAL = ("rate_estimator", "reversal_order", "reversal_settle", "board_temp", "thermal_lag")  # the model's structure
 PHASES = ("structure", "effect")
 STRUCT_TAU_FRACTION = 0.25   # structure phase: lags (block, second thermometer) <= this x the longest run
 
 
 def kind_of(family, params) -> str:
     """'structure' for a step that changes the model's own structure (rate estimator, order /
-    combiner, the lag-state polynomial block of the proxy, the second thermometer and its lag),
-    'effect' for an added effect regressor (module doc, step 3)."""
-    return "structure" if family in STRUCTURAL or (family == "thermal_lag" and "order" in params) else "effect"
+    combiner, settling window, a lag of the proxy: one lag or the lag-state polynomial block, the
+    second thermometer and its lag), 'effect' for an added effect regressor (module doc, step 3).
+    A single lag of the proxy is the same physics as the block (a lagged thermal node of the
+    device): on clean foreign devices their own nodes were reported as a thermal_lag "effect"."""
+    return "structure" if family in STRUCTURAL else "effect"
 
 
 def _step_key(family, params) -> str:
@@ -1042,66 +1066,90 @@ def _fold_logs(train, cv_blocks, cv_folds) -> list:
     if len(train) >= 2:
         return [([g for j, g in enumerate(train) if j != f], [train[f]]) for f in range(len(train))]
     log = train[0]
-    block = (np.arange(len(log)) * cv_blocks) // len(log)
-    return [([log.select(block % cv_folds != k)], [log.select(block % cv_folds == k)]) for k in range(cv_folds)]
+    fold = fold_ids(len(log), cv_blocks, cv_folds)
+    return [([log.select(fold != k)], [log.select(fold == k)]) for k in range(cv_folds)]
 
 
 def _order_step(train, hold, evals, cfg, model, cv_blocks, cv_folds):
     """The structural candidate 'regress-then-reverse' (host_tools.reversal order regress_first:
     two coefficient banks by mode, the combiner applied to the residual) with each combiner of
-    ORDER_ALTERNATIVES, the current terms and aux generators kept: every fold refits the whole
-    model (current and alternative) on its training part and scores the error (std of 100-s
-    averages, 1-s where undefined) on its held-out part.  The best alternative is a step when it
-    lowers the CV error by >= CONFIRM_MIN_DROP in total and in a strict majority of folds; then it
-    is confirmed on the held-out runs like every step.  Returns (entry, model) or (None, None)."""
+    ORDER_ALTERNATIVES, the current terms and aux generators kept (:func:`_whole_model_step`).
+    Returns (entry, model) or (None, None)."""
     from host_tools.reversal import ReversalConfig
-    terms = tuple(model.terms)
     rc = cfg.reversal
+    alts = [({"order": "regress_first", "combiner": comb},
+             replace(cfg, reversal=ReversalConfig(comb, rc.max_stale_s, rc.settle_s, order="regress_first")))
+            for comb in ORDER_ALTERNATIVES if not (rc.order == "regress_first" and comb == rc.combiner)]
+    return _whole_model_step("reversal_order", alts, train, hold, evals, cfg, model, cv_blocks, cv_folds)
+
+
+SETTLE_FACTORS = (2.0, 4.0)   # settle-window candidates: the current window x these (2 s, 4 s from none)
+
+
+def _settle_step(train, hold, evals, cfg, model, cv_blocks, cv_folds):
+    """The structural candidate 'settling window' (ReversalConfig.settle_s: the seconds after each
+    mode exchange that the fit and the output skip): the current window x SETTLE_FACTORS.  A
+    device whose loop settles for longer than the window leaves a transient after every exchange
+    that is the mode-reversal pipeline's structure, not an effect (:func:`_whole_model_step`)."""
+    rc = cfg.reversal
+    cur = rc.settle_s
+    values = sorted({round((cur if cur > 0 else 1.0) * f, 3) for f in SETTLE_FACTORS})
+    alts = [({"settle_s": v}, replace(cfg, reversal=replace(rc, settle_s=v))) for v in values if v > cur]
+    return _whole_model_step("reversal_settle", alts, train, hold, evals, cfg, model, cv_blocks, cv_folds)
+
+
+def _whole_model_step(family, alts, train, hold, evals, cfg, model, cv_blocks, cv_folds):
+    """A structural change of the combiner pipeline, ``alts`` = [(params, config)]: every fold
+    (:func:`_fold_logs`) refits the whole model (current and alternative; terms and aux generators
+    kept) on its training part and scores both on its held-out part by THE held-out error
+    (:func:`step_errors`: std of 100-s averages, 1-s where undefined, on the samples valid under
+    both).  The best alternative is a step when it lowers the CV error by >= CONFIRM_MIN_DROP in
+    total and in a strict majority of folds; then it is confirmed on the held-out runs like every
+    step.  Returns (entry, model), ({"skipped": why}, None) or (None, None)."""
+    terms = tuple(model.terms)
     folds = _fold_logs(train, cv_blocks, cv_folds)
-
-    def cv(c):
-        errs = []
-        for tr, te in folds:
-            try:
-                m, _ = fit_logs(tr, c, terms, drop_unidentifiable=True)
-                errs.append(_score(error_stats(te, m))[0])
-            except ValueError:
-                return None
-        return None if any(e is None for e in errs) else np.array(errs)
-
-    base = cv(cfg)
-    if base is None:
+    try:
+        base_fits = [fit_logs(tr, cfg, terms, drop_unidentifiable=True)[0] for tr, _ in folds]
+    except ValueError:
         return None, None
     rows = []
-    for comb in ORDER_ALTERNATIVES:
-        if rc.order == "regress_first" and comb == rc.combiner:
+    for params, alt in alts:
+        e0, e1 = [], []
+        try:
+            for (tr, te), mb in zip(folds, base_fits):
+                ma = fit_logs(tr, alt, terms, drop_unidentifiable=True)[0]
+                sb, sa = step_errors(te, mb, ma)
+                e0.append(_score(sb)[0])
+                e1.append(_score(sa)[0])
+        except ValueError:
             continue
-        alt = replace(cfg, reversal=ReversalConfig(comb, rc.max_stale_s, rc.settle_s, order="regress_first"))
-        e = cv(alt)
-        if e is not None:
-            rows.append({"combiner": comb, "cfg": alt, "gain": float(1.0 - e.sum() / base.sum()),
-                         "folds_improved": int(np.sum(e < base)), "folds": len(folds)})
+        if any(e is None for e in e0 + e1):
+            continue
+        e0, e1 = np.array(e0), np.array(e1)
+        rows.append({"params": params, "cfg": alt, "gain": float(1.0 - e1.sum() / e0.sum()),
+                     "folds_improved": int(np.sum(e1 < e0)), "folds": len(folds)})
     if not rows:
         return None, None
     best = max(rows, key=lambda r: r["gain"])
     if not (best["gain"] >= CONFIRM_MIN_DROP and best["folds_improved"] > len(folds) // 2):
         return None, None
     alt_model, _ = fit_logs(train, best["cfg"], terms, drop_unidentifiable=True)
+    label = f"{family}({', '.join(str(v) for v in best['params'].values())})"
     try:        # the model the loop writes must go to the firmware path (hdrg quantize)
         from host_tools.quantize import quantize
         quantize(alt_model, n_random=100)
     except (ValueError, ArithmeticError) as exc:
-        return {"skipped": f"regress-then-reverse ({best['combiner']}) gains {best['gain']:.3f} in CV but "
-                           f"does not quantize on this build: {exc}"}, None
+        return {"skipped": f"{label} gains {best['gain']:.3f} in CV but does not quantize on this build: {exc}"}, None
     before, after = error_stats(evals, model), error_stats(evals, alt_model)
-    confirmed = confirmed_on_holdout(before, after) if hold else None
-    entry = {"effect": "reversal_order", "params": {"order": "regress_first", "combiner": best["combiner"]},
-             "kind": "structure",
+    cb, ca = step_errors(evals, model, alt_model)
+    confirmed = confirmed_on_holdout(cb, ca) if hold else None
+    entry = {"effect": family, "params": dict(best["params"]), "kind": "structure",
              "before": _clean(before), "after": _clean(after), "confirmed": confirmed,
+             "heldout_error": _step_metric(cb, ca),
              "train_before": _clean(error_stats(train, model)), "train_after": _clean(error_stats(train, alt_model)),
              "cv_gain": best["gain"], "threshold": CONFIRM_MIN_DROP, "refined_from": None,
              "folds_improved": best["folds_improved"], "folds": best["folds"],
-             "ranking": [{"label": f"reversal_order(regress_first, {r['combiner']})", "family": "reversal_order",
+             "ranking": [{"label": f"{family}({', '.join(str(v) for v in r['params'].values())})", "family": family,
                           "gain": r["gain"], "folds_improved": r["folds_improved"], "folds": r["folds"]}
                          for r in sorted(rows, key=lambda r: -r["gain"])],
              "null_max": [], "aux": alt_model.config.aux.to_dict(), "rate": alt_model.config.rate.to_dict(),
@@ -1126,6 +1174,11 @@ def _verdict_detail(iterations, hold) -> str:
 
 def _clean(stats) -> dict:
     return {k: stats[k] for k in STAT_KEYS}
+
+
+def _step_metric(cb, ca) -> dict:
+    """The step's held-out error (:data:`HELDOUT_METRIC`, :func:`step_errors`) before / after [deg/h]."""
+    return {"before": _score(cb)[0], "after": _score(ca)[0], "metric": HELDOUT_METRIC}
 
 
 def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_folds, families, rate_alt,
@@ -1195,9 +1248,12 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
              and _step_key(c.family, c.params) not in excluded
              and (phase is None or (kind_of(c.family, c.params) == "structure") == (phase == "structure"))]
     dur = max(float(log.t_s[-1] - log.t_s[0]) for log in train)
-    tau_max = STRUCT_TAU_FRACTION * dur if phase == "structure" else dur
-    # a structural lag longer than a quarter of the run is a ramp (aging), not the device's dynamics
-    cands = [c for c in cands if c.params.get("tau_s", 0.0) <= tau_max]
+
+    def tau_cap(c):
+        # a structural lag longer than a quarter of the run is a ramp (aging), not the device's dynamics
+        return STRUCT_TAU_FRACTION * dur if kind_of(c.family, c.params) == "structure" else dur
+
+    cands = [c for c in cands if c.params.get("tau_s", 0.0) <= tau_cap(c)]
     rows = []
     nsur = Y_logs[0].shape[1] - 1
 
@@ -1296,7 +1352,7 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
     cand = best["_cand"]
     if cand is not None and cand.scan:
         for ratios in (_ratios(cand.scan, 1), _ratios(cand.scan, 2)):
-            trial = [best] + [evaluate(c) for c in effects.refine(cand, ratios, max_value=tau_max)]
+            trial = [best] + [evaluate(c) for c in effects.refine(cand, ratios, max_value=tau_cap(cand))]
             best = max(trial, key=lambda r: r["gain"])
             cand = best["_cand"]
     best = {k: v for k, v in best.items() if not k.startswith("_")}
