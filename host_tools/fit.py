@@ -72,10 +72,10 @@ class UnidentifiableError(ValueError):
 
 
 def block_groups(n: int, n_blocks: int) -> np.ndarray:
-    """Group ids 0..n_blocks-1 for n samples in contiguous, equal-length time blocks."""
-    if n_blocks < 1:
-        raise ValueError(f"cv_blocks must be >= 1, got {n_blocks}")
-    return (np.arange(n, dtype=np.int64) * n_blocks) // max(n, 1)
+    """Group ids 0..n_blocks-1 for n samples in contiguous, equal-length time blocks (the one
+    fold definition: host_tools.cv.block_ids; every block is its own fold here)."""
+    from host_tools.cv import block_ids
+    return block_ids(n, n_blocks)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -291,9 +291,9 @@ def solve(acc: Accumulator, terms=None, *, drop_unidentifiable=False, rcond=RCON
 # cross-validation and term selection
 # ---------------------------------------------------------------------------------------------
 def _heldout_sse(coef, G, b, yy):
-    """sum w (y - X c)^2 on a held-out system, from its internal-basis sums."""
-    d = _A @ coef
-    return max(yy - 2.0 * float(d @ b) + float(d @ G @ d), 0.0)
+    """sum w (y - X c)^2 on a held-out system, from its internal-basis sums (host_tools.cv.heldout_sse)."""
+    from host_tools.cv import heldout_sse
+    return max(heldout_sse(_A @ coef, yy, b, G), 0.0)
 
 
 def _banks_of(group) -> tuple:
@@ -340,11 +340,9 @@ class _CV:
 
 
 def _cv_se(e, sw):
-    """Standard error of the CV mean squared error sum(e) / sum(sw) from the spread of the
-    per-fold MSEs e_f / sw_f (folds weighted by their total weight sw_f)."""
-    mse = e.sum() / sw.sum()
-    g = len(e)
-    return math.sqrt(g / (g - 1) * float(np.sum(sw ** 2 * (e / np.where(sw > 0, sw, 1) - mse) ** 2))) / sw.sum()
+    """Standard error of the CV mean squared error (host_tools.cv.cv_se)."""
+    from host_tools.cv import cv_se
+    return cv_se(e, sw)
 
 
 def select_terms(accs, candidates=None, *, start=(0,), significance=1.0, min_gain=0.02, rcond=RCOND):
