@@ -196,7 +196,7 @@ uint64_t hdrg_udiv64(uint64_t n, uint64_t d, uint64_t *rem)
 
 /* floor(a / b), b > 0: for a < 0, floor(a / b) = -floor((-a - 1) / b) - 1 (-a - 1 = ~a >= 0,
  * defined for every int64 a), remainder b - 1 - r'. */
-static int64_t floor_divmod(int64_t a, int64_t b, int64_t *rem)
+static inline int64_t floor_divmod(int64_t a, int64_t b, int64_t *rem)
 {
     uint64_t r;
     if (a >= 0) {
@@ -217,17 +217,23 @@ int64_t hdrg_floor_div(int64_t a, int64_t b)
     return floor_divmod(a, b, &r);
 }
 
+/* floor((2a + b) / 2b), b > 0, 2a + b and 2b in int64 (arith.div_round): a + (a + b) = 2a + b
+ * without an intermediate 2a (which can leave int64 when 2a + b does not, for a < 0) */
+static inline int64_t div_round(int64_t a, int64_t b)
+{
+    int64_t r;
+    return floor_divmod(a + (a + b), 2 * b, &r);
+}
+
 int64_t hdrg_div_round(int64_t a, int64_t b)
 {
-    /* a + (a + b) = 2a + b without an intermediate 2a (which can leave int64 when 2a + b does
-     * not, for a < 0); 2b: the precondition of arith.div_round */
-    return hdrg_floor_div(a + (a + b), 2 * b);
+    return div_round(a, b);
 }
 
 int64_t hdrg_div_round_scaled(int64_t a, int64_t b, unsigned k)
 {
     int64_t r, q = floor_divmod(a, b, &r);          /* 0 <= r < b */
-    return q * P2(k) + hdrg_div_round(r * P2(k), b);
+    return q * P2(k) + div_round(r * P2(k), b);
 }
 
 int64_t hdrg_clamp(int64_t x, int64_t lo, int64_t hi, int *clamped)
