@@ -5,15 +5,17 @@
  * sequencer.py, evaluator.py, compensate.py) and the numba kernel (firmware_ref/kernel.py).
  * stdint.h and stddef.h only; no floating point, no malloc (all state is in hdrg_state_t),
  * no undefined behaviour and no implementation-defined behaviour:
- *   - arithmetic right shifts of negative values are never written: hdrg_rhu() shifts the
- *     offset value (uint64_t)x + 2^63 (see hdrg_fw.c for the proof of equivalence);
+ *   - arithmetic right shifts of negative values are never written: floor(x / 2^s) is
+ *     x < 0 ? ~(~x >> s) : x >> s, one ASR with GCC/Clang (proof in hdrg_fw.c);
+ *   - no 64-bit / or %: hdrg_udiv64() divides with 32-bit divisions (no library division on a
+ *     32-bit core); the per-sample products are 32 x 32 -> 64 (SMULL/SMLAL) where the bounds allow;
  *   - left shifts of negative values are written as products with (int64_t)1 << k;
  *   - every signed intermediate stays inside int64 by the bounds of FORMATS.md, which the
  *     table checks of hdrg_table_parse() enforce (including the Horner interval bound);
  *   - uint32 -> int32 reinterpretation is done arithmetically, never by a cast.
  *
  * Usage:
- *     static hdrg_state_t st;                     (17.5 kB with HDRG_N_HIST_MAX = 4096)
+ *     static hdrg_state_t st;                     (17.7 kB with HDRG_N_HIST_MAX = 4096)
  *     if (hdrg_init(&st, words, n_words) != HDRG_OK) ... refuse the table
  *     per sample: hdrg_step(&st, &in, &out);      (in: input words, out: outputs + intermediates)
  *     or hdrg_step_aux(&st, &in, &aux, &out) with the aux words A_c and the counter K (aux_gen 1)
