@@ -42,6 +42,7 @@ TARGETS = ("cortex-m4", "cortex-m7", "ice40", "xc7", "host")
 # tool -> the Debian package that ships it
 PACKAGES = {"arm-none-eabi-gcc": "gcc-arm-none-eabi", "arm-none-eabi-nm": "binutils-arm-none-eabi",
             "arm-none-eabi-objdump": "binutils-arm-none-eabi", "arm-none-eabi-size": "binutils-arm-none-eabi",
+            "arm-none-eabi-addr2line": "binutils-arm-none-eabi",
             "qemu-system-arm": "qemu-system-arm", "gcc": "gcc", "yosys": "yosys", "nextpnr-ice40": "nextpnr-ice40",
             "iverilog": "iverilog", "vvp": "iverilog", "verilator": "verilator"}
 NEWLIB_SPECS = Path("/usr/lib/arm-none-eabi/newlib/rdimon.specs")
@@ -49,7 +50,10 @@ MCU = {"cortex-m4": ("cortex-m4", "mps2-an386"), "cortex-m7": ("cortex-m7", "mps
 ARM_FLAGS = ("-std=c99", "-mthumb", "-mfloat-abi=soft", "-Wall", "-Wextra", "-Werror",
              # Debian's arm-none-eabi-gcc finds its own freestanding stdint.h before newlib's, which
              # then lacks the PRId64 macros: put newlib's headers first
-             "-isystem", "/usr/include/newlib")
+             "-isystem", "/usr/include/newlib",
+             # debug info (not in text/data/bss, no effect on the code): the per-stage attribution of
+             # the inlined build reads the inline chains of the executed addresses (addr2line -i)
+             "-g")
 STEP = "hdrg_step_aux"                  # the per-sample entry point
 TRACE_SAMPLES = 300                     # samples per traced case (the first ones: power-on, warm-up, reversals)
 # function -> stage (the -fno-inline build); primitives are charged to the stage that calls them
@@ -57,16 +61,17 @@ STAGES = {
     "sequencer": ("timer_step", "next_state", "state_length"),
     "proxy": ("proxy_u", "pword", "s32"),
     "rate": ("rate_step", "hist_back", "rate_reset"),
-    "combiner": ("comb_step", "comb_restart"),
-    "evaluator": ("hdrg_evaluate", "hdrg_evaluate_bank"),
+    "combiner": ("comb_step", "comb_restart", "comb_commit"),
+    "evaluator": ("hdrg_evaluate", "hdrg_evaluate_bank", "horner_row", "horner_step", "clamp_q30"),
     "aux": ("aux_step", "aux_norm", "hdrg_rhuw", "hdrg_sin_q30"),
     "step": ("hdrg_step_aux", "hdrg_step"),
     "table parser": ("hdrg_table_parse", "check_fields", "parse_aux", "check_horner", "check_horner_bank",
                      "hdrg_crc32_words",
-                     "hdrg_word_name", "hdrg_error_name", "hdrg_init", "hdrg_reset"),
+                     "hdrg_word_name", "hdrg_error_name", "hdrg_init", "hdrg_reset", "derive_bank"),
 }
 PRIMITIVES = ("hdrg_asr", "hdrg_rhu", "hdrg_mul_rhu", "hdrg_floor_div", "hdrg_div_round", "hdrg_div_round_scaled",
-              "hdrg_clamp", "hdrg_sat_signed", "abs64", "I64")
+              "hdrg_clamp", "hdrg_sat_signed", "abs64", "I64", "asr64", "asr32", "rhu64", "rhu32", "mulq30",
+              "clamp_one", "nlz32", "divlu", "hdrg_udiv64", "floor_divmod", "div_round")
 STAGE_OF = {f: s for s, fs in STAGES.items() for f in fs}
 
 
@@ -350,26 +355,44 @@ def cycles_m4(stream: list, dis: dict, P: int, div: int) -> int:
     return total
 
 
-def stage_counts(samples: list, dis_syms: list) -> dict:
-    """Instructions per stage, summed over the samples: each address -> its function -> STAGE_OF;
-    primitives and functions outside the library (libgcc) are charged to the last stage seen."""
-    import bisect
-    starts = [a for a, _, _ in dis_syms]
+def inline_chains(elf: Path, addrs) -> dict:
+    """address -> [function, ...] of the inline chain at that address (innermost first), from
+    ``addr2line -a -f -i`` on the ELF's debug info."""
+    addrs = sorted(set(addrs))
+    out = _run([need("arm-none-eabi-addr2line"), "-e", elf, "-a", "-f", "-i", *(hex(a) for a in addrs)],
+               what="addr2line").splitlines()
+    chains, cur = {}, None
+    for line in out:
+        if line.startswith("0x"):
+            cur = chains.setdefault(int(line, 16), [])
+        elif cur is not None and ":" not in line and line.strip() not in ("", "??"):
+            cur.append(line.strip())
+    return chains
+
+
+def stage_counts_inline(samples: list, elf: Path) -> tuple:
+    """(Counter, {address: stage or None}): instructions per stage of the production (inlined) build, summed over the samples: an address
+    belongs to the function its inline chain enters from hdrg_step_aux (proxy_u, rate_step, ... inlined
+    into it), or to the outermost function of the chain in a called function (hdrg_evaluate_bank);
+    primitives inlined straight into hdrg_step_aux count as "step", primitives and libgcc helpers
+    called as functions count to the stage that called them."""
+    chains = inline_chains(elf, {pc for s in samples for pc in s})
+    name_of = {}
+    for a, ch in chains.items():
+        ch = [f.split(".")[0] for f in ch]
+        if STEP in ch:
+            i = ch.index(STEP)
+            f = ch[i - 1] if i > 0 else STEP
+            name_of[a] = "step" if f in PRIMITIVES else STAGE_OF.get(f, f"other ({f})")
+        else:
+            f = ch[-1] if ch else "?"
+            name_of[a] = None if (f in PRIMITIVES or f.startswith("__") or f in ("memset", "memcpy", "?")) \
+                else STAGE_OF.get(f, f"other ({f})")
     counts = collections.Counter()
     for s in samples:
-        stage = "step"
-        for pc in s:
-            k = bisect.bisect_right(starts, pc) - 1
-            a, size, name = dis_syms[k] if k >= 0 else (0, 0, "?")
-            name = name.split(".")[0]            # rate_step.constprop.0 -> rate_step
-            if pc >= a + size or name in PRIMITIVES or name.startswith("__") or name in ("memset", "memcpy"):
-                pass
-            elif name in STAGE_OF:
-                stage = STAGE_OF[name]
-            else:
-                stage = f"other ({name})"
-            counts[stage] += 1
-    return counts
+        for st, part in _stage_runs(s, name_of):
+            counts[st] += len(part)
+    return counts, name_of
 
 
 def _stats(xs):
@@ -377,8 +400,25 @@ def _stats(xs):
     return {"mean": round(sum(xs) / len(xs), 1), "median": xs[len(xs) // 2], "max": xs[-1], "min": xs[0]}
 
 
+def _stage_runs(stream: list, stage_of_pc) -> list:
+    """The executed stream cut into runs of one stage: [(stage, [pc, ...]), ...] (stage_of_pc as
+    returned by stage_counts_inline's ``name_of``: None keeps the current stage)."""
+    runs, stage = [], "step"
+    for pc in stream:
+        st = stage_of_pc.get(pc)
+        if st is not None:
+            stage = st
+        if runs and runs[-1][0] == stage:
+            runs[-1][1].append(pc)
+        else:
+            runs.append((stage, [pc]))
+    return runs
+
+
 def measure_mcu(target: str, work: Path, log=print) -> dict:
-    """Build -O2, -Os, the broken build and a -fno-inline build; check-impl on QEMU; trace."""
+    """Build -O2, -Os, the -Os build without aux generators (-DHDRG_AUX_GEN=0), the broken build and a
+    -fno-inline build (code bytes per stage); check-impl on QEMU; trace -O2 and -Os (per stage from the
+    -O2 trace's inline chains)."""
     cpu, machine = MCU[target]
     res = {"target": target, "cpu": cpu, "machine": machine,
            "tools": {"gcc": tool_version("arm-none-eabi-gcc"), "qemu": tool_version("qemu-system-arm"),
@@ -390,6 +430,18 @@ def measure_mcu(target: str, work: Path, log=print) -> dict:
         sizes = mcu_sizes(b)
         res[opt] = {"bit_exact": rep["mismatches"] == 0, "vectors": sum(s["rows"] for s in rep["sets"].values()),
                     "first_mismatch": rep["first"], **sizes}
+    # a firmware without the aux generators: bit-exact on every set without aux_gen 1 tables, and it
+    # must refuse the aux set's tables (every aux request then mismatches)
+    na = build_mcu(target, "-Os", work / f"{target}-Os-noaux", defines=("HDRG_AUX_GEN=0",))
+    sets = [n for n in V.read_manifest(V.DEFAULT_DIR)["sets"] if n != "aux"]
+    rep = V.check_impl(qemu_argv(target, na["elf"]), names=sets, log=lambda s: log(f"  -Os AUX_GEN=0: {s}"))
+    rep_aux = V.check_impl(qemu_argv(target, na["elf"]), names=["aux"], log=lambda s: None)
+    sz = mcu_sizes(na)
+    res["-Os-no-aux-gen"] = {"bit_exact": rep["mismatches"] == 0, "sets": sets,
+                             "vectors": sum(s["rows"] for s in rep["sets"].values()),
+                             "aux_tables_refused": rep_aux["sets"]["aux"]["mismatches"] == rep_aux["sets"]["aux"]["requests"],
+                             "code_bytes": sz["code_bytes"], "step_functions": sz["step_functions"],
+                             "library": sz["library"], "stack_step_bytes": sz["stack_step_bytes"]}
     bad = build_mcu(target, "-O2", work / f"{target}-broken", defines=("HDRG_BREAK_ROUNDING",))
     rep = V.check_impl(qemu_argv(target, bad["elf"]), names=["primitives"], log=lambda s: None)
     res["broken_build_caught"] = rep["mismatches"] > 0
@@ -397,8 +449,7 @@ def measure_mcu(target: str, work: Path, log=print) -> dict:
     manifest = V.read_manifest(V.DEFAULT_DIR)
     aux_last = len(manifest["sets"]["aux"]["cases"]) - 1
     workloads = {"e2e": case_requests("e2e"), "aux-sim": case_requests("aux", [aux_last])}
-    ni = build_mcu(target, "-O2", work / f"{target}-noinline", noinline=True)
-    ni_syms = sorted((a, s, n) for n, (a, s) in symbols(ni["elf"]).items())
+    res["per_stage"] = {}
     for opt, b in builds.items():
         dis = disassembly(b["elf"])
         res[opt]["per_sample"] = {}
@@ -407,24 +458,29 @@ def measure_mcu(target: str, work: Path, log=print) -> dict:
             cyc = {k: _stats([cycles_m4(s, dis, **m) for s in samples]) for k, m in M4_MODEL.items()}
             res[opt]["per_sample"][wname] = {"samples": len(samples), "instructions": _stats([len(s) for s in samples]),
                                              "cycles_m4_model": cyc}
-    res["per_stage"] = {}
-    for wname, reqs in workloads.items():
-        samples = trace_samples(target, ni, reqs, work)
-        counts = stage_counts(samples, ni_syms)
-        res["per_stage"][wname] = {"samples": len(samples), "instructions_mean_noinline":
-                                   {k: round(v / len(samples), 1) for k, v in counts.most_common()},
-                                   "total_mean_noinline": round(sum(len(s) for s in samples) / len(samples), 1)}
-    ni_sizes = symbols(ni["lib"])
+            if opt == "-O2":            # per stage: the same trace, each address by its inline chain
+                counts, stage_of_pc = stage_counts_inline(samples, b["elf"])
+                cyc_stage = collections.Counter()
+                for s_ in samples:      # the nominal model over each stage's runs (branch joins approximate)
+                    for st_, part in _stage_runs(s_, stage_of_pc):
+                        cyc_stage[st_] += cycles_m4(part, dis, **M4_MODEL["nominal"])
+                n = len(samples)
+                res["per_stage"][wname] = {
+                    "samples": n, "instructions_mean": {k: round(v / n, 1) for k, v in counts.most_common()},
+                    "cycles_nominal_mean": {k: round(v / n, 1) for k, v in cyc_stage.most_common()},
+                    "total_instructions_mean": round(sum(len(s_) for s_ in samples) / n, 1)}
+    ni = build_mcu(target, "-O2", work / f"{target}-noinline", noinline=True)
     per_stage_code = collections.Counter()
-    for f, (_, s) in ni_sizes.items():
+    for f, (_, sz_) in symbols(ni["lib"]).items():
         f = f.split(".")[0]
-        per_stage_code[STAGE_OF.get(f, "primitives" if f in PRIMITIVES else f"other ({f})")] += s
+        per_stage_code[STAGE_OF.get(f, "primitives" if f in PRIMITIVES else f"other ({f})")] += sz_
     res["code_bytes_per_stage_noinline"] = dict(per_stage_code.most_common())
     ps = res["-O2"]["per_sample"]["e2e"]
     res.update({"bit_exact": res["-O2"]["bit_exact"] and res["-Os"]["bit_exact"],
                 "instructions_per_sample": ps["instructions"]["mean"],
                 "cycles_per_sample": ps["cycles_m4_model"]["nominal"]["mean"],
                 "code_bytes": res["-Os"]["code_bytes"], "code_bytes_O2": res["-O2"]["code_bytes"],
+                "code_bytes_no_aux_gen": res["-Os-no-aux-gen"]["code_bytes"],
                 "stack_bytes": res["-O2"]["stack_step_bytes"],
                 "cycle_model": "Cortex-M4 TRM table 3-1 per-instruction model over the executed stream"
                                + (" (M7 is dual-issue: an upper bound there)" if target == "cortex-m7" else "")})
@@ -676,7 +732,8 @@ def measure(target: str, work: Path, log=print) -> dict:
 
 def summary(r: dict) -> str:
     lines = [f"target {r['target']}: bit_exact {r['bit_exact']}"]
-    for k in ("cycles_per_sample", "instructions_per_sample", "code_bytes", "code_bytes_O2", "stack_bytes",
+    for k in ("cycles_per_sample", "instructions_per_sample", "code_bytes", "code_bytes_O2", "code_bytes_no_aux_gen",
+              "stack_bytes",
               "ns_per_sample", "luts", "ffs", "dsps", "brams", "fmax_mhz", "broken_build_caught"):
         if k in r:
             lines.append(f"  {k}: {r[k]}")
@@ -688,8 +745,12 @@ def summary(r: dict) -> str:
                        f"dsps {f['dsps']}, brams {f['brams']} (N_HIST {f['n_hist']})")
     if "per_stage" in r:
         for w, d in r["per_stage"].items():
-            lines.append(f"  instructions per sample by stage ({w}, -O2 -fno-inline, mean of {d['samples']}): "
-                         + ", ".join(f"{k} {v}" for k, v in d["instructions_mean_noinline"].items()))
+            lines.append(f"  per stage ({w}, -O2, mean of {d['samples']}): instructions "
+                         + ", ".join(f"{k} {v}" for k, v in d["instructions_mean"].items()) + "; cycles (nominal) "
+                         + ", ".join(f"{k} {v}" for k, v in d["cycles_nominal_mean"].items()))
+        na = r["-Os-no-aux-gen"]
+        lines.append(f"  -Os -DHDRG_AUX_GEN=0: per-sample code {na['code_bytes']} B, bit_exact {na['bit_exact']} "
+                     f"({na['vectors']} vectors, aux tables refused: {na['aux_tables_refused']})")
         lines.append("  code bytes by stage (-O2 -fno-inline): "
                      + ", ".join(f"{k} {v}" for k, v in r["code_bytes_per_stage_noinline"].items()))
         for opt in ("-O2", "-Os"):

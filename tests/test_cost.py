@@ -53,6 +53,12 @@ def test_worst_stack_path_from_gcc_call_graph(tmp_path):
     assert cost.reachable(edges, "eval") == {"eval", "rhu", "__aeabi_ldivmod"}
 
 
+def test_stage_runs_charge_called_primitives_to_the_caller():
+    where = {1: "proxy", 2: None, 3: "rate", 4: None, 5: "evaluator"}
+    runs = cost._stage_runs([1, 2, 3, 4, 4, 5, 2], where)
+    assert runs == [("proxy", [1, 2]), ("rate", [3, 4, 4]), ("evaluator", [5, 2])]
+
+
 def test_yosys_stat_parser_sums_families():
     stat = "   Number of cells:  9\n     LUT2  3\n     LUT6  2\n     FDRE  4\n     DSP48E1  1\n\nother\n"
     cells = cost.yosys_cells(stat)
@@ -89,9 +95,18 @@ def test_mcu_cost_json(target, tmp_path):
     assert 0 < r["code_bytes"] < r["code_bytes_O2"] and set(cost.STAGES["evaluator"]) & set(r["-O2"]["step_functions"])
     assert r["-O2"]["library"]["text"] > r["-Os"]["library"]["text"] > r["code_bytes"] // 2
     assert 0 < r["stack_bytes"] < 2048 and r["-O2"]["stack_step_path"][0] == cost.STEP
-    st = r["per_stage"]["aux-sim"]["instructions_mean_noinline"]
-    assert {"evaluator", "aux", "rate", "step"} <= set(st) and st["aux"] > 0
-    assert r["per_stage"]["e2e"]["instructions_mean_noinline"].get("aux", 0) == 0     # Z word: no generators
+    st = r["per_stage"]["aux-sim"]["instructions_mean"]
+    assert {"evaluator", "aux", "rate", "proxy", "step"} <= set(st) and st["aux"] > 0
+    e2e_st = r["per_stage"]["e2e"]
+    assert e2e_st["instructions_mean"].get("aux", 0) == 0     # Z word: no generators
+    assert abs(sum(e2e_st["instructions_mean"].values()) - r["instructions_per_sample"]) < 1
+    assert not any(k.startswith("other") for k in e2e_st["instructions_mean"])
+    # the per-sample path has no 64-bit library division; without the aux generators it is smaller,
+    # bit-exact on every other set, and refuses the aux set's tables
+    assert not any(f.startswith("__") and "div" in f for f in r["-Os"]["step_functions"])
+    na = r["-Os-no-aux-gen"]
+    assert na["bit_exact"] is True and na["aux_tables_refused"] is True and "aux" not in na["sets"]
+    assert 0 < r["code_bytes_no_aux_gen"] < r["code_bytes"]
 
 
 @pytest.mark.slow

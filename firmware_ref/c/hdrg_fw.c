@@ -6,21 +6,22 @@
  * Portability notes (C99 6.5.7, 6.3.1.3, 6.5p5):
  *
  *  - Right shift of a negative value is implementation-defined, so it is never written.
- *    hdrg_asr(x, s) = floor(x / 2^s) is computed as
- *        (int64_t)(((uint64_t)x + 2^63) >> s) - 2^(63 - s)          (1 <= s <= 63)
- *    Proof: (uint64_t)x is x mod 2^64 (6.3.1.3p2), so X = (uint64_t)x + 2^63 (mod 2^64) equals
- *    x + 2^63 exactly, because x + 2^63 lies in [0, 2^64).  The unsigned shift gives
- *    floor(X / 2^s) = floor(x / 2^s + 2^(63 - s)) = floor(x / 2^s) + 2^(63 - s), an integer in
- *    [0, 2^(64 - s) - 1], which fits int64 for s >= 1, so the conversion back is exact; the
- *    subtraction then yields floor(x / 2^s), which lies in int64.  Hence hdrg_asr equals the
- *    arithmetic (flooring) shift of the spec for every int64 x.  Cost: one add, one shift, one
- *    subtract; with a constant shift gcc -O2 folds the offset into RHU's rounding constant
- *    (add, shr, add per rounded product).
+ *    ASR(x, s) = floor(x / 2^s) is written
+ *        x < 0 ? ~(~x >> s) : x >> s
+ *    For x >= 0 it is the shift of a non-negative value.  For x < 0, ~x = -x - 1 >= 0 (int32_t
+ *    and int64_t are two's complement by definition, C99 7.18.1.1), its shift is defined, and
+ *    ~(~x >> s) = -floor((-x - 1) / 2^s) - 1 = -ceil(-x / 2^s) = floor(x / 2^s).  GCC and Clang
+ *    recognize the idiom and emit one arithmetic shift (ASR on Cortex-M, SAR on x86-64; a 64-bit
+ *    variable shift is the usual three-register sequence), so portability costs nothing.
  *  - Left shift of a negative value is undefined, so x << k is written x * ((int64_t)1 << k).
  *  - Signed overflow is undefined: every product and sum below is bounded by FORMATS.md
  *    ("Every signal"); the bounds rest on table checks that hdrg_table_parse() enforces (gains,
  *    shifts, s_bits vs g_v, exponents, and the Horner interval bound |acc| <= 2^31 - 1).
- *  - C's / truncates toward zero: hdrg_floor_div() corrects it to floor for negative a.
+ *  - Division: no C / or % on 64-bit operands (on a 32-bit core that calls a 64-bit library
+ *    division): hdrg_udiv64() divides with 32-bit divisions (UDIV on Cortex-M3/M4/M7) and
+ *    hdrg_floor_div() etc. are built on it (see there).
+ *  - Cortex-M: the per-sample products are written as (int64_t)a * b of two 32-bit operands
+ *    (one SMULL/SMLAL) wherever the bounds allow it; each such primitive states its contract.
  *
  * -DHDRG_BREAK_ROUNDING builds a deliberately wrong twin (RHU truncates instead of rounding
  * half up) so that the tests can show that the comparison catches it.
@@ -28,28 +29,80 @@
 #include "hdrg_fw.h"
 
 #define I64(x) ((int64_t)(x))
+/* a function kept out of line (GCC, Clang): rare or optional work (window commits, the aux
+ * generators) does not enter the register allocation of the per-sample path */
+#if defined(__GNUC__)
+#define HDRG_COLD __attribute__((noinline))
+#else
+#define HDRG_COLD
+#endif
 #define P2(k) ((int64_t)1 << (k))
 
 /* ---------------------------------------------------------------- primitives (arith.py) -- */
 
-int64_t hdrg_asr(int64_t x, unsigned s)
+/* floor(x / 2^s), 0 <= s <= 63: the arithmetic shift, written without shifting a negative value
+ * (see the top of this file). */
+static inline int64_t asr64(int64_t x, unsigned s)
 {
-    if (s == 0u) {
-        return x;
-    }
-    return (int64_t)(((uint64_t)x + UINT64_C(0x8000000000000000)) >> s) - P2(63u - s);
+    return x < 0 ? ~(~x >> s) : x >> s;
 }
 
-int64_t hdrg_rhu(int64_t x, unsigned s)
+/* floor(x / 2^s), 0 <= s <= 31, on a 32-bit word (one ASR). */
+static inline int32_t asr32(int32_t x, unsigned s)
+{
+    return x < 0 ? ~(~x >> s) : x >> s;
+}
+
+/* RHU(x, s) = floor(x / 2^s + 1/2), 1 <= s <= 62, x + 2^(s-1) in int64 (arith.rshift_round).
+ * Written as ASR(ASR(x, s - 1) + 1, 1): with y = floor(x / 2^(s-1)), floor((y + 1) / 2) =
+ * floor((x + 2^(s-1)) / 2^s) (nested floors); y + 1 <= (x + 2^(s-1)) / 2^(s-1) fits int64.  One
+ * variable 64-bit shift instead of a variable 2^(s-1) and a shift. */
+static inline int64_t rhu64(int64_t x, unsigned s)
+{
+#ifdef HDRG_BREAK_ROUNDING
+    return asr64(x, s);                             /* truncation: deliberately wrong */
+#else
+    return asr64(asr64(x, s - 1u) + 1, 1u);
+#endif
+}
+
+/* RHU(x, s) of a 32-bit word, 0 <= s <= 31 (any int32 x): ASR(x, s) plus bit s - 1 of x, since
+ * x = q 2^s + r (0 <= r < 2^s) rounds up exactly when r >= 2^(s-1).  No intermediate leaves
+ * int32 (x + 2^(s-1) could). */
+static inline int32_t rhu32(int32_t x, unsigned s)
 {
     if (s == 0u) {
         return x;
     }
 #ifdef HDRG_BREAK_ROUNDING
-    return hdrg_asr(x, s);                          /* truncation: deliberately wrong */
+    return asr32(x, s);
 #else
-    return hdrg_asr(x + P2(s - 1u), s);
+    return asr32(x, s) + (int32_t)(((uint32_t)x >> (s - 1u)) & 1u);
 #endif
+}
+
+/* RHU(a w, 30) for |a| <= 2^31 - 1 and |w| <= 2^30 (a Horner accumulator times a Q1.30 word):
+ * one 32 x 32 -> 64 product (SMULL; with the rounding constant GCC emits SMLAL) and the
+ * two-register shift by 30 (LSRS + ORR); |a w + 2^29| < 2^61 and |result| <= |a| (|a w / 2^30|
+ * <= |a|, rounded to an integer), so the result fits int32.  The caller's sum with the next
+ * coefficient stays within the Horner interval bound 2^31 - 1 (hdrg_table_parse). */
+static inline int32_t mulq30(int32_t a, int32_t w)
+{
+#ifdef HDRG_BREAK_ROUNDING
+    return (int32_t)asr64((int64_t)a * w, HDRG_Q);
+#else
+    return (int32_t)asr64((int64_t)a * w + ((int64_t)1 << (HDRG_Q - 1)), HDRG_Q);
+#endif
+}
+
+int64_t hdrg_asr(int64_t x, unsigned s)
+{
+    return asr64(x, s);
+}
+
+int64_t hdrg_rhu(int64_t x, unsigned s)
+{
+    return s == 0u ? x : rhu64(x, s);
 }
 
 int64_t hdrg_mul_rhu(int64_t a, int64_t b, unsigned s)
@@ -57,30 +110,130 @@ int64_t hdrg_mul_rhu(int64_t a, int64_t b, unsigned s)
     return hdrg_rhu(a * b, s);
 }
 
+/* the number of leading zero bits of x != 0 (CLZ on Cortex-M3/M4/M7 with GCC or Clang) */
+static inline unsigned nlz32(uint32_t x)
+{
+#if defined(__GNUC__)
+    return (unsigned)__builtin_clz(x);
+#else
+    unsigned n = 0;
+    while (!(x & 0x80000000u)) {
+        x <<= 1;
+        n++;
+    }
+    return n;
+#endif
+}
+
+/* 32 / 16-bit digit division (Hacker's Delight, 2nd ed., fig. 9-3 "divlu"): the 64-bit value
+ * u1 2^32 + u0 divided by v, u1 < v (so the quotient fits 32 bits); *r gets the remainder.  Only
+ * 32-bit divisions (UDIV) and products: the divisor is normalized (top bit set) and the quotient
+ * is formed from two 16-bit digits, each estimated from the top words and corrected at most twice. */
+static uint32_t divlu(uint32_t u1, uint32_t u0, uint32_t v, uint32_t *r)
+{
+    const uint32_t b = 65536u;
+    uint32_t un1, un0, vn1, vn0, q1, q0, un32, un21, un10, rhat;
+    unsigned s = nlz32(v);                          /* normalize: the top bit of v set */
+    v <<= s;
+    vn1 = v >> 16;
+    vn0 = v & 0xFFFFu;
+    un32 = s == 0u ? u1 : (u1 << s) | (u0 >> (32u - s));
+    un10 = u0 << s;
+    un1 = un10 >> 16;
+    un0 = un10 & 0xFFFFu;
+    q1 = un32 / vn1;
+    rhat = un32 - q1 * vn1;
+    while (q1 >= b || q1 * vn0 > b * rhat + un1) {
+        q1--;
+        rhat += vn1;
+        if (rhat >= b) {
+            break;
+        }
+    }
+    un21 = un32 * b + un1 - q1 * v;                 /* modulo 2^32: the true value is < v */
+    q0 = un21 / vn1;
+    rhat = un21 - q0 * vn1;
+    while (q0 >= b || q0 * vn0 > b * rhat + un0) {
+        q0--;
+        rhat += vn1;
+        if (rhat >= b) {
+            break;
+        }
+    }
+    *r = (un21 * b + un0 - q0 * v) >> s;
+    return q1 * b + q0;
+}
+
+uint64_t hdrg_udiv64(uint64_t n, uint64_t d, uint64_t *rem)
+{
+    uint32_t dh = (uint32_t)(d >> 32), dl = (uint32_t)d, r, qh, ql;
+    uint64_t q;
+    if (dh == 0u) {                                 /* d < 2^32: two 64 / 32 digit steps */
+        uint32_t nh = (uint32_t)(n >> 32);
+        qh = nh / dl;
+        ql = divlu(nh - qh * dl, (uint32_t)n, dl, &r);
+        *rem = r;
+        return ((uint64_t)qh << 32) | ql;
+    }
+    /* d >= 2^32, so q < 2^32: Hacker's Delight fig. 9-5 (divDu): normalize d to its top 32 bits,
+     * divide n / 2 by them (the estimate is q or q + 1 after the shift), then correct once. */
+    {
+        unsigned s = nlz32(dh);                     /* 0..31 */
+        uint64_t dn = d << s;
+        /* n / 2 < 2^63 and dn / 2^32 >= 2^31: the quotient of divlu fits 32 bits */
+        ql = divlu((uint32_t)(n >> 33), (uint32_t)(n >> 1), (uint32_t)(dn >> 32), &r);
+        q = ((uint64_t)ql << s) >> 31;
+        if (q != 0u) {
+            q--;
+        }
+        if (n - q * d >= d) {
+            q++;
+        }
+        *rem = n - q * d;
+        return q;
+    }
+}
+
+/* floor(a / b), b > 0: for a < 0, floor(a / b) = -floor((-a - 1) / b) - 1 (-a - 1 = ~a >= 0,
+ * defined for every int64 a), remainder b - 1 - r'. */
+static inline int64_t floor_divmod(int64_t a, int64_t b, int64_t *rem)
+{
+    uint64_t r;
+    if (a >= 0) {
+        int64_t q = (int64_t)hdrg_udiv64((uint64_t)a, (uint64_t)b, &r);
+        *rem = (int64_t)r;
+        return q;
+    }
+    {
+        int64_t q = (int64_t)hdrg_udiv64((uint64_t)~a, (uint64_t)b, &r);
+        *rem = b - 1 - (int64_t)r;
+        return -q - 1;
+    }
+}
+
 int64_t hdrg_floor_div(int64_t a, int64_t b)
 {
-    int64_t q = a / b;
-    if (a % b != 0 && a < 0) {
-        q -= 1;
-    }
-    return q;
+    int64_t r;
+    return floor_divmod(a, b, &r);
+}
+
+/* floor((2a + b) / 2b), b > 0, 2a + b and 2b in int64 (arith.div_round): a + (a + b) = 2a + b
+ * without an intermediate 2a (which can leave int64 when 2a + b does not, for a < 0) */
+static inline int64_t div_round(int64_t a, int64_t b)
+{
+    int64_t r;
+    return floor_divmod(a + (a + b), 2 * b, &r);
 }
 
 int64_t hdrg_div_round(int64_t a, int64_t b)
 {
-    /* a + (a + b) = 2a + b without an intermediate 2a (which can leave int64 when 2a + b does
-     * not, for a < 0) */
-    return hdrg_floor_div(a + (a + b), 2 * b);
+    return div_round(a, b);
 }
 
 int64_t hdrg_div_round_scaled(int64_t a, int64_t b, unsigned k)
 {
-    int64_t q = a / b, r = a % b;                   /* truncated (b > 0: neither overflows) */
-    if (r < 0) {                                    /* floor: 0 <= r < b, no q * b product */
-        q -= 1;
-        r += b;
-    }
-    return q * P2(k) + hdrg_div_round(r * P2(k), b);
+    int64_t r, q = floor_divmod(a, b, &r);          /* 0 <= r < b */
+    return q * P2(k) + div_round(r * P2(k), b);
 }
 
 int64_t hdrg_clamp(int64_t x, int64_t lo, int64_t hi, int *clamped)
@@ -270,7 +423,7 @@ static int check_fields(const hdrg_table_t *t, unsigned *bad)
             NEED(t->mant2[g] != INT32_MIN, HDRG_W_M2_0 + g);
         }
     }
-    NEED(t->aux_gen <= 1u, HDRG_W_AUX_GEN);
+    NEED(t->aux_gen <= (HDRG_AUX_GEN ? 1u : 0u), HDRG_W_AUX_GEN);    /* -DHDRG_AUX_GEN=0: aux_gen 0 only */
     NEED(t->aux_gen == 1u || t->aux_nparams == 0u, HDRG_W_AUX_NPARAMS);
     return HDRG_OK;
 }
@@ -404,6 +557,31 @@ static int check_horner(const hdrg_table_t *t, unsigned *bad)
     return err;
 }
 
+/* the rounding constant of the folded Horner addends (0 in the deliberately broken build) */
+#ifdef HDRG_BREAK_ROUNDING
+#define HALF(s) 0
+#else
+#define HALF(s) P2((s) - 1u)
+#endif
+#define HALF_Q HALF(HDRG_Q)
+
+/* hdrg_bank_t of one bank of checked fields (see hdrg_fw.h) */
+static void derive_bank(hdrg_bank_t *k, const int32_t *m, const uint32_t *e_row, uint32_t e_7, uint32_t e_acc)
+{
+    unsigned i, j;
+    for (i = 0; i < 4u; i++) {
+        for (j = 0; j < 3u; j++) {
+            k->add[3u * i + j] = I64(m[POLY[i][2u - j]]) * P2(HDRG_Q) + HALF_Q;
+        }
+        k->top[i] = m[POLY[i][3]];
+        k->align[i] = e_row[i] - e_acc;
+    }
+    k->m7 = m[K_AUX];
+    k->k7_shift = (unsigned)HDRG_Q + e_7 - e_acc;
+    k->k7_half = P2(k->k7_shift - 1u);
+    k->e_acc = e_acc;
+}
+
 int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, unsigned *bad_word)
 {
     unsigned dummy = 0, i;
@@ -438,15 +616,15 @@ int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, uns
     }
     t->proxy_kind = words[HDRG_W_PROXY_KIND];
     t->p_ref = t->proxy_kind == 0u ? I64(words[HDRG_W_P_REF]) : s32(words[HDRG_W_P_REF]);
-    t->g_u = s32(words[HDRG_W_G_U]);
-    t->u_off = s32(words[HDRG_W_U_OFF]);
+    t->g_u = (int32_t)s32(words[HDRG_W_G_U]);
+    t->u_off = (int32_t)s32(words[HDRG_W_U_OFF]);
     t->sh_u = words[HDRG_W_SH_U];
     t->rate_est = words[HDRG_W_RATE_EST];
     t->rate_n = words[HDRG_W_RATE_N];
     t->rate_shift = words[HDRG_W_RATE_SHIFT];
     t->rate_warmup = words[HDRG_W_RATE_WARMUP];
     t->s_bits = words[HDRG_W_S_BITS];
-    t->g_v = s32(words[HDRG_W_G_V]);
+    t->g_v = (int32_t)s32(words[HDRG_W_G_V]);
     t->sh_v = words[HDRG_W_SH_V];
     t->fs_q16 = words[HDRG_W_FS_Q16];
     t->combiner = words[HDRG_W_COMBINER];
@@ -500,10 +678,22 @@ int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, uns
     if (err == HDRG_OK) {
         err = parse_aux(t, words + n_fixed, bad);
     }
+    if (err == HDRG_OK) {
+        err = check_horner(t, bad);
+    }
     if (err != HDRG_OK) {
         return err;
     }
-    return check_horner(t, bad);
+    t->s_lim = P2(t->s_bits) - 1;
+    t->u_add = I64(t->u_off) + (t->sh_u == 0u ? 0 : HALF(t->sh_u));
+    t->v_half = t->sh_v == 0u ? 0 : HALF(t->sh_v);
+    derive_bank(&t->bank[0], t->mant, t->e_row, t->e_7, t->e_acc);
+    if (t->n_banks == 2u) {
+        derive_bank(&t->bank[1], t->mant2, t->e_row2, t->e_7_2, t->e_acc2);
+    } else {
+        t->bank[1] = t->bank[0];
+    }
+    return HDRG_OK;
 }
 
 /* ---------------------------------------------------------------- pipeline --------------- */
@@ -625,23 +815,38 @@ static uint8_t timer_step(hdrg_state_t *st)
     return st->t_state;
 }
 
-/* proxy.proxy_u */
-static int32_t proxy_u(const hdrg_table_t *t, int64_t p, int *clamped)
+/* clamp of an int64 to [-2^30, 2^30] (u, v, z); sets flag in *flags if it was outside */
+static inline int32_t clamp_one(int64_t x, unsigned *flags, unsigned flag)
 {
-    /* |dp| <= 2^31 - 1, 0 < g_u < 2^31, |u_off| <= 2^30, sh_u <= 62: the sum is below 2^63 */
-    int64_t dp = hdrg_clamp(p - t->p_ref, -I64(HDRG_INT32_SYM), HDRG_INT32_SYM, NULL);
-    int64_t u = hdrg_rhu(dp * t->g_u + t->u_off, t->sh_u);
-    return (int32_t)hdrg_clamp(u, -HDRG_ONE, HDRG_ONE, clamped);
+    if (x > HDRG_ONE) {
+        *flags |= flag;
+        return (int32_t)HDRG_ONE;
+    }
+    if (x < -HDRG_ONE) {
+        *flags |= flag;
+        return -(int32_t)HDRG_ONE;
+    }
+    return (int32_t)x;
 }
 
-/* rate.RateState.step: pushes p; returns v, sets *s (the sum before its clamp), *clamped, *warm */
-static int32_t rate_step(hdrg_state_t *st, uint32_t pw, int restart, int64_t *s_out, int *clamped,
-                         int *warm)
+/* proxy.proxy_u: dP = clamp(P - P_REF, +-(2^31 - 1)) is an int32, so RHU(dP G_U + U_OFF, SH_U) =
+ * ASR(dP G_U + u_add, SH_U) with u_add = U_OFF + 2^(SH_U - 1) (hdrg_table_t) is one SMLAL and one
+ * variable 64-bit shift (0 < G_U < 2^31, |U_OFF| <= 2^30, SH_U <= 62: |.| < 2^62 + 2^61); then
+ * the clamp to +-2^30 */
+static int32_t proxy_u(const hdrg_table_t *t, int64_t p, unsigned *flags)
+{
+    int64_t d = p - t->p_ref;
+    int32_t dp = d > HDRG_INT32_SYM ? HDRG_INT32_SYM : d < -HDRG_INT32_SYM ? -HDRG_INT32_SYM : (int32_t)d;
+    return clamp_one(asr64(t->u_add + I64(dp) * t->g_u, t->sh_u), flags, HDRG_FLAG_PROXY_CLAMPED);
+}
+
+/* rate.RateState.step: pushes p; returns v, sets *s (the sum before its clamp) and the flags
+ * HDRG_FLAG_WARMUP, HDRG_FLAG_RATE_CLAMPED in *flags */
+static int32_t rate_step(hdrg_state_t *st, uint32_t pw, int restart, int64_t *s_out, unsigned *flags)
 {
     const hdrg_table_t *t = &st->t;
     uint32_t k = st->k, n = st->n, j;
-    int64_t p, s = 0, sc, v;
-    int sclamp = 0, vclamp = 0;
+    int64_t p, s = 0, sc;
     if (restart) {
         rate_reset(st);
         k = 0;
@@ -671,23 +876,48 @@ static int32_t rate_step(hdrg_state_t *st, uint32_t pw, int restart, int64_t *s_
         s = st->iy;
     }
     *s_out = s;
-    *warm = k < t->rate_warmup;
-    if (*warm) {
+    if (k < t->rate_warmup) {
         st->k = k + 1u;                             /* saturates at rate_warmup */
-        *clamped = 0;
+        *flags |= HDRG_FLAG_WARMUP;
         return 0;
     }
     st->k = k;
-    sc = hdrg_clamp(s, -(P2(t->s_bits) - 1), P2(t->s_bits) - 1, &sclamp);
-    v = hdrg_rhu(sc * t->g_v, t->sh_v);             /* |sc g_v| < 2^SB 2^(62 - SB) */
-    v = hdrg_clamp(v, -HDRG_ONE, HDRG_ONE, &vclamp);
-    *clamped = sclamp || vclamp;
-    return (int32_t)v;
+    sc = s;                                         /* clamp to +-s_lim = +-(2^SB - 1) */
+    if (s > t->s_lim) {
+        sc = t->s_lim;
+        *flags |= HDRG_FLAG_RATE_CLAMPED;
+    } else if (s < -t->s_lim) {
+        sc = -t->s_lim;
+        *flags |= HDRG_FLAG_RATE_CLAMPED;
+    }
+    /* RHU(sc g_v, sh_v) = ASR(sc g_v + 2^(sh_v - 1), sh_v): |sc g_v| < 2^SB 2^(62 - SB) = 2^62 */
+    return clamp_one(asr64(sc * t->g_v + t->v_half, t->sh_v), flags, HDRG_FLAG_RATE_CLAMPED);
 }
 
-/* sequencer.Combiner.step: returns cvalid, sets st->y_hold, *sat; b (the sample's B) and warm
+/* the window commit of sequencer.Combiner.step (once per window): mean, slope; returns the
+ * slope's clamp flag.  A function of its own (not inlined: HDRG_COLD) so that the divisions
+ * stay out of the per-sample register allocation. */
+static HDRG_COLD int comb_commit(hdrg_state_t *st, unsigned cur)
+{
+    int c = 0;
+    int64_t mean = hdrg_div_round_scaled(st->acc, I64(st->cnt), HDRG_MEAN_EXTRA);
+    int64_t sp = I64(st->cnt) - 1;
+    if (st->ncommit[cur] >= 1u) {
+        int64_t dc2 = 2 * (I64(st->age[cur]) - 1) - sp + I64(st->span[cur]);
+        st->slope[cur] = hdrg_clamp(hdrg_div_round_scaled(mean - st->w[cur], dc2, HDRG_SLOPE_EXTRA),
+                                    -HDRG_SLOPE_MAX, HDRG_SLOPE_MAX, &c);
+    }
+    st->w[cur] = mean;
+    st->span[cur] = (uint32_t)sp;
+    st->age[cur] = 1u;
+    st->ncommit[cur] = st->ncommit[cur] >= 1u ? 2u : 1u;
+    return c;
+}
+
+/* sequencer.Combiner.step: returns cvalid, sets st->y_hold, HDRG_FLAG_SAT in *flags; b (the sample's B) and warm
  * are read by order 1 (the residual r = c - B) only */
-static int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, int64_t b, int warm, int *sat)
+static int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, int64_t b, int warm,
+                     unsigned *flags)
 {
     const hdrg_table_t *t = &st->t;
     unsigned cur, o;
@@ -707,20 +937,9 @@ static int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, in
     cur = st->cur;
     if (mode != cur) {
         if (cur != 0u && st->cnt >= 1u) {           /* commit the closing window */
-            int64_t mean = hdrg_div_round_scaled(st->acc, I64(st->cnt), HDRG_MEAN_EXTRA);
-            int64_t sp = I64(st->cnt) - 1;
-            if (st->ncommit[cur] >= 1u) {
-                int64_t dc2 = 2 * (I64(st->age[cur]) - 1) - sp + I64(st->span[cur]);
-                int c = 0;
-                st->slope[cur] = hdrg_clamp(
-                    hdrg_div_round_scaled(mean - st->w[cur], dc2, HDRG_SLOPE_EXTRA),
-                    -HDRG_SLOPE_MAX, HDRG_SLOPE_MAX, &c);
-                *sat |= c;
+            if (comb_commit(st, cur)) {
+                *flags |= HDRG_FLAG_SAT;
             }
-            st->w[cur] = mean;
-            st->span[cur] = (uint32_t)sp;
-            st->age[cur] = 1u;
-            st->ncommit[cur] = st->ncommit[cur] >= 1u ? 2u : 1u;
         }
         cur = (mode == 1u || mode == 2u) ? mode : 0u;
         st->cur = (uint8_t)cur;
@@ -741,13 +960,15 @@ static int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, in
                 }
                 /* r = symsat32(RHU(c 2^11 - B, 11)): |c 2^11| < 2^42, |B| < 2^52 */
                 c = hdrg_sat_signed(hdrg_rhu(c * P2(HDRG_OUT_SHIFT) - b, HDRG_OUT_SHIFT), 32u, &cs);
-                *sat |= cs;
+                if (cs) {
+                    *flags |= HDRG_FLAG_SAT;
+                }
                 if (t->combiner == 3u) {            /* none: out = r */
                     if (st->cnt < HDRG_COUNT_MAX) {
                         st->acc += c;
                         st->cnt += 1u;
                     } else {
-                        *sat = 1;
+                        *flags |= HDRG_FLAG_SAT;
                     }
                     st->y_hold = c * P2(HDRG_OUT_SHIFT);
                     return 1;
@@ -757,7 +978,7 @@ static int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, in
                 st->acc += c;                       /* |acc| <= 2^31 cnt < 2^62 */
                 st->cnt += 1u;
             } else {
-                *sat = 1;
+                *flags |= HDRG_FLAG_SAT;
             }
             o = 3u - cur;
             if (st->ncommit[o] >= 1u && st->age[o] <= t->max_stale_n) {
@@ -765,7 +986,9 @@ static int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, in
                 if (t->combiner == 2u) {
                     int dc = 0;
                     int64_t d = hdrg_clamp(2 * I64(st->age[o]) + I64(st->span[o]), 0, HDRG_D_MAX, &dc);
-                    *sat |= dc;
+                    if (dc) {
+                        *flags |= HDRG_FLAG_SAT;
+                    }
                     other += hdrg_rhu(st->slope[o] * d, HDRG_SLOPE_EXTRA);  /* < 2^40 2^22 */
                 }
                 st->y_hold = c * P2(HDRG_MEAN_EXTRA) + other;
@@ -778,34 +1001,66 @@ static int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, in
     return cvalid;
 }
 
-/* evaluator.evaluate (bank 2: mant2, e_row2, e_7_2, e_acc2) */
+/* floor((a w + add) / 2^30) for |a| <= 2^31 - 1, |w| <= 2^30 and add = c 2^30 + 2^29 with a
+ * coefficient c (hdrg_bank_t): RHU(a w, 30) + c in one SMLAL and the two-register shift by 30.
+ * |a w + add| < 2^62; the result is the next Horner accumulator, |.| <= 2^31 - 1 by the Horner
+ * interval bound (check_horner), so the conversion to int32 is exact. */
+static inline int32_t horner_step(int32_t a, int32_t w, int64_t add)
+{
+    return (int32_t)asr64(add + (int64_t)a * w, HDRG_Q);
+}
+
+/* the row u^i of a bank: c[i][3] through three Horner steps in v, aligned to 2^-E (RHU by
+ * e_i - E); written out four times by the caller (no loop) */
+static inline int32_t horner_row(const hdrg_bank_t *k, unsigned i, int32_t v)
+{
+    const int64_t *c = k->add + 3u * i;
+    int32_t p = k->top[i];
+    p = horner_step(p, v, c[0]);
+    p = horner_step(p, v, c[1]);
+    p = horner_step(p, v, c[2]);
+    return rhu32(p, k->align[i]);
+}
+
+/* clamp of an int32 to [-2^30, 2^30] (*clamped may be NULL) */
+static inline int32_t clamp_q30(int32_t x, int *clamped)
+{
+    int c = x > (int32_t)HDRG_ONE || x < -(int32_t)HDRG_ONE;
+    if (clamped != NULL) {
+        *clamped = c;
+    }
+    return x > (int32_t)HDRG_ONE ? (int32_t)HDRG_ONE : x < -(int32_t)HDRG_ONE ? -(int32_t)HDRG_ONE : x;
+}
+
+/* evaluator.evaluate (bank 2: the m2_k, e2_g words), on 32-bit words (hdrg_bank_t).  Contract
+ * (the table checks of hdrg_table_parse): every Horner accumulator p, q, t satisfies |.| <=
+ * 2^31 - 1 (the quantizer's interval bound, check_horner), |u|, |v| <= 2^30 (precondition;
+ * clamped in the pipeline), z is clamped here, e_i - E in 0..31 and e_7 - E in 0..31
+ * (check_fields).  Each inner Horner step is one SMLAL (horner_step), each outer one mulq30 plus
+ * a 32-bit add, each row alignment RHU(q, e_i - E) a 32-bit rhu32; only the k7 z product
+ * (shift 30..61) and the result B (|B| < 2^52) are 64-bit. */
 int64_t hdrg_evaluate_bank(const hdrg_table_t *t, unsigned bank, int32_t u, int32_t v, int32_t z, int *z_clamped)
 {
-    int64_t a[4], acc, zz;
-    unsigned i;
-    int two = bank == 2u && t->n_banks == 2u;
-    const int32_t *m = two ? t->mant2 : t->mant;
-    const uint32_t *e_row = two ? t->e_row2 : t->e_row;
-    uint32_t e_7 = two ? t->e_7_2 : t->e_7, e_acc = two ? t->e_acc2 : t->e_acc;
-    int E = (int)e_acc;
-    zz = hdrg_clamp(z, -HDRG_ONE, HDRG_ONE, z_clamped);
-    for (i = 0; i < 4u; i++) {
-        const uint8_t *c = POLY[3u - i];
-        int64_t p = m[c[3]];
-        p = hdrg_mul_rhu(p, v, HDRG_Q) + m[c[2]];
-        p = hdrg_mul_rhu(p, v, HDRG_Q) + m[c[1]];
-        p = hdrg_mul_rhu(p, v, HDRG_Q) + m[c[0]];
-        a[3u - i] = hdrg_rhu(p, e_row[3u - i] - e_acc);
-    }
+    const hdrg_bank_t *k = &t->bank[bank == 2u ? 1 : 0];
+    int32_t a[4], acc, zz = clamp_q30(z, z_clamped);
+    a[0] = horner_row(k, 0u, v);
+    a[1] = horner_row(k, 1u, v);
+    a[2] = horner_row(k, 2u, v);
+    a[3] = horner_row(k, 3u, v);
     acc = a[3];
-    acc = hdrg_mul_rhu(acc, u, HDRG_Q) + a[2];
-    acc = hdrg_mul_rhu(acc, u, HDRG_Q) + a[1];
-    acc = hdrg_mul_rhu(acc, u, HDRG_Q) + a[0];
-    acc += hdrg_mul_rhu(m[K_AUX], zz, HDRG_Q + e_7 - e_acc);
-    if (E >= HDRG_Y_FRAC) {
-        return hdrg_rhu(acc, (unsigned)(E - HDRG_Y_FRAC));
+    acc = mulq30(acc, u) + a[2];
+    acc = mulq30(acc, u) + a[1];
+    acc = mulq30(acc, u) + a[0];
+    /* RHU(m_7 z, s), s = 30 + e_7 - E: |m_7 z| < 2^61 (one SMLAL onto 2^(s-1)), |.| <= |m_7| */
+#ifdef HDRG_BREAK_ROUNDING
+    acc += (int32_t)asr64((int64_t)k->m7 * zz, k->k7_shift);
+#else
+    acc += (int32_t)asr64(k->k7_half + (int64_t)k->m7 * zz, k->k7_shift);
+#endif
+    if (k->e_acc >= (unsigned)HDRG_Y_FRAC) {
+        return rhu32(acc, k->e_acc - (unsigned)HDRG_Y_FRAC);
     }
-    return acc * P2(HDRG_Y_FRAC - E);               /* |acc| < 2^31: below 2^52 */
+    return (int64_t)acc * P2((unsigned)HDRG_Y_FRAC - k->e_acc);   /* |acc| < 2^31: below 2^52 */
 }
 
 int64_t hdrg_evaluate(const hdrg_table_t *t, int32_t u, int32_t v, int32_t z, int *z_clamped)
@@ -813,6 +1068,7 @@ int64_t hdrg_evaluate(const hdrg_table_t *t, int32_t u, int32_t v, int32_t z, in
     return hdrg_evaluate_bank(t, 1u, u, v, z, z_clamped);
 }
 
+#if HDRG_AUX_GEN
 /* aux.normalize: q = clamp(RHU(clamp(x - REF) G + OFF, SH), +-2^30) */
 static int64_t aux_norm(int64_t x, const int64_t *c)
 {
@@ -821,7 +1077,7 @@ static int64_t aux_norm(int64_t x, const int64_t *c)
 }
 
 /* aux.AuxStage.step: the raw sum RHU(acc, 30) (the caller clamps it) */
-static int64_t aux_step(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input_t *ax, int64_t k,
+static HDRG_COLD int64_t aux_step(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input_t *ax, int64_t k,
                         unsigned mode, int restart, int64_t s, int warm)
 {
     const hdrg_table_t *t = &st->t;
@@ -898,6 +1154,8 @@ static int64_t aux_step(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux
     return hdrg_rhu(acc, HDRG_Q);
 }
 
+#endif /* HDRG_AUX_GEN */
+
 /* compensate.Pipeline.step */
 int hdrg_step(hdrg_state_t *st, const hdrg_input_t *in, hdrg_sample_t *o)
 {
@@ -908,11 +1166,11 @@ int hdrg_step_aux(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input
 {
     const hdrg_table_t *t = &st->t;
     int restart = in->restart != 0;
-    int uc = 0, vc = 0, warm = 0, zc = 0, sat = 0, cvalid, valid;
-    unsigned state, mode, flags;
+    int cvalid, valid, warm;
+    unsigned state, mode, flags = 0;                /* flags are set where they arise */
     uint32_t pw;
-    int64_t s = 0, b, k, z;
-    int32_t u, v;
+    int64_t b;
+    int32_t u, v, z;
     if (in->mode < -1 || in->mode > 3) {
         return HDRG_ERR_INPUT;
     }
@@ -932,20 +1190,34 @@ int hdrg_step_aux(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input
         state = mode == 0u ? HDRG_ST_FTR : mode == 1u ? HDRG_ST_MODE_1 : mode == 2u ? HDRG_ST_MODE_2
               : st->last_window == 1u ? HDRG_ST_EXCH_TO_2 : HDRG_ST_EXCH_TO_1;
     }
-    /* 2. proxy, 3. rate */
+    o->state = (uint8_t)state;
+    o->vs = STATE_VS[state];
+    o->mode = (uint8_t)mode;
+    o->sign = STATE_SIGN[state];
+    /* 2. proxy, 3. rate (the outputs are stored as they arise: fewer live registers) */
     pw = t->proxy_kind == 0u ? in->f : (uint32_t)in->t;   /* bit pattern, decoded by pword */
-    u = proxy_u(t, pword(st, pw), &uc);
-    v = rate_step(st, pw, restart, &s, &vc, &warm);
-    /* 4b. aux: the generators (aux_gen 1) or the Z word */
-    k = (ax != NULL && ax->k_given) ? ax->k : st->kc;
-    st->kc = k < HDRG_K_LIMIT ? k + 1 : HDRG_K_LIMIT;
-    z = t->aux_gen == 1u ? aux_step(st, in, ax, k, mode, restart || st->fresh, s, warm) : I64(in->z);
-    st->fresh = 0;
-    z = hdrg_clamp(z, -HDRG_ONE, HDRG_ONE, &zc);
+    o->u = u = proxy_u(t, pword(st, pw), &flags);
+    o->v = v = rate_step(st, pw, restart, &o->s, &flags);
+    warm = (flags & HDRG_FLAG_WARMUP) != 0u;
+    /* 4b. aux: the generators (aux_gen 1; the sample counter kc is read by them only, so it is
+     * kept for aux_gen 1 tables only) or the Z word */
+#if HDRG_AUX_GEN
+    if (t->aux_gen == 1u) {
+        int64_t k = (ax != NULL && ax->k_given) ? ax->k : st->kc;
+        st->kc = k < HDRG_K_LIMIT ? k + 1 : HDRG_K_LIMIT;
+        z = clamp_one(aux_step(st, in, ax, k, mode, restart || st->fresh, o->s, warm), &flags,
+                      HDRG_FLAG_AUX_CLAMPED);
+        st->fresh = 0;
+    } else
+#endif
+    {
+        z = clamp_one(in->z, &flags, HDRG_FLAG_AUX_CLAMPED);
+    }
+    o->z = z;
     /* 5. evaluator: bank 2 on mode-2 samples of a two-bank table */
-    b = hdrg_evaluate_bank(t, mode == 2u ? 2u : 1u, u, v, (int32_t)z, NULL);
+    o->b = b = hdrg_evaluate_bank(t, mode == 2u ? 2u : 1u, u, v, z, NULL);
     /* 5b. combiner (order 1 reads B) */
-    cvalid = comb_step(st, mode, in->r, restart, b, warm, &sat);
+    cvalid = comb_step(st, mode, in->r, restart, b, warm, &flags);
     /* 6. compensate */
     valid = cvalid && !warm && mode != 3u;
     if (valid) {
@@ -954,24 +1226,18 @@ int hdrg_step_aux(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input
         st->out_hold = (int32_t)hdrg_sat_signed(hdrg_rhu(t->order == 0u ? st->y_hold - b : st->y_hold,
                                                          HDRG_OUT_SHIFT), 32u, &s1);
         st->bias_hold = (int32_t)hdrg_sat_signed(hdrg_rhu(b, HDRG_OUT_SHIFT), 32u, &s2);
-        sat = sat || s1 || s2;
+        if (s1 || s2) {
+            flags |= HDRG_FLAG_SAT;
+        }
     }
-    flags = (uc ? HDRG_FLAG_PROXY_CLAMPED : 0u) | (vc ? HDRG_FLAG_RATE_CLAMPED : 0u)
-          | (warm ? HDRG_FLAG_WARMUP : 0u) | (mode == 3u ? HDRG_FLAG_EXCHANGE : 0u)
-          | ((!cvalid && mode != 3u) ? HDRG_FLAG_STALE : 0u) | (zc ? HDRG_FLAG_AUX_CLAMPED : 0u)
-          | (sat ? HDRG_FLAG_SAT : 0u);
-    o->state = (uint8_t)state;
-    o->vs = STATE_VS[state];
-    o->mode = (uint8_t)mode;
-    o->sign = STATE_SIGN[state];
-    o->u = u;
-    o->v = v;
-    o->z = (int32_t)z;
-    o->s = s;
+    if (mode == 3u) {
+        flags |= HDRG_FLAG_EXCHANGE;
+    } else if (!cvalid) {
+        flags |= HDRG_FLAG_STALE;
+    }
     o->acc = st->acc;
     o->cnt = st->cnt;
     o->y = st->y_hold;
-    o->b = b;
     o->out = st->out_hold;
     o->bias = st->bias_hold;
     o->valid = (uint8_t)valid;

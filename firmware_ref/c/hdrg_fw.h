@@ -5,15 +5,17 @@
  * sequencer.py, evaluator.py, compensate.py) and the numba kernel (firmware_ref/kernel.py).
  * stdint.h and stddef.h only; no floating point, no malloc (all state is in hdrg_state_t),
  * no undefined behaviour and no implementation-defined behaviour:
- *   - arithmetic right shifts of negative values are never written: hdrg_rhu() shifts the
- *     offset value (uint64_t)x + 2^63 (see hdrg_fw.c for the proof of equivalence);
+ *   - arithmetic right shifts of negative values are never written: floor(x / 2^s) is
+ *     x < 0 ? ~(~x >> s) : x >> s, one ASR with GCC/Clang (proof in hdrg_fw.c);
+ *   - no 64-bit / or %: hdrg_udiv64() divides with 32-bit divisions (no library division on a
+ *     32-bit core); the per-sample products are 32 x 32 -> 64 (SMULL/SMLAL) where the bounds allow;
  *   - left shifts of negative values are written as products with (int64_t)1 << k;
  *   - every signed intermediate stays inside int64 by the bounds of FORMATS.md, which the
  *     table checks of hdrg_table_parse() enforce (including the Horner interval bound);
  *   - uint32 -> int32 reinterpretation is done arithmetically, never by a cast.
  *
  * Usage:
- *     static hdrg_state_t st;                     (17.5 kB with HDRG_N_HIST_MAX = 4096)
+ *     static hdrg_state_t st;                     (17.7 kB with HDRG_N_HIST_MAX = 4096)
  *     if (hdrg_init(&st, words, n_words) != HDRG_OK) ... refuse the table
  *     per sample: hdrg_step(&st, &in, &out);      (in: input words, out: outputs + intermediates)
  *     or hdrg_step_aux(&st, &in, &aux, &out) with the aux words A_c and the counter K (aux_gen 1)
@@ -36,6 +38,13 @@
 #endif
 #if HDRG_N_HIST_MAX < 2 || HDRG_N_HIST_MAX > 4096
 #error "HDRG_N_HIST_MAX must be in 2..4096"
+#endif
+
+/* 1 (default): the aux generators of aux_gen 1 tables are compiled in; 0: a firmware without
+ * them (aux_gen 1 tables are refused, HDRG_ERR_FIELD at word aux_gen; about 1.4 kB less code on
+ * Cortex-M at -Os).  Everything else is the same, bit for bit. */
+#ifndef HDRG_AUX_GEN
+#define HDRG_AUX_GEN 1
 #endif
 
 /* ---- table layout (version 2; version 1 is read as order 0 with one bank) --------------- */
@@ -156,15 +165,32 @@ typedef struct hdrg_aux_term {
     int64_t c[6];
 } hdrg_aux_term_t;
 
+/* One coefficient bank in the evaluator's order, derived from the table words by
+ * hdrg_table_parse (nothing here is a new degree of freedom): row i = 0..3 (the u^i row) is
+ * p = c[i][3], then three Horner steps p = RHU(p v, 30) + c[i][2], c[i][1], c[i][0], written as
+ * floor((p v + add) / 2^30) with add = c[i][j] 2^30 + 2^29 (the rounding constant and the next
+ * coefficient folded into one SMLAL addend: RHU(p v, 30) + c = floor((p v + 2^29 + c 2^30) / 2^30)). */
+typedef struct hdrg_bank {
+    int64_t add[12];            /* add[3 i + k] = c[i][2 - k] 2^30 + 2^29 */
+    int64_t k7_half;            /* 2^(k7_shift - 1) */
+    int32_t top[4];             /* c[i][3] */
+    int32_t m7;                 /* k7 mantissa */
+    uint32_t align[4];          /* e_i - E (0..31) */
+    uint32_t k7_shift;          /* 30 + e_7 - E (30..61) */
+    uint32_t e_acc;             /* E */
+} hdrg_bank_t;
+
 /* The decoded table fields (FORMATS.md "Coefficient table layout"); signed fields decoded from
- * two's complement, p_ref of a freq table kept as the uint32 value. */
+ * two's complement, p_ref of a freq table kept as the uint32 value.  The fields after crc are
+ * derived at parse time for the per-sample path. */
 typedef struct hdrg_table {
     uint32_t proxy_kind;        /* 0 freq (P = F word), 1 temp (P = T word) */
-    int64_t p_ref, g_u, u_off;
+    int64_t p_ref;
+    int32_t g_u, u_off;         /* 0 < g_u < 2^31, |u_off| <= g_u / 2 + 1 */
     uint32_t sh_u;
     uint32_t rate_est;          /* 0 diff, 1 diffn, 2 lsq, 3 iir */
     uint32_t rate_n, rate_shift, rate_warmup, s_bits;
-    int64_t g_v;
+    int32_t g_v;                /* 0 < g_v < 2^min(31, 62 - s_bits) */
     uint32_t sh_v, fs_q16;
     uint32_t combiner;          /* 0 ftr, 1 pair, 2 trend, 3 none (order 1 only) */
     uint32_t settle_n, max_stale_n, power_on_n, exchange_n, dwell_n;
@@ -180,6 +206,10 @@ typedef struct hdrg_table {
     uint32_t aux_frac[HDRG_AUX_MAX_CH];
     hdrg_aux_term_t aux_term[HDRG_AUX_MAX_TERMS];
     uint32_t n_words, crc;
+    int64_t s_lim;              /* 2^s_bits - 1: the rate-sum clamp */
+    int64_t u_add;              /* u_off + 2^(sh_u - 1) (u_off if sh_u = 0): u = ASR(dP g_u + u_add, sh_u) */
+    int64_t v_half;             /* 2^(sh_v - 1) (0 if sh_v = 0): v = ASR(S g_v + v_half, sh_v) */
+    hdrg_bank_t bank[2];        /* bank 1, bank 2 (a copy of bank 1 for a one-bank table) */
 } hdrg_table_t;
 
 /* The input words of one sample. */
@@ -254,6 +284,9 @@ int64_t hdrg_rhu(int64_t x, unsigned s);
 int64_t hdrg_asr(int64_t x, unsigned s);
 /* RHU(a * b, s); the product must fit int64. */
 int64_t hdrg_mul_rhu(int64_t a, int64_t b, unsigned s);
+/* floor(n / d) and *rem = n - d floor(n / d) for d > 0, with 32-bit divisions only (no 64-bit
+ * library division): the per-sample path's only divider (window means, trend slopes). */
+uint64_t hdrg_udiv64(uint64_t n, uint64_t d, uint64_t *rem);
 /* floor(a / b), b > 0. */
 int64_t hdrg_floor_div(int64_t a, int64_t b);
 /* floor((2a + b) / 2b), b > 0. */
