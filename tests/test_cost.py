@@ -7,7 +7,7 @@ import textwrap
 
 import pytest
 
-from host_tools import cli, cost
+from host_tools import cli, cost, cost_fpga
 
 ARM = shutil.which("arm-none-eabi-gcc") and shutil.which("qemu-system-arm") and cost.NEWLIB_SPECS.is_file()
 FPGA = all(shutil.which(t) for t in ("yosys", "iverilog", "vvp", "verilator"))
@@ -55,9 +55,9 @@ def test_worst_stack_path_from_gcc_call_graph(tmp_path):
 
 def test_yosys_stat_parser_sums_families():
     stat = "   Number of cells:  9\n     LUT2  3\n     LUT6  2\n     FDRE  4\n     DSP48E1  1\n\nother\n"
-    cells = cost.yosys_cells(stat)
+    cells = cost_fpga.yosys_cells(stat)
     assert cells == {"LUT2": 3, "LUT6": 2, "FDRE": 4, "DSP48E1": 1}
-    r = cost.resources("xc7", cells)
+    r = cost_fpga.resources("xc7", cells)
     assert (r["luts"], r["ffs"], r["dsps"], r["brams"]) == (5, 4, 1, 0)
 
 
@@ -105,7 +105,7 @@ def test_fpga_cost_json(target, tmp_path):
     assert 25 <= r["cycles_per_sample"] <= 200
     assert 100 < r["luts"] and 100 < r["ffs"] and 1 <= r["dsps"]
     if target == "ice40":                # the UP5K goals
-        assert r["luts"] <= 5280 and r["dsps"] <= 8 and r["fmax_mhz"] >= cost.FMAX_GOAL_MHZ
+        assert r["luts"] <= 5280 and r["dsps"] <= 8 and r["fmax_mhz"] >= cost_fpga.FMAX_GOAL_MHZ
         assert r["pnr"]["utilisation"]["ICESTORM_DSP"][0] == r["dsps"]
     else:
         assert r["fmax_mhz"] is None

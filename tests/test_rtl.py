@@ -7,7 +7,7 @@ import subprocess
 
 import pytest
 
-from host_tools import cost
+from host_tools import cost_fpga
 
 ICARUS = shutil.which("iverilog") and shutil.which("vvp")
 VERILATOR = shutil.which("verilator")
@@ -16,8 +16,8 @@ CYCLES_GOAL = 200
 
 @pytest.mark.skipif(not ICARUS, reason="Icarus Verilog not installed (Debian package iverilog)")
 def test_tm_evaluator_bit_exact_icarus(tmp_path):
-    meta, _ = cost._evaluator_meta()
-    r = cost.rtl_check_icarus(tmp_path)
+    meta, _ = cost_fpga._evaluator_meta()
+    r = cost_fpga.rtl_check_icarus(tmp_path)
     assert r["vectors"] == meta["rows"] > 1000
     assert r["mismatches"] == 0
     assert 25 <= r["cycles"] <= CYCLES_GOAL           # at least one cycle per operation of the program
@@ -25,14 +25,14 @@ def test_tm_evaluator_bit_exact_icarus(tmp_path):
 
 @pytest.mark.skipif(not ICARUS, reason="Icarus Verilog not installed (Debian package iverilog)")
 def test_broken_tm_evaluator_is_caught(tmp_path):
-    r = cost.rtl_check_icarus(tmp_path, ("HDRG_BREAK_ROUNDING",))
+    r = cost_fpga.rtl_check_icarus(tmp_path, ("HDRG_BREAK_ROUNDING",))
     assert r["mismatches"] > r["vectors"] // 10
 
 
 @pytest.mark.skipif(not VERILATOR, reason="Verilator not installed (Debian package verilator)")
 def test_tm_evaluator_lint_clean():
     pr = subprocess.run([VERILATOR, "--lint-only", "-Wall", "--top-module", "hdrg_eval_tm_pnr",
-                         str(cost.HDL / "hdrg_eval_tm.v"), str(cost.HDL / "hdrg_eval_tm_pnr.v")],
+                         str(cost_fpga.HDL / "hdrg_eval_tm.v"), str(cost_fpga.HDL / "hdrg_eval_tm_pnr.v")],
                         capture_output=True, text=True)
     assert pr.returncode == 0 and "%Warning" not in pr.stderr, pr.stderr
 
@@ -40,7 +40,7 @@ def test_tm_evaluator_lint_clean():
 @pytest.mark.slow
 @pytest.mark.skipif(not VERILATOR, reason="Verilator not installed (Debian package verilator)")
 def test_tm_evaluator_bit_exact_verilator(tmp_path):
-    r = cost.rtl_check_verilator(tmp_path)
+    r = cost_fpga.rtl_check_verilator(tmp_path)
     assert r["mismatches"] == 0 and r["vectors"] > 1000 and 25 <= r["cycles"] <= CYCLES_GOAL
 
 
@@ -51,14 +51,14 @@ def test_tm_evaluator_bit_exact_verilator(tmp_path):
 def test_front_bit_exact_icarus(set_name, tmp_path):
     from host_tools import vectors as V
     rows = V.read_manifest(V.DEFAULT_DIR)["sets"][set_name]["rows"]
-    r = cost.rtl_front_check(set_name, tmp_path)
+    r = cost_fpga.rtl_front_check(set_name, tmp_path)
     assert r["vectors"] == rows > 1000 and r["mismatches"] == 0
     assert r["cycles"] >= 4
 
 
 @pytest.mark.skipif(not ICARUS, reason="Icarus Verilog not installed (Debian package iverilog)")
 def test_broken_front_is_caught(tmp_path):
-    r = cost.rtl_front_check("sequencer", tmp_path, defines=("HDRG_BREAK_ROUNDING",))
+    r = cost_fpga.rtl_front_check("sequencer", tmp_path, defines=("HDRG_BREAK_ROUNDING",))
     assert r["mismatches"] > r["vectors"] // 10
 
 
@@ -66,5 +66,5 @@ def test_broken_front_is_caught(tmp_path):
 @pytest.mark.skipif(not VERILATOR, reason="Verilator not installed (Debian package verilator)")
 @pytest.mark.parametrize("set_name", ["sequencer", "e2e"])
 def test_front_bit_exact_verilator(set_name, tmp_path):
-    r = cost.rtl_front_check(set_name, tmp_path, "verilator")
+    r = cost_fpga.rtl_front_check(set_name, tmp_path, "verilator")
     assert r["vectors"] > 1000 and r["mismatches"] == 0
