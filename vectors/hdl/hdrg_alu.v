@@ -13,7 +13,9 @@
 module hdrg_alu (
     input  wire               clk,
     input  wire               start,
-    input  wire signed [63:0] a,
+    /* verilator lint_off UNUSEDSIGNAL */
+    input  wire signed [63:0] a,        // |a| < 2^59: bits 63..60 are sign copies
+    /* verilator lint_on UNUSEDSIGNAL */
     input  wire signed [31:0] w,
     input  wire signed [63:0] c,
     input  wire [5:0]         sh,

@@ -124,9 +124,9 @@ module hdrg_top #(
         input kd;
         pval = kd ? {{32{w[31]}}, w} : {32'd0, w};
     endfunction
-    function signed [63:0] clamp1;         // clamp to +-2^30
+    function signed [31:0] clamp1;         // clamp to +-2^30 (the result fits 32 bits)
         input signed [63:0] x;
-        clamp1 = (x > ONE) ? ONE : ((x < -ONE) ? -ONE : x);
+        clamp1 = (x > ONE) ? 32'sd1073741824 : ((x < -ONE) ? -32'sd1073741824 : x[31:0]);
     endfunction
     function signed [63:0] symsat32;
         input signed [63:0] x;
@@ -212,7 +212,10 @@ module hdrg_top #(
     // ---- evaluator ----
     reg ev_go, ev_bank;
     reg signed [31:0] ev_u, ev_v, ev_z;
-    wire ev_busy, ev_done;
+    /* verilator lint_off UNUSEDSIGNAL */
+    wire ev_busy;                       // the top's own busy covers it
+    /* verilator lint_on UNUSEDSIGNAL */
+    wire ev_done;
     hdrg_eval_tm ev (.clk(clk), .rst(rst), .we(we && waddr < 8'd72), .waddr(waddr[6:0]), .wdata(wdata), .start(ev_go),
                      .bank(ev_bank), .u(ev_u), .v(ev_v), .z(ev_z), .b(b), .z_clamped(z_clamped), .busy(ev_busy),
                      .done(ev_done));
@@ -266,7 +269,7 @@ module hdrg_top #(
     wire signed [63:0] cc = order ? c1 : c0;
     wire signed [63:0] yo = ((order ? y_hold : y_hold - b) + 64'sd1024) >>> 11;
     wire signed [63:0] bo = (b + 64'sd1024) >>> 11;
-    wire [31:0] s_cnt = {1'b0, cnt};
+    wire signed [63:0] yo_s = symsat32(yo), bo_s = symsat32(bo);
 
     always @(posedge clk) begin
         done <= 1'b0;
@@ -290,7 +293,7 @@ module hdrg_top #(
                     mean_q <= div_q;
                     if ((ccur == 2'd1 ? nc1 : nc2) != 2'd0) begin
                         div_a <= div_q - (ccur == 2'd1 ? w1 : w2);
-                        div_b <= {4'd0, age_q_dc2(ccur == 2'd1 ? age1 : age2, sp_q, ccur == 2'd1 ? span1 : span2)};
+                        div_b <= age_q_dc2(ccur == 2'd1 ? age1 : age2, sp_q, ccur == 2'd1 ? span1 : span2);
                         div_k <= 5'd16;
                         div_go <= 1'b1;
                         cph <= C_DIV2;
@@ -524,11 +527,11 @@ module hdrg_top #(
                     ph <= S_T2;
                 end
                 default: begin                  // S_T2: outputs, flags (valid holds cvalid here)
-                    flags <= {(sat_c || (valid && !warm_q && mode_o != 2'd3 && (yo != symsat32(yo) || bo != symsat32(bo)))),
+                    flags <= {(sat_c || (valid && !warm_q && mode_o != 2'd3 && (yo != yo_s || bo != bo_s))),
                               1'b0, z_clamped, !valid && mode_o != 2'd3, mode_o == 2'd3, warm_q, vc_q && !warm_q, uc_q};
                     if (valid && !warm_q && mode_o != 2'd3) begin
-                        out_hold <= symsat32(yo);
-                        bias_hold <= symsat32(bo);
+                        out_hold <= yo_s[31:0];
+                        bias_hold <= bo_s[31:0];
                     end
                     valid <= valid && !warm_q && mode_o != 2'd3;
                     busy <= 1'b0;

@@ -47,7 +47,7 @@ module tb_top;
     reg signed [63:0] val;
     reg signed [63:0] a [0:15];
     reg [31:0] last;
-    reg ok, neg;
+    reg ok, neg, quit;
     reg [8*8-1:0] cmd;
 
     // the next character of the line (p counts down from the first character)
@@ -102,7 +102,8 @@ module tb_top;
         repeat (2) tick;
         rst = 1'b0;
         tick;
-        while (!$feof(fd)) begin
+        quit = 1'b0;
+        while (!quit && !$feof(fd)) begin
             line = 0;
             nch = $fgets(line, fd);
             if (nch > 0) begin
@@ -114,7 +115,7 @@ module tb_top;
                         $fdisplay(fo, "samples %0d max %0d sum %0d", nsamp, maxcyc, sumcyc);
                         $fclose(fo);
                     end
-                    $finish;
+                    quit = 1'b1;
                 end else if (cmd == "TABLE") begin
                     ntok = 0;
                     next_int(1'b1);
