@@ -3,7 +3,8 @@
 //     r <= RHU(a * w + c, sh)        RHU(x, s) = s == 0 ? x : (x + 2^(s-1)) >>> s
 //
 // a: signed, |a| < 2^59; w: signed 32-bit (every use has w >= 0); c: signed 64-bit; sh 0..63.
-// ONE 32 x 32 signed multiplier, used twice per operation: a = a_hi 2^28 + a_lo with
+// ONE 32 x 32 signed multiplier (outside: hdrg_eval_tm's, shared while the evaluator is idle:
+// ma, mw -> mp one cycle later), used twice per operation: a = a_hi 2^28 + a_lo with
 // a_hi = a >>> 28 (signed, fits 32 bits) and a_lo = a[27:0] (unsigned), so
 // a w = (a_hi w) 2^28 + a_lo w exactly; every product of the pipeline's front end is below 2^63
 // (FORMATS.md: dP G_U < 2^62, S G_V < 2^62, n x_out < 2^46, (n - 1) A < 2^58, slope d < 2^63).
@@ -20,21 +21,22 @@ module hdrg_alu (
     input  wire signed [63:0] c,
     input  wire [5:0]         sh,
     output reg  signed [63:0] r,
-    output reg                done
+    output reg                done,
+    output reg  signed [31:0] ma,       // the shared multiplier's operands ...
+    output reg  signed [31:0] mw,
+    input  wire signed [63:0] mp        // ... and its registered product (ma mw of the previous cycle)
 );
-    reg signed [31:0] aw, mw;       // multiplier operands
     reg signed [31:0] a_hi_q, a_lo_q, w_q;
-    reg signed [63:0] c_q, m, p_hi, p, half;
+    reg signed [63:0] c_q, p_hi, p, half;
     reg [5:0] sh_q;
     reg [2:0] ph;
     reg busy = 1'b0;
     always @* begin
-        aw = (ph == 3'd1) ? a_hi_q : a_lo_q;
+        ma = (ph == 3'd1) ? a_hi_q : a_lo_q;
         mw = w_q;
     end
     always @(posedge clk) begin
         done <= 1'b0;
-        m <= aw * mw;               // the multiplier (one per ALU)
         if (start) begin
             a_hi_q <= a[59:28];
             a_lo_q <= {4'd0, a[27:0]};
@@ -46,9 +48,9 @@ module hdrg_alu (
             busy <= 1'b1;
         end else if (busy) begin
             case (ph)
-                3'd1: ph <= 3'd2;                       // m <= a_hi w
-                3'd2: begin p_hi <= m; ph <= 3'd3; end  // m <= a_lo w
-                3'd3: begin p <= (p_hi <<< 28) + m + c_q; ph <= 3'd4; end
+                3'd1: ph <= 3'd2;                       // mp <= a_hi w
+                3'd2: begin p_hi <= mp; ph <= 3'd3; end  // mp <= a_lo w
+                3'd3: begin p <= (p_hi <<< 28) + mp + c_q; ph <= 3'd4; end
                 3'd4: begin
 `ifdef HDRG_BREAK_ROUNDING
                     p <= p;

@@ -207,7 +207,10 @@ module hdrg_top #(
     reg [5:0] alu_sh;
     wire signed [63:0] alu_r;
     wire alu_done;
-    hdrg_alu alu (.clk(clk), .start(alu_go), .a(alu_a), .w(alu_w), .c(alu_c), .sh(alu_sh), .r(alu_r), .done(alu_done));
+    wire signed [31:0] mul_a, mul_w;
+    wire signed [63:0] mul_p;
+    hdrg_alu alu (.clk(clk), .start(alu_go), .a(alu_a), .w(alu_w), .c(alu_c), .sh(alu_sh), .r(alu_r), .done(alu_done),
+                  .ma(mul_a), .mw(mul_w), .mp(mul_p));
 
     // ---- evaluator ----
     reg ev_go, ev_bank;
@@ -218,7 +221,7 @@ module hdrg_top #(
     wire ev_done;
     hdrg_eval_tm ev (.clk(clk), .rst(rst), .we(we && waddr < 8'd72), .waddr(waddr[6:0]), .wdata(wdata), .start(ev_go),
                      .bank(ev_bank), .u(ev_u), .v(ev_v), .z(ev_z), .b(b), .z_clamped(z_clamped), .busy(ev_busy),
-                     .done(ev_done));
+                     .done(ev_done), .xa(mul_a), .xw(mul_w), .xp(mul_p), .zhold(1'b0));
 
     // ---- combiner state ----
     reg [1:0] cur, ccur;
@@ -242,7 +245,7 @@ module hdrg_top #(
                C_READY = 3'd6;
     reg [3:0] ph;
     reg [2:0] op, cph;
-    reg front_done, ev_fin;
+    reg ev_fin;
     reg signed [63:0] nx, s_w;
     reg vc_q, uc_q;
 
@@ -326,8 +329,8 @@ module hdrg_top #(
                     else
                         cph <= C_READY;
                 end
-                C_TREND: if (front_done && !alu_go) begin
-                    // the ALU is free once the evaluator runs
+                C_TREND: if (ev_fin) begin
+                    // the ALU (the evaluator's multiplier) is free once the evaluator is done
                     if (d_raw > D_MAX) sat_c <= 1'b1;
                     alu_a <= slope_o;
                     alu_w <= (d_raw > D_MAX) ? D_MAX[31:0] : d_raw[31:0];
@@ -429,9 +432,9 @@ module hdrg_top #(
                                 pos <= 31'd0;
                         end
                     end
+                    ev_fin <= 1'b0;
                     ph <= S_F;
                     op <= (est == 2'd2) ? O_L1 : ((est == 2'd3) ? O_I : O_V);
-                    front_done <= 1'b0;
                 end
                 S_F: begin
                     // the next front-end ALU operation (or its skip)
@@ -467,8 +470,6 @@ module hdrg_top #(
                             // front end done: start the evaluator
                             ev_u <= u; ev_v <= v; ev_z <= z_q; ev_bank <= two_banks && mode_o == 2'd2;
                             ev_go <= 1'b1;
-                            ev_fin <= 1'b0;
-                            front_done <= 1'b1;
                             ph <= S_EV;
                         end
                     endcase
