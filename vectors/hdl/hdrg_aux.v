@@ -27,7 +27,6 @@
 //   busy           high from start until done
 //   done           one-cycle pulse when z, z_clamped are valid
 //
-// STATUS: stub (z = clamp(z_in) for every table); the generators follow.
 `timescale 1ns / 1ns
 module hdrg_aux (
     input  wire               clk,
@@ -53,21 +52,409 @@ module hdrg_aux (
     output reg                busy,
     output reg                done
 );
-    localparam signed [31:0] ONE = 32'sd1073741824;
+    localparam signed [31:0] ONE = 32'sd1073741824;   // 2^30
+    // SIN_POLY (formats.py): S_0..S_5
+    localparam signed [31:0] S0 = 32'sd1686629713, S1 = -32'sd693598663, S2 = 32'sd85569264,
+                             S3 = -32'sd5026852, S4 = 32'sd172032, S5 = -32'sd3670;
+
+    // ---- op codes (one datapath operation each, 2 cycles) ----
+    localparam [4:0] OP_DX = 5'd0, OP_Q = 5'd1, OP_YSET = 5'd2, OP_D = 5'd3, OP_P1 = 5'd4, OP_P2 = 5'd5,
+                     OP_YA = 5'd6, OP_YR = 5'd7, OP_PW = 5'd8, OP_WT = 5'd9, OP_DSET = 5'd10, OP_ZSET = 5'd11,
+                     OP_ONE = 5'd12, OP_R1 = 5'd13, OP_R2 = 5'd14, OP_R3 = 5'd15, OP_RP1 = 5'd16, OP_RP2 = 5'd17,
+                     OP_RM = 5'd18, OP_O1 = 5'd19, OP_O2 = 5'd20, OP_O3 = 5'd21, OP_O4 = 5'd22, OP_O5 = 5'd23,
+                     OP_O6 = 5'd24, OP_H = 5'd25, OP_O12 = 5'd26, OP_FIN = 5'd27;
+    localparam [2:0] K_INPUT = 3'd0, K_RATE = 3'd1, K_ONE = 3'd2, K_DON = 3'd3, K_DEX = 3'd4, K_RAMP = 3'd5,
+                     K_OSC = 3'd6;
+
+    // ---- table: aux_gen, n_terms, n_chan, per-term small fields in registers; 32-bit words in RAM ----
+    reg        aux_gen;
+    reg [2:0]  n_terms;
+    reg [2:0]  n_chan;
+    reg [2:0]  t_kind [0:7];
+    reg        t_sign [0:7];
+    reg [2:0]  t_src  [0:7];
+    reg [2:0]  t_pow  [0:7];
+    reg [5:0]  t_fa   [0:7];             // input SH (c3), rate SH_V (c2), ramp SH (c2), osc part (c2)
+    reg [5:0]  t_fb   [0:7];             // input SB (c5), rate SB (c0), decay SB (c1)
+    reg [31:0] ram_a  [0:63];            // {term, field}: field 0 weight, 1..6 c0..c5 (two copies:
+    reg [31:0] ram_b  [0:63];            //  two read ports)
+    reg [63:0] yram   [0:7];             // filter / decay state Y_j (Q1.60)
+    reg [7:0]  ex;                       // decay_exchange: an exchange has been seen
+
+    // word -> (term, field) of the aux parameters: rel = waddr - 74 - n_chan
+    wire [7:0] rel = waddr - 8'd74 - {5'd0, n_chan};
+    reg  [2:0] wterm;
+    reg  [3:0] wfld;
+    always @* begin
+        if (rel < 8'd11)      begin wterm = 3'd0; wfld = rel[3:0]; end
+        else if (rel < 8'd22) begin wterm = 3'd1; wfld = rel[3:0] - 4'd11; end
+        else if (rel < 8'd33) begin wterm = 3'd2; wfld = rel[3:0] - 4'd6; end   // rel - 22 (mod 16)
+        else if (rel < 8'd44) begin wterm = 3'd3; wfld = rel[3:0] - 4'd1; end   // rel - 33
+        else if (rel < 8'd55) begin wterm = 3'd4; wfld = rel[3:0] - 4'd12; end  // rel - 44
+        else                  begin wterm = 3'd5; wfld = rel[3:0] - 4'd7; end   // rel - 55
+    end
+    wire wterm_ok = (waddr >= 8'd74 + {5'd0, n_chan}) && (rel < 8'd66);
     always @(posedge clk) begin
-        if (rst) begin
-            busy <= 1'b0;
-            done <= 1'b0;
-            z <= 32'sd0;
-            z_clamped <= 1'b0;
-        end else begin
-            done <= 1'b0;
-            if (start) begin
-                done <= 1'b1;
-                z <= (z_in > ONE) ? ONE : (z_in < -ONE) ? -ONE : z_in;
-                z_clamped <= (z_in > ONE) || (z_in < -ONE);
+        if (we) begin
+            if (waddr == 8'd45) aux_gen <= wdata[0];
+            if (waddr == 8'd72) n_terms <= wdata[2:0];
+            if (waddr == 8'd73) n_chan <= wdata[2:0];
+            if (wterm_ok) begin
+                case (wfld)
+                    4'd0: t_kind[wterm] <= wdata[2:0];
+                    4'd1: t_sign[wterm] <= wdata[0];
+                    4'd2: t_src[wterm] <= wdata[2:0];
+                    4'd3: t_pow[wterm] <= wdata[2:0];
+                    default: ;
+                endcase
+                if (wfld >= 4'd4) begin
+                    ram_a[{wterm, wfld[2:0] - 3'd4}] <= wdata;     // 4 -> 0 (weight), 5..10 -> 1..6
+                    ram_b[{wterm, wfld[2:0] - 3'd4}] <= wdata;
+                end
             end
         end
     end
-    wire unused = &{1'b0, we, waddr, wdata, f_word, t_word, a0, a1, a2, a3, k, mode, restart, s, warm};
+    // the shift fields depend on the kind: decoded when their word is written (kind word comes first)
+    always @(posedge clk) begin
+        if (we && wterm_ok) begin
+            case (t_kind[wterm])
+                K_INPUT: begin
+                    if (wfld == 4'd8) t_fa[wterm] <= wdata[5:0];
+                    if (wfld == 4'd10) t_fb[wterm] <= wdata[5:0];
+                end
+                K_RATE: begin
+                    if (wfld == 4'd7) t_fa[wterm] <= wdata[5:0];
+                    if (wfld == 4'd5) t_fb[wterm] <= wdata[5:0];
+                end
+                K_DON, K_DEX: if (wfld == 4'd6) t_fb[wterm] <= wdata[5:0];
+                K_RAMP: if (wfld == 4'd7) t_fa[wterm] <= wdata[5:0];
+                default: if (wfld == 4'd7) t_fa[wterm] <= wdata[5:0];    // osc part
+            endcase
+        end
+    end
+
+    // ---- the sample's inputs (registered at start) ----
+    reg [31:0]        fq;
+    reg signed [31:0] tq, a0q, a1q, a2q, a3q, zinq;
+    reg [62:0]        kk;               // max(K, 0)
+    reg [1:0]         mq;
+    reg               rs, warmq, fresh;
+    reg signed [63:0] sq;
+
+    // ---- sequencer: op and term of the operation in flight, the next ones ----
+    reg               ph;               // 0: X cycle (operands, multiply), 1: Y cycle (add, shift, write)
+    reg               prime;            // the cycle after start: the memories read the first op's words
+    reg [4:0]         op, nop;
+    reg [2:0]         j, nj;
+    reg [2:0]         cnt;              // power / Horner counter
+    reg               ovp, ovn, ge;     // rate clamp above / below, ramp K >= N
+    reg [1:0]         quad;             // osc quadrant
+
+    wire [2:0] kind = t_kind[j];
+    wire [5:0] cur_fa = t_fa[j], cur_fb = t_fb[j];
+    wire       cur_sign = t_sign[j];
+    wire [2:0] cur_src = t_src[j], cur_pow = t_pow[j];
+    wire [2:0] nkind = t_kind[nj];
+
+    // ---- memories: synchronous reads at the next op's words (valid in its X cycle) ----
+    reg [2:0] fa_sel, fb_sel;
+    always @* begin
+        fa_sel = 3'd0;
+        fb_sel = 3'd0;
+        case (nop)
+            OP_DX: fa_sel = 3'd1;
+            OP_Q: begin fa_sel = 3'd2; fb_sel = 3'd3; end
+            OP_P1, OP_P2: fa_sel = (nkind == K_INPUT) ? 3'd5 : 3'd1;
+            OP_RP1, OP_RP2: fa_sel = 3'd2;
+            OP_RM: begin fa_sel = 3'd2; fb_sel = 3'd1; end
+            OP_O1, OP_O2, OP_O3: begin fa_sel = 3'd1; fb_sel = 3'd2; end
+            default: ;
+        endcase
+    end
+    reg [31:0] ra, rb;
+    reg [63:0] yq;
+    reg        ywe;
+    reg [63:0] ywd;
+    always @(posedge clk) begin
+        ra <= ram_a[{nj, fa_sel}];
+        rb <= ram_b[{nj, fb_sel}];
+        yq <= yram[nj];
+        if (ywe) yram[j] <= ywd;
+    end
+
+    // ---- registers of the datapath ----
+    reg signed [63:0] acc, x;            // the weighted sum; the 64-bit work register
+    reg signed [31:0] dxr, yv, g, cap;   // dX then q; y (osc: x); g (osc: r, p); captured half / x2
+    reg signed [63:0] p, cd;             // X-cycle results: A W and C + D
+    reg [5:0]         sh_q;
+    reg               clamp_q;
+
+    // first op of term jj
+    function [4:0] first_op;
+        input [2:0] kd;
+        input       exj;
+        input       rsv;
+        input       warmv;
+        input [1:0] mv;
+        begin
+            case (kd)
+                K_INPUT: first_op = OP_DX;
+                K_RATE:  first_op = warmv ? OP_WT : OP_R1;
+                K_ONE:   first_op = OP_ONE;
+                K_DON:   first_op = rsv ? OP_DSET : OP_D;
+                K_DEX:   first_op = (mv == 2'd3 || rsv) ? OP_ZSET : (exj ? OP_DSET : OP_D);
+                K_RAMP:  first_op = OP_RM;
+                default: first_op = OP_O1;
+            endcase
+        end
+    endfunction
+
+    // ---- operand select (X cycle) ----
+    reg signed [31:0] a_op, w_op, cbv;
+    reg               nega, zeroa;
+    reg [3:0]         csel;
+    reg [1:0]         dsel;
+    reg [5:0]         rk, sh;
+    reg               clamp_op;
+    reg [1:0]         top2;
+    localparam [3:0] C_ZERO = 4'd0, C_ACC = 4'd1, C_X = 4'd2, C_XM = 4'd3, C_XS = 4'd4, C_CB = 4'd5,
+                     C_CB30 = 4'd6, C_TH = 4'd7, C_NTH = 4'd8;
+    localparam [1:0] D_ZERO = 2'd0, D_RND = 2'd1, D_Y = 2'd2, D_S = 2'd3;
+    wire [1:0] w1lo = {rb[0], ra[31]};
+    always @* begin
+        a_op = 32'sd0; w_op = 32'sd0; nega = 1'b0; zeroa = 1'b0; csel = C_ZERO; dsel = D_ZERO; cbv = 32'sd0;
+        rk = 6'd0; sh = 6'd0; clamp_op = 1'b0;
+        top2 = ((rb[30] ? kk[1:0] : 2'd0) + (kk[32:31] * w1lo) + (kk[62] ? ra[1:0] : 2'd0) + {1'b0, cur_fa[0]});
+        case (op)
+            OP_Q: begin a_op = dxr; w_op = ra; csel = C_CB; cbv = rb; dsel = D_RND; rk = cur_fa; sh = cur_fa; clamp_op = 1'b1; end
+            OP_YSET: begin a_op = dxr; w_op = ONE; end
+            OP_D: begin a_op = (kind == K_INPUT) ? dxr : 32'sd0; nega = 1'b1; w_op = ONE; dsel = D_Y; end
+            OP_P1: begin a_op = ra; nega = 1'b1; w_op = {1'b0, x[30:0]}; dsel = D_RND; rk = cur_fb; sh = 6'd31; end
+            OP_P2: begin a_op = ra; nega = 1'b1; w_op = cap; csel = C_X; sh = cur_fb - 6'd31; end
+            OP_YA: begin csel = C_X; dsel = D_Y; end
+            OP_YR: begin csel = C_X; dsel = D_RND; rk = 6'd30; sh = 6'd30; end
+            OP_PW: begin a_op = g; w_op = yv; dsel = D_RND; rk = 6'd30; sh = 6'd30; end
+            OP_WT: begin
+                a_op = ra; w_op = g; csel = C_ACC;
+                nega = (cur_sign && mq == 2'd2) ^ (kind == K_OSC && quad[1]);
+                zeroa = (cur_sign && mq == 2'd3) || (kind == K_RATE && warmq);
+            end
+            OP_DSET: begin csel = C_CB30; cbv = ONE; end
+            OP_ONE: begin csel = C_CB30; cbv = 32'sd1; end
+            OP_R1: begin csel = C_NTH; dsel = D_S; end
+            OP_R2: begin csel = C_TH; dsel = D_S; end
+            OP_R3: begin
+                csel = ovp ? C_TH : (ovn ? C_NTH : C_ZERO);
+                dsel = ovn ? D_RND : (ovp ? D_ZERO : D_S);
+                rk = 6'd1;
+            end
+            OP_RP1: begin a_op = ra; w_op = x[62:31]; end
+            OP_RP2: begin a_op = ra; w_op = cap; csel = C_XS; top2 = 2'd0; dsel = D_RND; rk = cur_fa; sh = cur_fa;
+                          clamp_op = 1'b1; end
+            OP_RM: begin a_op = ra; w_op = {1'b0, kk[30:0]}; dsel = D_RND; rk = cur_fa; sh = cur_fa; end
+            OP_O1: begin a_op = {1'b0, rb[29:0], ra[31]}; w_op = {1'b0, kk[30:0]}; end
+            OP_O2: begin a_op = {1'b0, ra[30:0]}; w_op = {1'b0, kk[61:31]}; csel = C_X; end
+            OP_O3: begin a_op = {1'b0, ra[30:0]}; w_op = {1'b0, kk[30:0]}; csel = C_XS; end
+            OP_O4: begin csel = C_XM; dsel = D_RND; rk = 6'd32; sh = 6'd32; end
+            OP_O5: begin a_op = g; nega = quad[0]; w_op = 32'sd1; csel = quad[0] ? C_CB30 : C_ZERO; cbv = 32'sd1; end
+            OP_O6: begin a_op = g; w_op = yv; dsel = D_RND; rk = 6'd30; sh = 6'd30; end
+            OP_H: begin
+                a_op = g; w_op = cap; csel = C_CB30; dsel = D_RND; rk = 6'd30; sh = 6'd30;
+                case (cnt)
+                    3'd0: cbv = S4;
+                    3'd1: cbv = S3;
+                    3'd2: cbv = S2;
+                    3'd3: cbv = S1;
+                    default: cbv = S0;
+                endcase
+            end
+            OP_O12: begin a_op = g; w_op = yv; dsel = D_RND; rk = 6'd30; sh = 6'd30; clamp_op = 1'b1; end
+            OP_FIN: begin
+                clamp_op = 1'b1;
+                if (aux_gen) begin csel = C_ACC; dsel = D_RND; rk = 6'd30; sh = 6'd30; end
+                else begin csel = C_CB; cbv = zinq; end
+            end
+            default: ;   // OP_DX (dedicated subtractor), OP_ZSET (0)
+        endcase
+    end
+
+    // C, D and the rounding constant
+    wire [63:0] th = (64'd1 << cur_fb) - 64'd1;                              // 2^SB - 1 (rate clamp)
+    wire [63:0] rnd = (rk == 6'd0) ? 64'd0 : (64'd1 << (rk - 6'd1));          // 2^(rk-1)
+    reg signed [63:0] c_val, d_val;
+    always @* begin
+        case (csel)
+            C_ACC:  c_val = acc;
+            C_X:    c_val = x;
+            C_XM:   c_val = {2'b00, x[61:0]};
+            C_XS:   c_val = {x[32:31] + top2, x[30:0], 31'd0};
+            C_CB:   c_val = {{32{cbv[31]}}, cbv};
+            C_CB30: c_val = {{2{cbv[31]}}, cbv, 30'd0};
+            C_TH:   c_val = th;
+            C_NTH:  c_val = ~th;
+            default: c_val = 64'sd0;
+        endcase
+        case (dsel)
+`ifdef HDRG_BREAK_ROUNDING
+            D_RND:  d_val = 64'sd0;          // deliberately wrong: RHU truncates
+`else
+            D_RND:  d_val = rnd;
+`endif
+            D_Y:    d_val = yq;
+            D_S:    d_val = sq;
+            default: d_val = 64'sd0;
+        endcase
+    end
+    wire signed [31:0] a_eff = zeroa ? 32'sd0 : (nega ? -a_op : a_op);
+
+    // DX: dX = clamp(X - REF, +-(2^31 - 1)) of the term's channel (F and its REF unsigned)
+    reg signed [33:0] xe, re, d34;
+    always @* begin
+        case (cur_src)
+            3'd0: xe = {2'b00, fq};
+            3'd1: xe = {{2{tq[31]}}, tq};
+            3'd2: xe = {{2{a0q[31]}}, a0q};
+            3'd3: xe = {{2{a1q[31]}}, a1q};
+            3'd4: xe = {{2{a2q[31]}}, a2q};
+            default: xe = {{2{a3q[31]}}, a3q};
+        endcase
+        re = (cur_src == 3'd0) ? {2'b00, ra} : {{2{ra[31]}}, ra};
+        d34 = xe - re;
+    end
+    localparam signed [33:0] DP_MAX = 34'sd2147483647;
+
+    // the Y cycle: add, shift, clamp
+    wire signed [63:0] sum = p + cd;
+    wire signed [63:0] shr = sum >>> sh_q;
+    wire               hi = clamp_q && (shr > $signed({32'd0, ONE}));
+    wire               lo = clamp_q && (shr < -$signed({32'd0, ONE}));
+    wire signed [31:0] r32 = hi ? ONE : (lo ? -ONE : shr[31:0]);
+
+    // next op (decided in the X cycle)
+    wire [4:0] term_end = (j + 3'd1 >= n_terms) ? OP_FIN : first_op(t_kind[j + 3'd1], ex[j + 3'd1], rs, warmq, mq);
+    wire [4:0] pw_or_wt = (cur_pow > 3'd1) ? OP_PW : OP_WT;
+    reg  [4:0] next_op;
+    always @* begin
+        case (op)
+            OP_DX: next_op = OP_Q;
+            OP_Q: next_op = (cur_fb == 6'd0) ? pw_or_wt : (rs ? OP_YSET : OP_D);
+            OP_YSET: next_op = pw_or_wt;
+            OP_D: next_op = OP_P1;
+            OP_P1: next_op = OP_P2;
+            OP_P2: next_op = OP_YA;
+            OP_YA: next_op = OP_YR;
+            OP_YR: next_op = (kind == K_INPUT) ? pw_or_wt : OP_WT;
+            OP_PW: next_op = (cnt + 3'd2 >= cur_pow) ? OP_WT : OP_PW;
+            OP_DSET, OP_ZSET: next_op = OP_YR;
+            OP_ONE, OP_RM, OP_RP2, OP_O12: next_op = OP_WT;
+            OP_R1: next_op = OP_R2;
+            OP_R2: next_op = OP_R3;
+            OP_R3: next_op = OP_RP1;
+            OP_RP1: next_op = OP_RP2;
+            OP_O1: next_op = OP_O2;
+            OP_O2: next_op = OP_O3;
+            OP_O3: next_op = OP_O4;
+            OP_O4: next_op = OP_O5;
+            OP_O5: next_op = OP_O6;
+            OP_O6: next_op = OP_H;
+            OP_H: next_op = (cnt == 3'd4) ? OP_O12 : OP_H;
+            OP_WT: next_op = term_end;
+            default: next_op = OP_FIN;
+        endcase
+    end
+
+    always @* begin
+        ywe = 1'b0;
+        ywd = 64'sd0;
+        if (busy && ph && !prime) begin
+            case (op)
+                OP_YSET, OP_YA, OP_DSET, OP_ZSET: begin ywe = 1'b1; ywd = shr; end
+                default: ;
+            endcase
+        end
+    end
+
+    always @(posedge clk) begin
+        done <= 1'b0;
+        if (rst) begin
+            busy <= 1'b0;
+            fresh <= 1'b1;
+            z <= 32'sd0;
+            z_clamped <= 1'b0;
+            ph <= 1'b0;
+            prime <= 1'b0;
+            ex <= 8'd0;
+            nop <= OP_FIN;
+            nj <= 3'd0;
+        end else if (!busy) begin
+            if (we) fresh <= 1'b1;
+            if (start) begin
+                busy <= 1'b1;
+                prime <= 1'b1;
+                fq <= f_word; tq <= t_word; a0q <= a0; a1q <= a1; a2q <= a2; a3q <= a3; zinq <= z_in;
+                kk <= k[63] ? 63'd0 : k[62:0];
+                mq <= mode;
+                rs <= restart | fresh | we;
+                fresh <= 1'b0;
+                warmq <= warm;
+                sq <= s;
+                acc <= 64'sd0;
+                nj <= 3'd0;
+                nop <= aux_gen ? first_op(t_kind[0], ex[0], restart | fresh | we, warm, mode) : OP_FIN;
+                ph <= 1'b0;
+            end
+        end else if (prime) begin
+            // the first op: needs rs, warmq, mq registered (this cycle), the memories read its words
+            prime <= 1'b0;
+            op <= nop;
+            j <= nj;
+        end else if (!ph) begin
+            // X cycle
+            p <= a_eff * w_op;
+            cd <= c_val + d_val;
+            sh_q <= sh;
+            clamp_q <= clamp_op;
+            nop <= next_op;
+            nj <= (op == OP_WT) ? j + 3'd1 : j;
+            case (op)
+                OP_DX: begin
+                    dxr <= (d34 > DP_MAX) ? DP_MAX[31:0] : ((d34 < -DP_MAX) ? -DP_MAX[31:0] : d34[31:0]);
+                    cnt <= 3'd0;
+                end
+                OP_P1: cap <= x[62:31];
+                OP_RP1: cap <= {1'b0, x[30:0]};
+                OP_RM: ge <= (kk[62:31] != 32'd0) || ({1'b0, kk[30:0]} >= rb);
+                default: ;
+            endcase
+            ph <= 1'b1;
+        end else begin
+            // Y cycle: write back
+            case (op)
+                OP_Q: begin dxr <= r32; yv <= r32; g <= r32; end
+                OP_D, OP_P1, OP_P2, OP_YA, OP_DSET, OP_ZSET, OP_R3, OP_RP1, OP_O1, OP_O2, OP_O3: x <= shr;
+                OP_YR: begin yv <= shr[31:0]; g <= shr[31:0]; end
+                OP_PW: begin g <= shr[31:0]; cnt <= cnt + 3'd1; end
+                OP_WT: acc <= shr;
+                OP_ONE, OP_RP2, OP_O12: g <= r32;
+                OP_RM: g <= ge ? ONE : shr[31:0];
+                OP_R1: ovp <= ~shr[63];
+                OP_R2: ovn <= shr[63];
+                OP_O4: begin g <= shr[31:0]; quad <= x[63:62]; end
+                OP_O5: begin yv <= shr[31:0]; g <= shr[31:0]; end
+                OP_O6: begin cap <= shr[31:0]; g <= S5; cnt <= 3'd0; end
+                OP_H: begin g <= shr[31:0]; cnt <= cnt + 3'd1; end
+                OP_FIN: begin z <= r32; z_clamped <= hi | lo; end
+                default: ;
+            endcase
+            if (op == OP_ZSET) ex[j] <= (mq == 2'd3);
+            if (op == OP_DSET) ex[j] <= 1'b0;
+            if (op == OP_FIN) begin
+                busy <= 1'b0;
+                done <= 1'b1;
+            end
+            op <= nop;
+            j <= nj;
+            ph <= 1'b0;
+        end
+    end
 endmodule
