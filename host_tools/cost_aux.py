@@ -40,10 +40,12 @@ def _cycles(out: str) -> dict:
     return {"cycles_min": int(m.group(1)), "cycles_max": int(m.group(2))} if m else {}
 
 
-def rtl_aux_check(work: Path, simulator: str = "icarus", defines=(), n_vec: int | None = None) -> dict:
-    """hdrg_aux on the aux set under Icarus (``iverilog -g2001``) or Verilator (``--binary``):
-    {vectors, mismatches, cycles (the most of one sample), cycles_min, cycles_max}."""
-    params, plus = aux_params(work, n_vec)
+def rtl_aux_check(work: Path, simulator: str = "icarus", defines=(), n_vec: int | None = None,
+                  files: tuple | None = None) -> dict:
+    """hdrg_aux on the aux set (or ``files``: the (parameters, plusargs) of :func:`write_directed`)
+    under Icarus (``iverilog -g2001``) or Verilator (``--binary``): {vectors, mismatches, cycles (the
+    most of one sample), cycles_min, cycles_max}."""
+    params, plus = aux_params(work, n_vec) if files is None else files
     tag = simulator + "".join("_" + d for d in defines)
     if simulator == "icarus":
         exe = work / f"tb_aux_{tag}"
@@ -75,3 +77,48 @@ def synth_aux(family: str, work: Path) -> dict:
     _run([need("yosys"), "-q", "-p", cmd], what="yosys", timeout=1800)
     cells = yosys_cells(stat.read_text())
     return {"cells": cells, **resources(family, cells)}
+
+
+# -- directed cases: any tables and streams, expected values from the Python reference ---------------------
+
+def write_directed(work: Path, cases, name: str = "directed") -> tuple:
+    """Write ``cases`` (a list of (firmware_ref Table, stream dict with int arrays ``f``, ``t``, ``r``,
+    ``mode`` (0..3, logged), ``restart``, ``z``, ``k`` and ``aux`` (int64[n, n_chan]))) as
+    ``$readmemh`` files in the aux set's record layout, with the expected z, flags, S and mode from
+    firmware_ref.compensate.run_reference; returns (tb_aux parameters, plusargs) like :func:`aux_params`."""
+    import numpy as np
+
+    from firmware_ref.compensate import run_reference
+
+    meta = V.read_manifest(V.DEFAULT_DIR)["sets"][SET]
+    rec, pos = record_positions(meta)
+    bits = {f["name"]: f["bits"] for f in meta["mem_record"]}
+    work.mkdir(parents=True, exist_ok=True)
+    lines, words, offsets = [], [], []
+    for c, (table, s) in enumerate(cases):
+        n = len(s["k"])
+        p = s["f"] if table.proxy_kind == 0 else s["t"]
+        out = run_reference(table, p, s["r"], s["mode"], s["restart"], s["z"], f=s["f"], t=s["t"], aux=s["aux"],
+                            k=s["k"])
+        offsets.append(len(words))
+        words += [w & 0xFFFFFFFF for w in table.to_words()]
+        aux = np.zeros((n, 4), np.int64)
+        aux[:, :s["aux"].shape[1]] = s["aux"]
+        cols = {"case": [c] * n, "F": s["f"], "T": s["t"], "R": s["r"], "MODE": s["mode"], "RESTART": s["restart"],
+                "Z": s["z"], "K": s["k"], "A0": aux[:, 0], "A1": aux[:, 1], "A2": aux[:, 2], "A3": aux[:, 3],
+                "mode": s["mode"], "z": out["z"], "s": out["s"], "flags": out["flags"]}
+        for i in range(n):
+            v = 0
+            for field, col in cols.items():
+                v |= (int(col[i]) & ((1 << bits[field]) - 1)) << pos[field]
+            lines.append(f"{v:0{rec // 4}x}")
+    vec, tab, off = (work / f"{name}.mem", work / f"{name}.tables.mem", work / f"{name}.offsets.mem")
+    vec.write_text("\n".join(lines) + "\n")
+    tab.write_text("".join(f"{w:08x}\n" for w in words))
+    off.write_text("".join(f"{o:08x}\n" for o in offsets))
+    params = {"REC": rec, "P_CASE": pos["case"], "P_F": pos["F"], "P_T": pos["T"], "P_RESTART": pos["RESTART"],
+              "P_Z": pos["Z"], "P_K": pos["K"], "P_A0": pos["A0"], "P_A1": pos["A1"], "P_A2": pos["A2"],
+              "P_A3": pos["A3"], "P_MODE": pos["mode"], "P_ZOUT": pos["z"], "P_S": pos["s"], "P_FLAGS": pos["flags"]}
+    plus = [f"+vectors={vec}", f"+tables={tab}", f"+offsets={off}", f"+n_vec={len(lines)}", f"+n_words={len(words)}",
+            f"+n_tab={len(cases)}"]
+    return params, plus

@@ -187,7 +187,7 @@ module hdrg_aux (
     reg signed [31:0] dxr, yv, g, cap;   // dX then q; y (osc: x); g (osc: r, p); captured half / x2
     reg signed [63:0] p, cd;             // X-cycle results: A W and C + D
     reg [5:0]         sh_q;
-    reg               clamp_q;
+    reg               clamp_q, cl31_q;     // clamp to +-2^30 / to +-(2^31 - 1) (dX)
 
     // first op of term jj
     function [4:0] first_op;
@@ -215,17 +215,21 @@ module hdrg_aux (
     reg [3:0]         csel;
     reg [1:0]         dsel;
     reg [5:0]         rk, sh;
-    reg               clamp_op;
+    reg               clamp_op, cl31;
     reg [1:0]         top2;
     localparam [3:0] C_ZERO = 4'd0, C_ACC = 4'd1, C_X = 4'd2, C_XM = 4'd3, C_XS = 4'd4, C_CB = 4'd5,
-                     C_CB30 = 4'd6, C_TH = 4'd7, C_NTH = 4'd8;
+                     C_CB30 = 4'd6, C_RND = 4'd7, C_NRND = 4'd8;
     localparam [1:0] D_ZERO = 2'd0, D_RND = 2'd1, D_Y = 2'd2, D_S = 2'd3;
     wire [1:0] w1lo = {rb[0], ra[31]};
     always @* begin
         a_op = 32'sd0; w_op = 32'sd0; nega = 1'b0; zeroa = 1'b0; csel = C_ZERO; dsel = D_ZERO; cbv = 32'sd0;
-        rk = 6'd0; sh = 6'd0; clamp_op = 1'b0;
+        rk = 6'd0; sh = 6'd0; clamp_op = 1'b0; cl31 = 1'b0;
         top2 = ((rb[30] ? kk[1:0] : 2'd0) + (kk[32:31] * w1lo) + (kk[62] ? ra[1:0] : 2'd0) + {1'b0, cur_fa[0]});
         case (op)
+            OP_DX: begin   // dX = clamp(X - REF): F and its REF offset by 2^31 (uint32 -> int32)
+                a_op = {ra[31] ^ (cur_src == 3'd0), ra[30:0]}; w_op = -32'sd1; csel = C_CB; cbv = chan;
+                clamp_op = 1'b1; cl31 = 1'b1;
+            end
             OP_Q: begin a_op = dxr; w_op = ra; csel = C_CB; cbv = rb; dsel = D_RND; rk = cur_fa; sh = cur_fa; clamp_op = 1'b1; end
             OP_YSET: begin a_op = dxr; w_op = ONE; end
             OP_D: begin a_op = (kind == K_INPUT) ? dxr : 32'sd0; nega = 1'b1; w_op = ONE; dsel = D_Y; end
@@ -241,12 +245,15 @@ module hdrg_aux (
             end
             OP_DSET: begin csel = C_CB30; cbv = ONE; end
             OP_ONE: begin csel = C_CB30; cbv = 32'sd1; end
-            OP_R1: begin csel = C_NTH; dsel = D_S; end
-            OP_R2: begin csel = C_TH; dsel = D_S; end
-            OP_R3: begin
-                csel = ovp ? C_TH : (ovn ? C_NTH : C_ZERO);
-                dsel = ovn ? D_RND : (ovp ? D_ZERO : D_S);
-                rk = 6'd1;
+            // rate clamp |S| <= 2^SB - 1 (rk = SB + 1: RND = 2^SB, NRND = -2^SB - 1)
+            OP_R1: begin a_op = 32'sd1; w_op = 32'sd1; csel = C_NRND; dsel = D_S; rk = cur_fb + 6'd1; end  // S - 2^SB
+            OP_R2: begin a_op = 32'sd1; nega = 1'b1; w_op = 32'sd1; csel = C_RND; dsel = D_S;               // S + 2^SB - 1
+                         rk = cur_fb + 6'd1; end
+            OP_R3: begin                                                         // sc: 2^SB - 1, 1 - 2^SB or S
+                a_op = 32'sd1; nega = ~ovn; w_op = (ovp | ovn) ? 32'sd2 - {31'd0, ovp} : 32'sd0;
+                csel = ovp ? C_RND : (ovn ? C_NRND : C_ZERO);
+                dsel = (ovp | ovn) ? D_ZERO : D_S;
+                rk = cur_fb + 6'd1;
             end
             OP_RP1: begin a_op = ra; w_op = x[62:31]; end
             OP_RP2: begin a_op = ra; w_op = cap; csel = C_XS; top2 = 2'd0; dsel = D_RND; rk = cur_fa; sh = cur_fa;
@@ -274,12 +281,11 @@ module hdrg_aux (
                 if (aux_gen) begin csel = C_ACC; dsel = D_RND; rk = 6'd30; sh = 6'd30; end
                 else begin csel = C_CB; cbv = zinq; end
             end
-            default: ;   // OP_DX (dedicated subtractor), OP_ZSET (0)
+            default: ;   // OP_ZSET (0)
         endcase
     end
 
     // C, D and the rounding constant
-    wire [63:0] th = (64'd1 << cur_fb) - 64'd1;                              // 2^SB - 1 (rate clamp)
     wire [63:0] rnd = (rk == 6'd0) ? 64'd0 : (64'd1 << (rk - 6'd1));          // 2^(rk-1)
     reg signed [63:0] c_val, d_val;
     always @* begin
@@ -290,8 +296,8 @@ module hdrg_aux (
             C_XS:   c_val = {x[32:31] + top2, x[30:0], 31'd0};
             C_CB:   c_val = {{32{cbv[31]}}, cbv};
             C_CB30: c_val = {{2{cbv[31]}}, cbv, 30'd0};
-            C_TH:   c_val = th;
-            C_NTH:  c_val = ~th;
+            C_RND:  c_val = rnd;
+            C_NRND: c_val = ~rnd;
             default: c_val = 64'sd0;
         endcase
         case (dsel)
@@ -307,28 +313,27 @@ module hdrg_aux (
     end
     wire signed [31:0] a_eff = zeroa ? 32'sd0 : (nega ? -a_op : a_op);
 
-    // DX: dX = clamp(X - REF, +-(2^31 - 1)) of the term's channel (F and its REF unsigned)
-    reg signed [33:0] xe, re, d34;
+    // the channel word of the term (DX): F as uint32 - 2^31, the others as they are
+    reg [31:0] chan;
     always @* begin
         case (cur_src)
-            3'd0: xe = {2'b00, fq};
-            3'd1: xe = {{2{tq[31]}}, tq};
-            3'd2: xe = {{2{a0q[31]}}, a0q};
-            3'd3: xe = {{2{a1q[31]}}, a1q};
-            3'd4: xe = {{2{a2q[31]}}, a2q};
-            default: xe = {{2{a3q[31]}}, a3q};
+            3'd0: chan = {~fq[31], fq[30:0]};
+            3'd1: chan = tq;
+            3'd2: chan = a0q;
+            3'd3: chan = a1q;
+            3'd4: chan = a2q;
+            default: chan = a3q;
         endcase
-        re = (cur_src == 3'd0) ? {2'b00, ra} : {{2{ra[31]}}, ra};
-        d34 = xe - re;
     end
-    localparam signed [33:0] DP_MAX = 34'sd2147483647;
 
     // the Y cycle: add, shift, clamp
     wire signed [63:0] sum = p + cd;
     wire signed [63:0] shr = sum >>> sh_q;
-    wire               hi = clamp_q && (shr > $signed({32'd0, ONE}));
-    wire               lo = clamp_q && (shr < -$signed({32'd0, ONE}));
-    wire signed [31:0] r32 = hi ? ONE : (lo ? -ONE : shr[31:0]);
+    // above 2^30: bits 62..31 not all 0, or bit 30 and a lower one; below -2^30: bits 62..30 not
+    // all 1 (negative); cl31: outside +-(2^31 - 1) (bits 62..31 not all equal to the sign; -2^31)
+    wire               hi = clamp_q && !shr[63] && ((|shr[62:31]) || (!cl31_q && shr[30] && (|shr[29:0])));
+    wire               lo = clamp_q && shr[63] && (!(&shr[62:31]) || (cl31_q ? !(|shr[30:0]) : !shr[30]));
+    wire signed [31:0] r32 = hi ? (cl31_q ? 32'sh7fffffff : ONE) : (lo ? (cl31_q ? -32'sh7fffffff : -ONE) : shr[31:0]);
 
     // next op (decided in the X cycle)
     wire [4:0] term_end = (j + 3'd1 >= n_terms) ? OP_FIN : first_op(t_kind[j + 3'd1], ex[j + 3'd1], rs, warmq, mq);
@@ -414,13 +419,11 @@ module hdrg_aux (
             cd <= c_val + d_val;
             sh_q <= sh;
             clamp_q <= clamp_op;
+            cl31_q <= cl31;
             nop <= next_op;
             nj <= (op == OP_WT) ? j + 3'd1 : j;
             case (op)
-                OP_DX: begin
-                    dxr <= (d34 > DP_MAX) ? DP_MAX[31:0] : ((d34 < -DP_MAX) ? -DP_MAX[31:0] : d34[31:0]);
-                    cnt <= 3'd0;
-                end
+                OP_DX: cnt <= 3'd0;
                 OP_P1: cap <= x[62:31];
                 OP_RP1: cap <= {1'b0, x[30:0]};
                 OP_RM: ge <= (kk[62:31] != 32'd0) || ({1'b0, kk[30:0]} >= rb);
@@ -430,6 +433,7 @@ module hdrg_aux (
         end else begin
             // Y cycle: write back
             case (op)
+                OP_DX: dxr <= r32;
                 OP_Q: begin dxr <= r32; yv <= r32; g <= r32; end
                 OP_D, OP_P1, OP_P2, OP_YA, OP_DSET, OP_ZSET, OP_R3, OP_RP1, OP_O1, OP_O2, OP_O3: x <= shr;
                 OP_YR: begin yv <= shr[31:0]; g <= shr[31:0]; end
