@@ -122,3 +122,24 @@ def write_directed(work: Path, cases, name: str = "directed") -> tuple:
     plus = [f"+vectors={vec}", f"+tables={tab}", f"+offsets={off}", f"+n_vec={len(lines)}", f"+n_words={len(words)}",
             f"+n_tab={len(cases)}"]
     return params, plus
+
+
+def pnr_aux(work: Path, seed: int = 1, freq_mhz: float = 24.0) -> dict:
+    """nextpnr-ice40 --up5k of the pin-light wrapper hdrg_aux_pnr.v: Fmax of the clock, utilisation."""
+    import re
+    import subprocess
+
+    work.mkdir(parents=True, exist_ok=True)
+    js = work / "aux_pnr.json"
+    _run([need("yosys"), "-q", "-p", f"read_verilog {HDL / 'hdrg_aux.v'} {HDL / 'hdrg_aux_pnr.v'}; "
+                                     f"synth_ice40 -dsp -top hdrg_aux_pnr -json {js}"], what="yosys", timeout=1800)
+    pr = subprocess.run([need("nextpnr-ice40"), "--up5k", "--package", "sg48", "--json", str(js),
+                         "--pcf-allow-unconstrained", "--freq", str(freq_mhz), "--seed", str(seed)],
+                        capture_output=True, text=True, timeout=3600)
+    log = pr.stdout + pr.stderr
+    fm = re.findall(r"Max frequency for clock '(clk[^']*)': ([\d.]+) MHz", log)
+    if not fm:
+        raise CostError(f"nextpnr-ice40 reported no Fmax (status {pr.returncode}):\n{log[-1500:]}")
+    util = {m.group(1): (int(m.group(2)), int(m.group(3)))
+            for m in re.finditer(r"(ICESTORM_LC|ICESTORM_DSP|ICESTORM_RAM|SB_IO):\s+(\d+)/\s*(\d+)", log)}
+    return {"fmax_mhz": float(fm[-1][1]), "utilisation": util, "seed": seed}

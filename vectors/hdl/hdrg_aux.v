@@ -70,12 +70,12 @@ module hdrg_aux (
     reg        aux_gen;
     reg [2:0]  n_terms;
     reg [2:0]  n_chan;
-    reg [2:0]  t_kind [0:7];
-    reg        t_sign [0:7];
-    reg [2:0]  t_src  [0:7];
-    reg [2:0]  t_pow  [0:7];
-    reg [5:0]  t_fa   [0:7];             // input SH (c3), rate SH_V (c2), ramp SH (c2), osc part (c2)
-    reg [5:0]  t_fb   [0:7];             // input SB (c5), rate SB (c0), decay SB (c1)
+    // per term, in a memory: {fb, fa, power, src, sign, kind}; fa: input SH (c3), rate SH_V (c2), ramp
+    // SH (c2), osc part (c2); fb: input SB (c5), rate SB (c0), decay SB (c1).  A copy of the kinds
+    // (read at the next term).
+    reg [21:0] tf    [0:7];
+    reg [2:0]  tk2   [0:7];
+    reg [21:0] wst;                      // the fields of the term being written (words in address order)
     reg [31:0] ram_a  [0:63];            // {term, field}: field 0 weight, 1..6 c0..c5 (two copies:
     reg [31:0] ram_b  [0:63];            //  two read ports)
     reg [63:0] yram   [0:7];             // filter / decay state Y_j (Q1.60)
@@ -94,42 +94,43 @@ module hdrg_aux (
         else                  begin wterm = 3'd5; wfld = rel[3:0] - 4'd7; end   // rel - 55
     end
     wire wterm_ok = (waddr >= 8'd74 + {5'd0, n_chan}) && (rel < 8'd66);
+    // the term's fields after this word (its kind word, field 0, comes first and clears the others)
+    reg [21:0] wnew;
+    always @* begin
+        wnew = (wfld == 4'd0) ? {19'd0, wdata[2:0]} : wst;
+        case (wfld)
+            4'd1: wnew[3] = wdata[0];
+            4'd2: wnew[6:4] = wdata[2:0];
+            4'd3: wnew[9:7] = wdata[2:0];
+            default: ;
+        endcase
+        case (wst[2:0])
+            K_INPUT: begin
+                if (wfld == 4'd8) wnew[15:10] = wdata[5:0];
+                if (wfld == 4'd10) wnew[21:16] = wdata[5:0];
+            end
+            K_RATE: begin
+                if (wfld == 4'd7) wnew[15:10] = wdata[5:0];
+                if (wfld == 4'd5) wnew[21:16] = wdata[5:0];
+            end
+            K_DON, K_DEX: if (wfld == 4'd6) wnew[21:16] = wdata[5:0];
+            default: if (wfld == 4'd7) wnew[15:10] = wdata[5:0];     // ramp SH, osc part
+        endcase
+    end
     always @(posedge clk) begin
         if (we) begin
             if (waddr == 8'd45) aux_gen <= wdata[0];
             if (waddr == 8'd72) n_terms <= wdata[2:0];
             if (waddr == 8'd73) n_chan <= wdata[2:0];
             if (wterm_ok) begin
-                case (wfld)
-                    4'd0: t_kind[wterm] <= wdata[2:0];
-                    4'd1: t_sign[wterm] <= wdata[0];
-                    4'd2: t_src[wterm] <= wdata[2:0];
-                    4'd3: t_pow[wterm] <= wdata[2:0];
-                    default: ;
-                endcase
+                wst <= wnew;
+                tf[wterm] <= wnew;
+                if (wfld == 4'd0) tk2[wterm] <= wdata[2:0];
                 if (wfld >= 4'd4) begin
                     ram_a[{wterm, wfld[2:0] - 3'd4}] <= wdata;     // 4 -> 0 (weight), 5..10 -> 1..6
                     ram_b[{wterm, wfld[2:0] - 3'd4}] <= wdata;
                 end
             end
-        end
-    end
-    // the shift fields depend on the kind: decoded when their word is written (kind word comes first)
-    always @(posedge clk) begin
-        if (we && wterm_ok) begin
-            case (t_kind[wterm])
-                K_INPUT: begin
-                    if (wfld == 4'd8) t_fa[wterm] <= wdata[5:0];
-                    if (wfld == 4'd10) t_fb[wterm] <= wdata[5:0];
-                end
-                K_RATE: begin
-                    if (wfld == 4'd7) t_fa[wterm] <= wdata[5:0];
-                    if (wfld == 4'd5) t_fb[wterm] <= wdata[5:0];
-                end
-                K_DON, K_DEX: if (wfld == 4'd6) t_fb[wterm] <= wdata[5:0];
-                K_RAMP: if (wfld == 4'd7) t_fa[wterm] <= wdata[5:0];
-                default: if (wfld == 4'd7) t_fa[wterm] <= wdata[5:0];    // osc part
-            endcase
         end
     end
 
@@ -150,11 +151,18 @@ module hdrg_aux (
     reg               ovp, ovn, ge;     // rate clamp above / below, ramp K >= N
     reg [1:0]         quad;             // osc quadrant
 
-    wire [2:0] kind = t_kind[j];
-    wire [5:0] cur_fa = t_fa[j], cur_fb = t_fb[j];
-    wire       cur_sign = t_sign[j];
-    wire [2:0] cur_src = t_src[j], cur_pow = t_pow[j];
-    wire [2:0] nkind = t_kind[nj];
+    // the fields of the current op's term (read at nj: valid in its X and Y cycles, and while idle
+    // those of term 0) and the kind of the term after it
+    reg [21:0] tcur;
+    reg [2:0]  knext;
+    always @(posedge clk) begin
+        tcur <= tf[nj];
+        knext <= tk2[nj + 3'd1];
+    end
+    wire [2:0] kind = tcur[2:0];
+    wire       cur_sign = tcur[3];
+    wire [2:0] cur_src = tcur[6:4], cur_pow = tcur[9:7];
+    wire [5:0] cur_fa = tcur[15:10], cur_fb = tcur[21:16];
 
     // ---- memories: synchronous reads at the next op's words (valid in its X cycle) ----
     reg [2:0] fa_sel, fb_sel;
@@ -164,7 +172,7 @@ module hdrg_aux (
         case (nop)
             OP_DX: fa_sel = 3'd1;
             OP_Q: begin fa_sel = 3'd2; fb_sel = 3'd3; end
-            OP_P1, OP_P2: fa_sel = (nkind == K_INPUT) ? 3'd5 : 3'd1;
+            OP_P1, OP_P2: fa_sel = (kind == K_INPUT) ? 3'd5 : 3'd1;   // same term
             OP_RP1, OP_RP2: fa_sel = 3'd2;
             OP_RM: begin fa_sel = 3'd2; fb_sel = 3'd1; end
             OP_O1, OP_O2, OP_O3: begin fa_sel = 3'd1; fb_sel = 3'd2; end
@@ -336,7 +344,7 @@ module hdrg_aux (
     wire signed [31:0] r32 = hi ? (cl31_q ? 32'sh7fffffff : ONE) : (lo ? (cl31_q ? -32'sh7fffffff : -ONE) : shr[31:0]);
 
     // next op (decided in the X cycle)
-    wire [4:0] term_end = (j + 3'd1 >= n_terms) ? OP_FIN : first_op(t_kind[j + 3'd1], ex[j + 3'd1], rs, warmq, mq);
+    wire [4:0] term_end = (j + 3'd1 >= n_terms) ? OP_FIN : first_op(knext, ex[j + 3'd1], rs, warmq, mq);
     wire [4:0] pw_or_wt = (cur_pow > 3'd1) ? OP_PW : OP_WT;
     reg  [4:0] next_op;
     always @* begin
@@ -405,7 +413,7 @@ module hdrg_aux (
                 sq <= s;
                 acc <= 64'sd0;
                 nj <= 3'd0;
-                nop <= aux_gen ? first_op(t_kind[0], ex[0], restart | fresh | we, warm, mode) : OP_FIN;
+                nop <= aux_gen ? first_op(kind, ex[0], restart | fresh | we, warm, mode) : OP_FIN;
                 ph <= 1'b0;
             end
         end else if (prime) begin
@@ -421,7 +429,7 @@ module hdrg_aux (
             clamp_q <= clamp_op;
             cl31_q <= cl31;
             nop <= next_op;
-            nj <= (op == OP_WT) ? j + 3'd1 : j;
+            nj <= (op == OP_WT) ? j + 3'd1 : ((op == OP_FIN) ? 3'd0 : j);   // idle: term 0
             case (op)
                 OP_DX: cnt <= 3'd0;
                 OP_P1: cap <= x[62:31];
