@@ -10,7 +10,10 @@
 //                  only), then 11 words per term: kind, sign, src, power, weight, c0..c5).  Other
 //                  addresses are ignored.  Write the whole table (aux_gen and every aux word) while
 //                  idle; any write puts the generators back to power-on (next sample = restart).
-//                  waddr is 8 bits (the aux words reach 143).
+//                  waddr is 8 bits (the aux words reach 143).  Write the aux words in ascending
+//                  address order (n_chan before the terms, each term's kind word before its
+//                  coefficients: the shift fields are decoded by kind as they arrive), as a loader
+//                  streaming the table does; not in the same cycle as start.
 //   start          one-cycle pulse: compute z of one sample from the inputs below (sampled at start,
 //                  hold them until done is not needed: they are registered at start)
 //   f_word         F, the drive-frequency word (uint32 bit pattern)                 (channel 0)
@@ -27,6 +30,51 @@
 //   busy           high from start until done
 //   done           one-cycle pulse when z, z_clamped are valid
 //
+// WHEN z IS READY: done comes 2 + 2 * (ops + 1) cycles after start (start and first memory read,
+// 2 cycles per datapath operation below, the last one `FIN` writes z), ops = the sum over the
+// table's terms of the operation counts in the table below: at most 6 x 13 + 1 = 79 operations,
+// 160 cycles (six oscillators; six filtered power-5 input terms: 148); 4 cycles with aux_gen 0.
+// The vector set's tables take 6..94 cycles (the fitted decay + 2 lag model of `sim_aux`: 48).
+// Started together with hdrg_eval_tm (whose k7 operation Z begins 116 cycles after its start),
+// z is ready in time for every table of at most 56 operations; a 6-oscillator table needs the
+// evaluator held up to 44 cycles (126 + 44 = 170 <= 200 cycles per sample).
+//
+// DATAPATH (time-multiplexed): ONE 32 x 32 -> 64 signed multiplier, two 64-bit adders, one 64-bit
+// arithmetic right shifter and a clamp; every operation is
+//
+//     dest <= clamp?( (A W + C + D) >>> sh )       D: 0, 2^(rk-1) (rounding), Y_j or S
+//
+//   cycle X: P <= A W (A optionally negated or zeroed), CD <= C + D; the next op is decided
+//   cycle Y: (P + CD) >>> sh, clamp to +-2^30 (or +-(2^31 - 1) for dX), write dest; the memories
+//            read the next op's words at the end of this cycle
+//
+// Exactness: every operand fits 32 bits signed (split 31-bit halves where wider), every sum fits
+// int64 (bounds of FORMATS.md), so the 64-bit datapath computes the reference's exact integers.
+// RHUW(B, d, SB) (d up to 2^61, a 92-bit product) is two passes as firmware_ref.arith does:
+// (B dh + ((B dl + 2^(SB-1)) >> 31)) >> (SB - 31) with d = dh 2^31 + dl; here on d' = -d with
+// -B (the state Y is read once as the D input).  The phase kk W mod 2^64 of the oscillator is
+// k0 w0 + 2^31 (k0 w1 + k1 w0) + 2^62 ((k0 w2 + k1 w1 + k2 w0 + part) mod 4) in 31-bit digits.
+//
+// Operations per term (restart: the state is set, not updated):
+//   input    DX dX = clamp(X - REF) | Q q = clamp(RHU(dX G + OFF, SH)) | no filter: -, restart:
+//            YSET Y = q 2^30, else D d' = Y - q 2^30, P1, P2 (RHUW), YA Y += , YR y = RHU(Y, 30)
+//            | PW g = RHU(g y, 30) power - 1 times | WT acc += w' g          2 .. 12 operations
+//   rate     warm: WT (w' = 0); else R1, R2 (S against +-(2^SB - 1)), R3 sc, RP1 (G_V (sc >> 31)),
+//            RP2 g = clamp(RHU(G_V sc, SH_V)) | WT                             1 or 6
+//   one      ONE g = 2^30 | WT                                                   2
+//   decay_on restart: DSET Y = 2^60; else D, P1, P2, YA | YR | WT                3 or 6
+//   decay_exchange  m = 3 or restart: ZSET Y = 0; ex: DSET; else D, P1, P2, YA | YR | WT   3 or 6
+//   ramp     RM g = K >= N ? 2^30 : RHU(K G, SH) | WT                            2
+//   osc      O1, O2, O3 phase | O4 r | O5 x | O6 x^2 | H x 5 (Horner, SIN_POLY) | O12 s | WT   13
+//   then     FIN z = clamp(RHU(acc, 30)) (aux_gen 0: clamp(Z))                   1
+// w' = w, -w (sign and m = 2, xor osc quadrant >= 2) or 0 (sign and m = 3; rate in warm-up).
+//
+// Storage: the terms' 32-bit words (weight, c0..c5) in two 64 x 32 memories (two read ports), the
+// small fields (kind, sign, src, power, the shift fields) in an 8 x 22 memory, the states Y_j in an
+// 8 x 64 memory (Yosys: 10 SB_RAM40_4K on iCE40), ex_j in registers; the sample's inputs are
+// registered at start.
+//
+// `define HDRG_BREAK_ROUNDING builds a deliberately wrong module (no rounding constants: RHU truncates).
 `timescale 1ns / 1ns
 module hdrg_aux (
     input  wire               clk,
