@@ -137,6 +137,7 @@ def pnr_aux(work: Path, seed: int = 1, freq_mhz: float = 24.0) -> dict:
                          "--pcf-allow-unconstrained", "--freq", str(freq_mhz), "--seed", str(seed)],
                         capture_output=True, text=True, timeout=3600)
     log = pr.stdout + pr.stderr
+    (work / "aux_pnr.log").write_text(log)                  # the critical path is in it
     fm = re.findall(r"Max frequency for clock '(clk[^']*)': ([\d.]+) MHz", log)
     if not fm:
         raise CostError(f"nextpnr-ice40 reported no Fmax (status {pr.returncode}):\n{log[-1500:]}")
