@@ -41,12 +41,13 @@ def _cycles(out: str) -> dict:
 
 
 def rtl_aux_check(work: Path, simulator: str = "icarus", defines=(), n_vec: int | None = None,
-                  files: tuple | None = None) -> dict:
-    """hdrg_aux on the aux set (or ``files``: the (parameters, plusargs) of :func:`write_directed`)
-    under Icarus (``iverilog -g2001``) or Verilator (``--binary``): {vectors, mismatches, cycles (the
-    most of one sample), cycles_min, cycles_max}."""
+                  files: tuple | None = None, op_cycles: int = 2) -> dict:
+    """hdrg_aux (``op_cycles`` per operation: 2 or 4) on the aux set (or ``files``: the (parameters,
+    plusargs) of :func:`write_directed`) under Icarus (``iverilog -g2001``) or Verilator
+    (``--binary``): {vectors, mismatches, cycles (the most of one sample), cycles_min, cycles_max}."""
     params, plus = aux_params(work, n_vec) if files is None else files
-    tag = simulator + "".join("_" + d for d in defines)
+    params = {**params, "OP_CYCLES": op_cycles}
+    tag = simulator + f"_c{op_cycles}" + "".join("_" + d for d in defines)
     if simulator == "icarus":
         exe = work / f"tb_aux_{tag}"
         _run([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines),
@@ -68,11 +69,12 @@ def lint_aux() -> str:
     return _run([need("verilator"), "--lint-only", "-Wall", HDL / "hdrg_aux.v"], what="verilator lint")
 
 
-def synth_aux(family: str, work: Path) -> dict:
+def synth_aux(family: str, work: Path, op_cycles: int = 2) -> dict:
     """Yosys synthesis of hdrg_aux alone (``synth_ice40 -dsp`` or ``synth_xilinx``): cells and resources."""
     work.mkdir(parents=True, exist_ok=True)
-    stat = work / f"stat_aux_{family}.txt"
-    cmd = (f"read_verilog {HDL / 'hdrg_aux.v'}; " + ("synth_ice40 -dsp" if family == "ice40" else "synth_xilinx")
+    stat = work / f"stat_aux_{family}_c{op_cycles}.txt"
+    cmd = (f"read_verilog {HDL / 'hdrg_aux.v'}; chparam -set OP_CYCLES {op_cycles} hdrg_aux; "
+           + ("synth_ice40 -dsp" if family == "ice40" else "synth_xilinx")
            + f" -top hdrg_aux; tee -o {stat} stat")
     _run([need("yosys"), "-q", "-p", cmd], what="yosys", timeout=1800)
     cells = yosys_cells(stat.read_text())
@@ -124,20 +126,21 @@ def write_directed(work: Path, cases, name: str = "directed") -> tuple:
     return params, plus
 
 
-def pnr_aux(work: Path, seed: int = 1, freq_mhz: float = 24.0) -> dict:
+def pnr_aux(work: Path, seed: int = 1, freq_mhz: float = 24.0, op_cycles: int = 2) -> dict:
     """nextpnr-ice40 --up5k of the pin-light wrapper hdrg_aux_pnr.v: Fmax of the clock, utilisation."""
     import re
     import subprocess
 
     work.mkdir(parents=True, exist_ok=True)
-    js = work / "aux_pnr.json"
+    js = work / f"aux_pnr_c{op_cycles}.json"
     _run([need("yosys"), "-q", "-p", f"read_verilog {HDL / 'hdrg_aux.v'} {HDL / 'hdrg_aux_pnr.v'}; "
+                                     f"chparam -set OP_CYCLES {op_cycles} hdrg_aux_pnr; "
                                      f"synth_ice40 -dsp -top hdrg_aux_pnr -json {js}"], what="yosys", timeout=1800)
     pr = subprocess.run([need("nextpnr-ice40"), "--up5k", "--package", "sg48", "--json", str(js),
                          "--pcf-allow-unconstrained", "--freq", str(freq_mhz), "--seed", str(seed)],
                         capture_output=True, text=True, timeout=3600)
     log = pr.stdout + pr.stderr
-    (work / "aux_pnr.log").write_text(log)                  # the critical path is in it
+    (work / f"aux_pnr_c{op_cycles}.log").write_text(log)                  # the critical path is in it
     fm = re.findall(r"Max frequency for clock '(clk[^']*)': ([\d.]+) MHz", log)
     if not fm:
         raise CostError(f"nextpnr-ice40 reported no Fmax (status {pr.returncode}):\n{log[-1500:]}")

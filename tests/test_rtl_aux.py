@@ -97,13 +97,14 @@ def test_icarus_aux_subset_bit_exact(tmp_path):
 
 
 @needs_iverilog
-def test_icarus_directed_worst_case_bit_exact(directed):
+@pytest.mark.parametrize("op_cycles", [2, 4])
+def test_icarus_directed_worst_case_bit_exact(directed, op_cycles):
     work, files = directed
-    r = CA.rtl_aux_check(work, "icarus", files=files)
+    r = CA.rtl_aux_check(work, "icarus", files=files, op_cycles=op_cycles)
     assert r["mismatches"] == 0, r
-    # the schedule: 2 cycles (start, first read) + 2 per operation; the worst table is 6 osc terms
-    assert r["cycles_max"] == 2 + 2 * (F.AUX_MAX_TERMS * OPS_PER_TERM_MAX + 1), r
-    assert r["cycles_min"] == 2 + 2 * 1, r          # aux_gen 0: one operation (z = clamp(Z))
+    # the schedule: 2 cycles (start, first read) + op_cycles per operation; the worst table is 6 osc terms
+    assert r["cycles_max"] == 2 + op_cycles * (F.AUX_MAX_TERMS * OPS_PER_TERM_MAX + 1), r
+    assert r["cycles_min"] == 2 + op_cycles * 1, r  # aux_gen 0: one operation (z = clamp(Z))
 
 
 @pytest.mark.slow
@@ -115,9 +116,10 @@ def test_icarus_broken_rounding_fails(tmp_path):
 
 @pytest.mark.slow
 @needs_iverilog
-def test_icarus_aux_set_bit_exact(tmp_path):
+@pytest.mark.parametrize("op_cycles", [2, 4])
+def test_icarus_aux_set_bit_exact(tmp_path, op_cycles):
     meta = V.read_manifest(V.DEFAULT_DIR)["sets"]["aux"]
-    r = CA.rtl_aux_check(tmp_path, "icarus")
+    r = CA.rtl_aux_check(tmp_path, "icarus", op_cycles=op_cycles)
     assert r["vectors"] == meta["rows"] and r["mismatches"] == 0, r
 
 

@@ -30,14 +30,16 @@
 //   busy           high from start until done
 //   done           one-cycle pulse when z, z_clamped are valid
 //
-// WHEN z IS READY: done comes 2 + 2 * (ops + 1) cycles after start (start and first memory read,
-// 2 cycles per datapath operation below, the last one `FIN` writes z), ops = the sum over the
-// table's terms of the operation counts in the table below: at most 6 x 13 + 1 = 79 operations,
-// 160 cycles (six oscillators; six filtered power-5 input terms: 148); 4 cycles with aux_gen 0.
-// The vector set's tables take 6..94 cycles (the fitted decay + 2 lag model of `sim_aux`: 48).
+// WHEN z IS READY: done comes 2 + OP_CYCLES * (ops + 1) cycles after start (start and first memory
+// read, OP_CYCLES per datapath operation below, the last one `FIN` writes z), ops = the sum over
+// the table's terms of the operation counts in the table below: at most 6 x 13 + 1 = 79
+// operations (six oscillators; six filtered power-5 input terms: 73); aux_gen 0: 1.
+//   OP_CYCLES = 2 (default): worst case 160 cycles; the aux vector set's tables 6..94 (the fitted
+//     decay + 2 lags of `sim_aux`: 48).  Fmax 14 MHz on an UP5K (docs/COST_AUX.md).
+//   OP_CYCLES = 4 (the add and the shift registered): worst case 322; the set 10..186 (`sim_aux`
+//     98); for Fmax (docs/COST_AUX.md).
 // Started together with hdrg_eval_tm (whose k7 operation Z begins 116 cycles after its start),
-// z is ready in time for every table of at most 56 operations; a 6-oscillator table needs the
-// evaluator held up to 44 cycles (126 + 44 = 170 <= 200 cycles per sample).
+// z is ready in time for tables of at most 56 operations (OP_CYCLES 2) or 27 (OP_CYCLES 4).
 //
 // DATAPATH (time-multiplexed): ONE 32 x 32 -> 64 signed multiplier, two 64-bit adders, one 64-bit
 // arithmetic right shifter and a clamp; every operation is
@@ -46,7 +48,8 @@
 //
 //   cycle X: P <= A W (A optionally negated or zeroed), CD <= C + D; the next op is decided
 //   cycle Y: (P + CD) >>> sh, clamp to +-2^30 (or +-(2^31 - 1) for dX), write dest; the memories
-//            read the next op's words at the end of this cycle
+//            read the next op's words at the end of this cycle (OP_CYCLES 4: Y is three cycles,
+//            the sum and the shifted sum registered)
 //
 // Exactness: every operand fits 32 bits signed (split 31-bit halves where wider), every sum fits
 // int64 (bounds of FORMATS.md), so the 64-bit datapath computes the reference's exact integers.
@@ -76,7 +79,9 @@
 //
 // `define HDRG_BREAK_ROUNDING builds a deliberately wrong module (no rounding constants: RHU truncates).
 `timescale 1ns / 1ns
-module hdrg_aux (
+module hdrg_aux #(
+    parameter OP_CYCLES = 2              // cycles per operation: 2, or 4 (add and shift registered: Fmax)
+) (
     input  wire               clk,
     input  wire               rst,
     input  wire               we,
@@ -191,7 +196,8 @@ module hdrg_aux (
     reg signed [63:0] sq;
 
     // ---- sequencer: op and term of the operation in flight, the next ones ----
-    reg               ph;               // 0: X cycle (operands, multiply), 1: Y cycle (add, shift, write)
+    reg  [1:0]        ph;               // 0: X cycle (operands, multiply), then Y (add, shift, write);
+                                        // OP_CYCLES 4: 1 add, 2 shift, 3 write
     reg               prime;            // the cycle after start: the memories read the first op's words
     reg [4:0]         op, nop;
     reg [2:0]         j, nj;
@@ -384,7 +390,9 @@ module hdrg_aux (
 
     // the Y cycle: add, shift, clamp
     wire signed [63:0] sum = p + cd;
-    wire signed [63:0] shr = sum >>> sh_q;
+    reg  signed [63:0] s_r, r_r;         // OP_CYCLES 4: the sum and the shifted sum, registered
+    wire signed [63:0] shr = (OP_CYCLES == 4) ? r_r : (sum >>> sh_q);
+    wire               wb = (OP_CYCLES == 4) ? (ph == 2'd3) : (ph == 2'd1);     // the write-back cycle
     // above 2^30: bits 62..31 not all 0, or bit 30 and a lower one; below -2^30: bits 62..30 not
     // all 1 (negative); cl31: outside +-(2^31 - 1) (bits 62..31 not all equal to the sign; -2^31)
     wire               hi = clamp_q && !shr[63] && ((|shr[62:31]) || (!cl31_q && shr[30] && (|shr[29:0])));
@@ -427,7 +435,7 @@ module hdrg_aux (
     always @* begin
         ywe = 1'b0;
         ywd = 64'sd0;
-        if (busy && ph && !prime) begin
+        if (busy && wb && !prime) begin
             case (op)
                 OP_YSET, OP_YA, OP_DSET, OP_ZSET: begin ywe = 1'b1; ywd = shr; end
                 default: ;
@@ -442,7 +450,7 @@ module hdrg_aux (
             fresh <= 1'b1;
             z <= 32'sd0;
             z_clamped <= 1'b0;
-            ph <= 1'b0;
+            ph <= 2'd0;
             prime <= 1'b0;
             ex <= 8'd0;
             nop <= OP_FIN;
@@ -462,14 +470,14 @@ module hdrg_aux (
                 acc <= 64'sd0;
                 nj <= 3'd0;
                 nop <= aux_gen ? first_op(kind, ex[0], restart | fresh | we, warm, mode) : OP_FIN;
-                ph <= 1'b0;
+                ph <= 2'd0;
             end
         end else if (prime) begin
             // the first op: needs rs, warmq, mq registered (this cycle), the memories read its words
             prime <= 1'b0;
             op <= nop;
             j <= nj;
-        end else if (!ph) begin
+        end else if (ph == 2'd0) begin
             // X cycle
             p <= a_eff * w_op;
             cd <= c_val + d_val;
@@ -485,7 +493,12 @@ module hdrg_aux (
                 OP_RM: ge <= (kk[62:31] != 32'd0) || ({1'b0, kk[30:0]} >= rb);
                 default: ;
             endcase
-            ph <= 1'b1;
+            ph <= 2'd1;
+        end else if (!wb) begin
+            // OP_CYCLES 4: the add, then the shift
+            if (ph == 2'd1) s_r <= sum;
+            else r_r <= s_r >>> sh_q;
+            ph <= ph + 2'd1;
         end else begin
             // Y cycle: write back
             case (op)
@@ -514,7 +527,7 @@ module hdrg_aux (
             end
             op <= nop;
             j <= nj;
-            ph <= 1'b0;
+            ph <= 2'd0;
         end
     end
 endmodule

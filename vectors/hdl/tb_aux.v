@@ -20,6 +20,7 @@ module tb_aux;
     parameter P_CASE = 832, P_F = 800, P_T = 768, P_RESTART = 688, P_Z = 648, P_K = 584, P_A0 = 552, P_A1 = 520,
               P_A2 = 488, P_A3 = 456, P_MODE = 440, P_ZOUT = 360, P_S = 296, P_FLAGS = 0;
     parameter SHOW = 10;
+    parameter OP_CYCLES = 2;             // hdrg_aux's cycles per operation (2 or 4)
 
     reg [REC-1:0] vec [0:MAX_VEC-1];
     reg [31:0] tab [0:MAX_WORDS-1];
@@ -38,7 +39,7 @@ module tb_aux;
     wire signed [31:0] z;
     wire zc, busy, done;
 
-    hdrg_aux dut (.clk(clk), .rst(rst), .we(we), .waddr(waddr), .wdata(wdata), .start(start), .f_word(f_word),
+    hdrg_aux #(.OP_CYCLES(OP_CYCLES)) dut (.clk(clk), .rst(rst), .we(we), .waddr(waddr), .wdata(wdata), .start(start), .f_word(f_word),
                   .t_word(t_word), .a0(a0), .a1(a1), .a2(a2), .a3(a3), .k(k_in), .mode(mode), .restart(restart),
                   .s(s), .warm(warm), .z_in(z_in), .z(z), .z_clamped(zc), .busy(busy), .done(done));
 
