@@ -52,6 +52,12 @@ module hdrg_top #(
     input  wire               self_timed,
     input  wire               restart,
     input  wire signed [31:0] zin,
+    input  wire signed [31:0] a0,          // aux words A_0..A_3 (aux_gen 1)
+    input  wire signed [31:0] a1,
+    input  wire signed [31:0] a2,
+    input  wire signed [31:0] a3,
+    input  wire signed [63:0] kin,         // K, the sample counter (when k_given; else the internal count)
+    input  wire               k_given,
     input  wire signed [31:0] eval_u,
     input  wire signed [31:0] eval_v,
     input  wire               eval_bank,
@@ -81,6 +87,7 @@ module hdrg_top #(
     localparam signed [63:0] SLOPE_MAX = 64'sd1099511627775;  // 2^40 - 1
     localparam [33:0] D_MAX = 34'd4194303;                    // 2^22 - 1
     localparam AW = 13;
+    localparam signed [63:0] K_LIMIT = 64'sd4611686018427387904;   // 2^62
 
     // ---- table fields ----
     reg        kind;
@@ -157,7 +164,8 @@ module hdrg_top #(
     reg [1:0] m_now;
     // latched sample inputs
     reg [31:0] f_q;
-    reg signed [31:0] t_q, r_q, z_q;
+    reg signed [31:0] t_q, r_q, z_q, a0_q, a1_q, a2_q, a3_q;
+    reg signed [63:0] k_q, kc;
     reg [1:0] mode_q;
     reg self_q, restart_q;
     always @* begin
@@ -191,6 +199,7 @@ module hdrg_top #(
     reg [12:0] fill;                   // words before the present one in the segment, up to n
     reg [31:0] k;
     reg signed [63:0] iy, la, lq;      // iir state; lsq A and Q
+    reg signed [63:0] s_w;             // the rate sum S of the sample
     reg [31:0] rd_w;
     reg [12:0] fill_p;
     reg [31:0] k_p;
@@ -219,9 +228,20 @@ module hdrg_top #(
     wire ev_busy;                       // the top's own busy covers it
     /* verilator lint_on UNUSEDSIGNAL */
     wire ev_done;
-    hdrg_eval_tm ev (.clk(clk), .rst(rst), .we(we && waddr < 8'd72), .waddr(waddr[6:0]), .wdata(wdata), .start(ev_go),
-                     .bank(ev_bank), .u(ev_u), .v(ev_v), .z(ev_z), .b(b), .z_clamped(z_clamped), .busy(ev_busy),
-                     .done(ev_done), .xa(mul_a), .xw(mul_w), .xp(mul_p), .zhold(1'b0));
+    // ---- aux generators: z (aux_gen 1: the generator terms; aux_gen 0: clamp(Z)) ----
+    reg aux_go, aux_fin, evo;
+    wire signed [31:0] aux_z;
+    wire aux_zc, aux_done;
+    /* verilator lint_off UNUSEDSIGNAL */
+    wire aux_busy;                      // the top's own busy covers it
+    /* verilator lint_on UNUSEDSIGNAL */
+    hdrg_aux aux (.clk(clk), .rst(rst), .we(we), .waddr(waddr), .wdata(wdata), .start(aux_go), .f_word(f_q), .t_word(t_q),
+                  .a0(a0_q), .a1(a1_q), .a2(a2_q), .a3(a3_q), .k(k_q), .mode(mode_o), .restart(restart_q), .s(s_w),
+                  .warm(warm_q), .z_in(z_q), .z(aux_z), .z_clamped(aux_zc), .busy(aux_busy), .done(aux_done));
+
+    hdrg_eval_tm #(.Z_LATE(1)) ev (.clk(clk), .rst(rst), .we(we && waddr < 8'd72), .waddr(waddr[6:0]), .wdata(wdata), .start(ev_go),
+                     .bank(ev_bank), .u(ev_u), .v(ev_v), .z(evo ? ev_z : aux_z), .b(b), .z_clamped(z_clamped), .busy(ev_busy),
+                     .done(ev_done), .xa(mul_a), .xw(mul_w), .xp(mul_p), .zhold(!evo && !aux_fin && !aux_done));
 
     // ---- combiner state ----
     reg [1:0] cur, ccur;
@@ -246,7 +266,7 @@ module hdrg_top #(
     reg [3:0] ph;
     reg [2:0] op, cph;
     reg ev_fin;
-    reg signed [63:0] nx, s_w;
+    reg signed [63:0] nx;
     reg vc_q, uc_q;
 
     // ring n back valid for lsq; iir input
@@ -284,6 +304,7 @@ module hdrg_top #(
             busy <= 1'b0;
             cph <= C_IDLE;
             tstate <= 3'd0; tcnt <= 32'd0;
+            kc <= 64'sd0; evo <= 1'b0;
             head <= {AW{1'b0}}; fill <= 13'd0; k <= 32'd0; iy <= 64'sd0; la <= 64'sd0; lq <= 64'sd0;
             cur <= 2'd0; acc <= 64'sd0; cnt <= 31'd0; pos <= 31'd0; nc1 <= 2'd0; nc2 <= 2'd0;
             w1 <= 64'sd0; w2 <= 64'sd0; slope1 <= 64'sd0; slope2 <= 64'sd0;
@@ -346,16 +367,24 @@ module hdrg_top #(
                 default: ;
             endcase
 
+            aux_go <= 1'b0;
             if (ev_done) ev_fin <= 1'b1;
+            if (aux_done) aux_fin <= 1'b1;
             case (ph)
                 S_IDLE: begin
                     if (start) begin
                         f_q <= f; t_q <= t; r_q <= r; z_q <= zin; mode_q <= mode; self_q <= self_timed;
+                        a0_q <= a0; a1_q <= a1; a2_q <= a2; a3_q <= a3;
+                        // K: given, or the internal count (kc = min(K + 1, 2^62) after each sample)
+                        k_q <= k_given ? kin : kc;
+                        kc <= ((k_given ? kin : kc) >= K_LIMIT) ? K_LIMIT : (k_given ? kin : kc) + 64'sd1;
+                        evo <= 1'b0;
                         restart_q <= restart;
                         busy <= 1'b1;
                         ph <= S_T;
                     end else if (eval_start) begin
                         ev_u <= eval_u; ev_v <= eval_v; ev_z <= zin; ev_bank <= eval_bank;
+                        evo <= 1'b1;
                         ev_go <= 1'b1;
                         busy <= 1'b1;
                         ph <= S_EVO;
@@ -433,6 +462,7 @@ module hdrg_top #(
                         end
                     end
                     ev_fin <= 1'b0;
+                    aux_fin <= 1'b0;
                     ph <= S_F;
                     op <= (est == 2'd2) ? O_L1 : ((est == 2'd3) ? O_I : O_V);
                 end
@@ -464,7 +494,8 @@ module hdrg_top #(
                                 ph <= S_ALU + 4'd8;     // one cycle for s_w, then issue V
                             end
                         end
-                        O_U: begin alu_a <= dpc; alu_w <= g_u; alu_c <= {{32{u_off[31]}}, u_off}; alu_sh <= sh_u;
+                        O_U: begin aux_go <= 1'b1;      // S and warm are final: start the aux generators
+                                   alu_a <= dpc; alu_w <= g_u; alu_c <= {{32{u_off[31]}}, u_off}; alu_sh <= sh_u;
                                    alu_go <= 1'b1; end
                         default: begin
                             // front end done: start the evaluator
@@ -504,7 +535,7 @@ module hdrg_top #(
                 S_EV: if ((ev_done || ev_fin) && cph == C_READY) begin
                     s <= s_w;
                     if (warm_q) begin v <= 32'sd0; vc_q <= 1'b0; end
-                    z <= clamp1({{32{z_q[31]}}, z_q});
+                    z <= aux_z;
                     ph <= S_T1;
                 end
                 S_T1: begin
@@ -529,7 +560,7 @@ module hdrg_top #(
                 end
                 default: begin                  // S_T2: outputs, flags (valid holds cvalid here)
                     flags <= {(sat_c || (valid && !warm_q && mode_o != 2'd3 && (yo != yo_s || bo != bo_s))),
-                              1'b0, z_clamped, !valid && mode_o != 2'd3, mode_o == 2'd3, warm_q, vc_q && !warm_q, uc_q};
+                              1'b0, aux_zc, !valid && mode_o != 2'd3, mode_o == 2'd3, warm_q, vc_q && !warm_q, uc_q};
                     if (valid && !warm_q && mode_o != 2'd3) begin
                         out_hold <= yo_s[31:0];
                         bias_hold <= bo_s[31:0];

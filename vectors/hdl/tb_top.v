@@ -18,7 +18,9 @@ module tb_top;
     reg clk = 1'b0, rst = 1'b1, we = 1'b0, load = 1'b0, start = 1'b0, eval_start = 1'b0;
     reg [7:0] waddr = 8'd0;
     reg [31:0] wdata = 32'd0, f = 32'd0;
-    reg signed [31:0] t = 0, r = 0, zin = 0, eu = 0, ev = 0;
+    reg signed [31:0] t = 0, r = 0, zin = 0, eu = 0, ev = 0, a0 = 0, a1 = 0, a2 = 0, a3 = 0;
+    reg signed [63:0] kin = 0;
+    reg k_given = 1'b0;
     reg [1:0] mode = 2'd0;
     reg self_timed = 1'b0, restart = 1'b0, ebank = 1'b0;
     wire [2:0] state;
@@ -33,7 +35,7 @@ module tb_top;
     hdrg_top #(.N_HIST(N_HIST)) dut (
         .clk(clk), .rst(rst), .we(we), .waddr(waddr), .wdata(wdata), .load(load), .start(start),
         .eval_start(eval_start), .f(f), .t(t), .r(r), .mode(mode), .self_timed(self_timed), .restart(restart),
-        .zin(zin), .eval_u(eu), .eval_v(ev), .eval_bank(ebank), .state(state), .vs(vs), .mode_o(mode_o),
+        .zin(zin), .a0(a0), .a1(a1), .a2(a2), .a3(a3), .kin(kin), .k_given(k_given), .eval_u(eu), .eval_v(ev), .eval_bank(ebank), .state(state), .vs(vs), .mode_o(mode_o),
         .sign(sign), .u(u), .v(v), .z(z), .s(s), .acc(acc), .cnt(cnt), .y_hold(y), .b(b), .out_hold(out),
         .bias_hold(bias), .valid(valid), .flags(flags), .z_clamped(zc), .busy(busy), .done(done));
 
@@ -149,6 +151,12 @@ module tb_top;
                     mode = a[3][1:0];
                     restart = a[4][0];
                     zin = a[5][31:0];
+                    kin = a[6];
+                    k_given = (ntok > 6);
+                    a0 = a[7][31:0];
+                    a1 = a[8][31:0];
+                    a2 = a[9][31:0];
+                    a3 = a[10][31:0];
                     start = 1'b1;
                     tick;
                     start = 1'b0;
