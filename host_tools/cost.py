@@ -477,12 +477,9 @@ def summary(r: dict) -> str:
               "ns_per_sample", "luts", "ffs", "dsps", "brams", "fmax_mhz", "broken_build_caught"):
         if k in r:
             lines.append(f"  {k}: {r[k]}")
-    if "front_end" in r:
-        f = r["front_end"]
-        lines.append(f"  proxy + rate RTL: bit_exact {f['bit_exact']} (Icarus: "
-                     + ", ".join(f"{n} {x['vectors']}" for n, x in f["icarus"].items())
-                     + f"), max {f['cycles_per_sample_max']} cycles/sample; luts {f['luts']}, ffs {f['ffs']}, "
-                       f"dsps {f['dsps']}, brams {f['brams']} (N_HIST {f['n_hist']})")
+    if "evaluator_alone" in r:
+        from host_tools.cost_fpga import summary_lines
+        lines.extend(summary_lines(r))
     if "per_stage" in r:
         for w, d in r["per_stage"].items():
             lines.append(f"  instructions per sample by stage ({w}, -O2 -fno-inline, mean of {d['samples']}): "
