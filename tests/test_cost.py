@@ -7,7 +7,7 @@ import textwrap
 
 import pytest
 
-from host_tools import cli, cost
+from host_tools import cli, cost, cost_fpga
 
 ARM = shutil.which("arm-none-eabi-gcc") and shutil.which("qemu-system-arm") and cost.NEWLIB_SPECS.is_file()
 FPGA = all(shutil.which(t) for t in ("yosys", "iverilog", "vvp", "verilator"))
@@ -61,9 +61,9 @@ def test_stage_runs_charge_called_primitives_to_the_caller():
 
 def test_yosys_stat_parser_sums_families():
     stat = "   Number of cells:  9\n     LUT2  3\n     LUT6  2\n     FDRE  4\n     DSP48E1  1\n\nother\n"
-    cells = cost.yosys_cells(stat)
+    cells = cost_fpga.yosys_cells(stat)
     assert cells == {"LUT2": 3, "LUT6": 2, "FDRE": 4, "DSP48E1": 1}
-    r = cost.resources("xc7", cells)
+    r = cost_fpga.resources("xc7", cells)
     assert (r["luts"], r["ffs"], r["dsps"], r["brams"]) == (5, 4, 1, 0)
 
 
@@ -115,13 +115,24 @@ def test_mcu_cost_json(target, tmp_path):
                     reason="yosys, iverilog, verilator or nextpnr-ice40 not installed")
 def test_fpga_cost_json(target, tmp_path):
     r = _cost_json(target, tmp_path)
-    assert r["broken_build_caught"] is True and r["icarus"]["mismatches"] == r["verilator"]["mismatches"] == 0
-    assert r["front_end"]["bit_exact"] is True and r["front_end"]["luts"] > 100
-    assert 25 <= r["cycles_per_sample"] <= 200
-    assert 100 < r["luts"] and 100 < r["ffs"] and 1 <= r["dsps"]
-    if target == "ice40":                # the UP5K goals
-        assert r["luts"] <= 5280 and r["dsps"] <= 8 and r["fmax_mhz"] >= cost.FMAX_GOAL_MHZ
-        assert r["pnr"]["utilisation"]["ICESTORM_DSP"][0] == r["dsps"]
+    from host_tools import vectors as V
+    sets = V.read_manifest(V.DEFAULT_DIR)["sets"]
+    assert r["scope"] == "whole pipeline" and r["broken_build_caught"] is True
+    for sim in ("icarus", "verilator"):                 # every pipeline set, every vector, both simulators
+        assert {n: (x["vectors"], x["mismatches"]) for n, x in r[sim].items()} == {
+            n: (sets[n]["rows"], 0) for n in ("evaluator", "sequencer", "e2e", "aux")}
+    assert 126 < r["cycles_per_sample"] <= cost_fpga.CYCLES_GOAL            # the evaluator alone takes 126
+    assert 1000 < r["luts"] and 1000 < r["ffs"] and 1 <= r["dsps"]
+    e = r["evaluator_alone"]
+    assert e["bit_exact"] is True and e["broken_build_caught"] is True and e["cycles_per_sample"] == 126
+    assert e["luts"] < r["luts"] and e["dsps"] <= r["dsps"]
+    if target == "ice40":
+        fits = r["luts"] <= cost_fpga.UP5K["luts"] and r["dsps"] <= cost_fpga.UP5K["dsps"]
+        if r["pnr"]["fits"]:
+            assert r["fmax_mhz"] > 0 and r["pnr"]["utilisation"]["ICESTORM_DSP"][0] == r["dsps"]
+        else:                                           # nextpnr says why, and it agrees with the cell count
+            assert r["fmax_mhz"] is None and "UP5K" in r["pnr"]["error"] and not fits
+        assert e["luts"] <= 5280 and e["dsps"] <= 8 and e["fmax_mhz"] >= cost_fpga.FMAX_GOAL_MHZ
     else:
         assert r["fmax_mhz"] is None
 

@@ -1,13 +1,17 @@
-"""The time-multiplexed evaluator (vectors/hdl/hdrg_eval_tm.v) on the evaluator vectors through its
-testbench (vectors/hdl/tb_eval_tm.v): bit-exact under Icarus and under Verilator, a constant number
-of cycles per sample within the goal, lint-clean under Verilator -Wall, and a deliberately broken
-build (-DHDRG_BREAK_ROUNDING) caught."""
+"""The RTL (vectors/hdl): the whole pipeline hdrg_top behind the check-impl protocol (tb_top.v) and
+the time-multiplexed evaluator alone (hdrg_eval_tm.v through tb_eval_tm.v): bit-exact under Icarus
+(the first cases of every pipeline set in the default run; every vector under @slow) and under
+Verilator (@slow), cycles per sample within the goal, lint-clean under Verilator -Wall, and a
+deliberately broken build (-DHDRG_BREAK_ROUNDING) caught."""
 import shutil
 import subprocess
 
 import pytest
 
-from host_tools import cost
+from host_tools import cost_fpga, cost_rtl
+from host_tools import vectors as V
+from host_tools.vectors.build import load_set
+from host_tools.vectors.runner import requests
 
 ICARUS = shutil.which("iverilog") and shutil.which("vvp")
 VERILATOR = shutil.which("verilator")
@@ -16,8 +20,8 @@ CYCLES_GOAL = 200
 
 @pytest.mark.skipif(not ICARUS, reason="Icarus Verilog not installed (Debian package iverilog)")
 def test_tm_evaluator_bit_exact_icarus(tmp_path):
-    meta, _ = cost._evaluator_meta()
-    r = cost.rtl_check_icarus(tmp_path)
+    meta, _ = cost_fpga._evaluator_meta()
+    r = cost_fpga.rtl_check_icarus(tmp_path)
     assert r["vectors"] == meta["rows"] > 1000
     assert r["mismatches"] == 0
     assert 25 <= r["cycles"] <= CYCLES_GOAL           # at least one cycle per operation of the program
@@ -25,14 +29,14 @@ def test_tm_evaluator_bit_exact_icarus(tmp_path):
 
 @pytest.mark.skipif(not ICARUS, reason="Icarus Verilog not installed (Debian package iverilog)")
 def test_broken_tm_evaluator_is_caught(tmp_path):
-    r = cost.rtl_check_icarus(tmp_path, ("HDRG_BREAK_ROUNDING",))
+    r = cost_fpga.rtl_check_icarus(tmp_path, ("HDRG_BREAK_ROUNDING",))
     assert r["mismatches"] > r["vectors"] // 10
 
 
 @pytest.mark.skipif(not VERILATOR, reason="Verilator not installed (Debian package verilator)")
 def test_tm_evaluator_lint_clean():
     pr = subprocess.run([VERILATOR, "--lint-only", "-Wall", "--top-module", "hdrg_eval_tm_pnr",
-                         str(cost.HDL / "hdrg_eval_tm.v"), str(cost.HDL / "hdrg_eval_tm_pnr.v")],
+                         str(cost_fpga.HDL / "hdrg_eval_tm.v"), str(cost_fpga.HDL / "hdrg_eval_tm_pnr.v")],
                         capture_output=True, text=True)
     assert pr.returncode == 0 and "%Warning" not in pr.stderr, pr.stderr
 
@@ -40,31 +44,74 @@ def test_tm_evaluator_lint_clean():
 @pytest.mark.slow
 @pytest.mark.skipif(not VERILATOR, reason="Verilator not installed (Debian package verilator)")
 def test_tm_evaluator_bit_exact_verilator(tmp_path):
-    r = cost.rtl_check_verilator(tmp_path)
+    r = cost_fpga.rtl_check_verilator(tmp_path)
     assert r["mismatches"] == 0 and r["vectors"] > 1000 and 25 <= r["cycles"] <= CYCLES_GOAL
 
 
-# -- proxy + rate (vectors/hdl/hdrg_front.v) on the pipeline sets ----------------------------------
+# -- the whole pipeline (vectors/hdl/hdrg_top.v) ------------------------------------------------------
+
+def _subset(cases_per_set=1, rows_per_case=120):
+    """Request lines and expected answers: the first cases of every pipeline set (table loads,
+    samples, EVAL requests), at most rows_per_case samples each."""
+    manifest = V.read_manifest(V.DEFAULT_DIR)
+    lines, expected = [], []
+    for name in ("evaluator", "sequencer", "e2e", "aux"):
+        vs = load_set(V.DEFAULT_DIR, name, manifest["sets"][name])
+        n_case, n_rows = -1, 0
+        for line, exp, _row, _pos in requests(vs, None):
+            if line.startswith("TABLE"):
+                n_case, n_rows = n_case + 1, 0
+            elif n_rows >= rows_per_case:
+                continue
+            else:
+                n_rows += 1
+            if n_case >= cases_per_set:
+                break
+            lines.append(line)
+            expected.append(" ".join(exp))
+    return "".join(x + "\n" for x in lines) + "QUIT\n", expected
+
+
+def _run_subset(tmp_path, sim, defines=()):
+    argv = cost_rtl.build_top(sim, tmp_path, defines)
+    data, expected = _subset()
+    cyc = tmp_path / "cycles.txt"
+    pr = subprocess.run([*argv, f"+cycles={cyc}"], input=data, capture_output=True, text=True, timeout=600)
+    got = pr.stdout.splitlines()[:len(expected)]
+    bad = [k for k, e in enumerate(expected) if k >= len(got) or got[k] != e]
+    return expected, got, bad, cost_rtl._cycles(cyc)
+
 
 @pytest.mark.skipif(not ICARUS, reason="Icarus Verilog not installed (Debian package iverilog)")
-@pytest.mark.parametrize("set_name", ["sequencer", "e2e", "aux"])
-def test_front_bit_exact_icarus(set_name, tmp_path):
-    from host_tools import vectors as V
-    rows = V.read_manifest(V.DEFAULT_DIR)["sets"][set_name]["rows"]
-    r = cost.rtl_front_check(set_name, tmp_path)
-    assert r["vectors"] == rows > 1000 and r["mismatches"] == 0
-    assert r["cycles"] >= 4
+def test_top_bit_exact_icarus_subset(tmp_path):
+    expected, got, bad, cyc = _run_subset(tmp_path, "icarus")
+    assert len(expected) > 300 and sum(e.startswith("O ") for e in expected) > 300
+    assert not bad, f"{len(bad)} mismatches; first: expected {expected[bad[0]]!r}, got {got[bad[0]] if bad[0] < len(got) else None!r}"
+    assert 126 < cyc["cycles_max"] <= CYCLES_GOAL and cyc["samples"] > 300     # the evaluator alone takes 126
 
 
 @pytest.mark.skipif(not ICARUS, reason="Icarus Verilog not installed (Debian package iverilog)")
-def test_broken_front_is_caught(tmp_path):
-    r = cost.rtl_front_check("sequencer", tmp_path, defines=("HDRG_BREAK_ROUNDING",))
-    assert r["mismatches"] > r["vectors"] // 10
+def test_broken_top_is_caught(tmp_path):
+    expected, _, bad, _ = _run_subset(tmp_path, "icarus", (cost_rtl.BREAK,))
+    assert len(bad) > len(expected) // 10
+
+
+@pytest.mark.skipif(not VERILATOR, reason="Verilator not installed (Debian package verilator)")
+@pytest.mark.parametrize("top", ["hdrg_top", "hdrg_top_pnr"])
+def test_top_lint_clean(top):
+    files = [str(f) for f in cost_rtl.top_sources()] + ([str(cost_rtl.HDL / "hdrg_top_pnr.v")] if top != "hdrg_top" else [])
+    pr = subprocess.run([VERILATOR, "--lint-only", "-Wall", "-GN_HIST=4096", "--top-module", top, *files],
+                        capture_output=True, text=True)
+    assert pr.returncode == 0 and "%Warning" not in pr.stderr, pr.stderr
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not VERILATOR, reason="Verilator not installed (Debian package verilator)")
-@pytest.mark.parametrize("set_name", ["sequencer", "e2e"])
-def test_front_bit_exact_verilator(set_name, tmp_path):
-    r = cost.rtl_front_check(set_name, tmp_path, "verilator")
-    assert r["vectors"] > 1000 and r["mismatches"] == 0
+@pytest.mark.parametrize("sim", ["icarus", "verilator"])
+@pytest.mark.skipif(not (ICARUS and VERILATOR), reason="iverilog or verilator not installed")
+def test_top_every_vector(sim, tmp_path):
+    """check-impl of every pipeline set (evaluator, sequencer, e2e, aux) on hdrg_top."""
+    manifest = V.read_manifest(V.DEFAULT_DIR)
+    r = cost_rtl.check_top(sim, tmp_path, log=lambda s: None)
+    for name, x in r.items():
+        assert x["vectors"] == manifest["sets"][name]["rows"] and x["mismatches"] == 0, (name, x["first"])
+    assert max(x["cycles_max"] for x in r.values()) <= CYCLES_GOAL

@@ -42,8 +42,15 @@
 //
 // `define HDRG_BREAK_ROUNDING builds a deliberately wrong evaluator (RHU truncates), HDRG_BREAK_BANK
 // one that reads bank 1's mantissas for bank 2.
+//
+// Sharing (hdrg_top): while idle, the multiplier computes xp <= xa * xw every cycle for a client
+// (hdrg_top's front-end ALU), so the pipeline needs one 32 x 32 multiplier for both.  Z_LATE = 1:
+// z is sampled at the Z operation instead of at start, and the evaluator waits there while `zhold`
+// is high (the aux generators of hdrg_top run in parallel with the Horner rows).
 `timescale 1ns / 1ns
-module hdrg_eval_tm (
+module hdrg_eval_tm #(
+    parameter Z_LATE = 0
+) (
     input  wire               clk,
     input  wire               rst,        // synchronous, active high: idle, done low
     input  wire               we,         // table word write
@@ -57,7 +64,11 @@ module hdrg_eval_tm (
     output reg  signed [63:0] b,          // bias B, LSB 2^-21 deg/h (valid with done)
     output reg                z_clamped,
     output reg                busy,
-    output reg                done        // one-cycle pulse when b is valid
+    output reg                done,       // one-cycle pulse when b is valid
+    input  wire signed [31:0] xa,         // the shared multiplier while idle: xp <= xa * xw
+    input  wire signed [31:0] xw,
+    output wire signed [63:0] xp,
+    input  wire               zhold       // Z_LATE: wait at the Z operation while high
 );
     localparam signed [31:0] ONE = 32'sd1073741824;   // 2^30
 
@@ -134,6 +145,7 @@ module hdrg_eval_tm (
     reg [5:0]  sh;
     reg [1:0]  dest;                    // 0 acc, 1 t, 2 b
     reg signed [63:0] p, p2, s;
+    assign xp = p;
     reg signed [31:0] c_q;              // C held to cycle 4
     reg [1:0]  dest_q;
 
@@ -165,6 +177,13 @@ module hdrg_eval_tm (
     reg [5:0] sh_q, sh_q2;
     reg signed [63:0] half;             // 2^(sh-1), 0 when sh = 0 (registered with P)
 
+    // the one multiplier: the program's A W in phase 1, the client's xa xw while idle
+    wire signed [31:0] ma = busy ? a_op : xa;
+    wire signed [31:0] mw = busy ? w_op : xw;
+    always @(posedge clk)
+        if (!busy || phase == 3'd1)
+            p <= ma * mw;
+
     always @(posedge clk) begin
         done <= 1'b0;
         if (rst) begin
@@ -186,7 +205,11 @@ module hdrg_eval_tm (
             end
         end else begin
             case (phase)
-                3'd0: begin
+                3'd0: if (Z_LATE == 0 || pos != 3'd6 || !zhold) begin
+                    if (Z_LATE != 0 && pos == 3'd6) begin
+                        z_clamped <= (z > ONE) || (z < -ONE);
+                        zq <= (z > ONE) ? ONE : ((z < -ONE) ? -ONE : z);
+                    end
 `ifdef HDRG_BREAK_BANK
                     mrd <= mant[{1'b0, midx}];          // wrong on purpose: bank 2's mantissas ignored
 `else
@@ -195,7 +218,6 @@ module hdrg_eval_tm (
                     phase <= 3'd1;
                 end
                 3'd1: begin
-                    p <= a_op * w_op;
                     c_q <= c_op;
                     sh_q <= sh;
                     half <= (sh == 6'd0) ? 64'sd0 : (64'sd1 <<< (sh - 6'd1));

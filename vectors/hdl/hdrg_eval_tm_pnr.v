@@ -19,6 +19,9 @@ module hdrg_eval_tm_pnr (
     reg [63:0]  so;
     wire signed [63:0] b;
     wire zc, done;
+    /* verilator lint_off UNUSEDSIGNAL */
+    wire signed [63:0] xp_unused;       // the shared multiplier port: no client here
+    /* verilator lint_on UNUSEDSIGNAL */
     always @(posedge clk) begin
         if (shift) sr <= {sr[126:0], sdi};
         if (done) so <= b; else so <= {so[62:0], 1'b0};
@@ -27,5 +30,6 @@ module hdrg_eval_tm_pnr (
     end
     assign sdo = so[63];
     hdrg_eval_tm ev (.clk(clk), .rst(rst), .we(we), .waddr(sr[38:32]), .wdata(sr[31:0]), .start(start), .bank(sr[39]),
-                     .u(sr[127:96]), .v(sr[95:64]), .z(sr[63:32]), .b(b), .z_clamped(zc), .busy(busy), .done(done));
+                     .u(sr[127:96]), .v(sr[95:64]), .z(sr[63:32]), .b(b), .z_clamped(zc), .busy(busy), .done(done),
+                     .xa(32'sd0), .xw(32'sd0), .xp(xp_unused), .zhold(1'b0));
 endmodule

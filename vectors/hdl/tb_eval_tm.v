@@ -37,7 +37,8 @@ module tb_eval_tm;
     wire zc, busy, done;
 
     hdrg_eval_tm dut (.clk(clk), .rst(rst), .we(we), .waddr(waddr), .wdata(wdata), .start(start), .bank(bank), .u(u), .v(v),
-                      .z(z), .b(b), .z_clamped(zc), .busy(busy), .done(done));
+                      .z(z), .b(b), .z_clamped(zc), .busy(busy), .done(done),
+                     .xa(32'sd0), .xw(32'sd0), .xp(), .zhold(1'b0));
 
     always #5 clk = ~clk;
 
