@@ -64,9 +64,10 @@ def rtl_aux_check(work: Path, simulator: str = "icarus", defines=(), n_vec: int 
     return {**_tb_result(out, f"{simulator} aux"), **_cycles(out)}
 
 
-def lint_aux() -> str:
+def lint_aux(op_cycles: int = 2) -> str:
     """``verilator --lint-only -Wall`` of hdrg_aux.v: its output (empty when clean); CostError if it fails."""
-    return _run([need("verilator"), "--lint-only", "-Wall", HDL / "hdrg_aux.v"], what="verilator lint")
+    return _run([need("verilator"), "--lint-only", "-Wall", f"-GOP_CYCLES={op_cycles}", HDL / "hdrg_aux.v"],
+                what="verilator lint")
 
 
 def synth_aux(family: str, work: Path, op_cycles: int = 2) -> dict:

@@ -348,7 +348,23 @@ module hdrg_aux #(
     end
 
     // C, D and the rounding constant
-    wire [63:0] rnd = (rk == 6'd0) ? 64'd0 : (64'd1 << (rk - 6'd1));          // 2^(rk-1)
+    wire [63:0] rnd_x = (rk == 6'd0) ? 64'd0 : (64'd1 << (rk - 6'd1));        // 2^(rk-1)
+    // OP_CYCLES 4: the next op's rounding constant, registered in the write-back (or prime) cycle,
+    // when the memories already show the next op's term (off the X cycle's critical path)
+    reg  [5:0]  rk_n;
+    always @* begin
+        case (nop)
+            OP_Q, OP_RP2, OP_RM: rk_n = cur_fa;
+            OP_P1: rk_n = cur_fb;
+            OP_R1, OP_R2, OP_R3: rk_n = cur_fb + 6'd1;
+            OP_YR, OP_PW, OP_O6, OP_H, OP_O12: rk_n = 6'd30;
+            OP_O4: rk_n = 6'd32;
+            OP_FIN: rk_n = aux_gen ? 6'd30 : 6'd0;
+            default: rk_n = 6'd0;
+        endcase
+    end
+    reg  [63:0] rnd_q;
+    wire [63:0] rnd = (OP_CYCLES == 4) ? rnd_q : rnd_x;
     reg signed [63:0] c_val, d_val;
     always @* begin
         case (csel)
@@ -473,6 +489,7 @@ module hdrg_aux #(
                 ph <= 2'd0;
             end
         end else if (prime) begin
+            rnd_q <= (rk_n == 6'd0) ? 64'd0 : (64'd1 << (rk_n - 6'd1));
             // the first op: needs rs, warmq, mq registered (this cycle), the memories read its words
             prime <= 1'b0;
             op <= nop;
@@ -501,6 +518,7 @@ module hdrg_aux #(
             ph <= ph + 2'd1;
         end else begin
             // Y cycle: write back
+            rnd_q <= (rk_n == 6'd0) ? 64'd0 : (64'd1 << (rk_n - 6'd1));
             case (op)
                 OP_DX: dxr <= r32;
                 OP_Q: begin dxr <= r32; yv <= r32; g <= r32; end
