@@ -51,7 +51,6 @@ The log's sample rate (``RunLog.sample_rate_hz``) must match the model's ``rate.
 """
 from __future__ import annotations
 
-import argparse
 from dataclasses import dataclass
 
 import numpy as np
@@ -300,41 +299,3 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
         rate = RateConfig.from_data(ps, fs, rate_estimator, n, shift, restarts=[log.segments for log in logs],
                                     percentile=rate_percentile, margin=rate_margin, masks=keep)
     return ModelConfig(proxy, rate, rev, aux_cfg)
-
-
-# -- CLI ------------------------------------------------------------------------------------------
-
-def configure_cli(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("run", metavar="RUN", help="run log to compensate (CSV or .npz)")
-    parser.add_argument("--model", required=True, help="bias model JSON (hdrg fit)")
-    parser.add_argument("-o", "--output", required=True, help="compensated run log to write (CSV or .npz)")
-    parser.add_argument("--impl", choices=IMPLS, default="float",
-                        help="float: the float64 golden model (default); fixed: the bit-accurate "
-                             "fixed-point firmware reference")
-    parser.add_argument("--table", metavar="TABLE",
-                        help="with --impl fixed: coefficient table (table.json from hdrg quantize, .bin or "
-                             ".memh) instead of quantizing the model on the fly")
-    parser.add_argument("--strict", action="store_true",
-                        help="refuse (exit 2, nothing written) when the model is extrapolated (> 1 %% of the "
-                             "samples proxy/rate clamped) or any sample saturates, instead of warning")
-
-
-def run_cli(args) -> int:
-    from host_tools import flags
-    from host_tools.atomic import refuse_overwrite
-
-    check_impl(args.impl)
-    refuse_overwrite(args.output, [args.run, args.model, getattr(args, "table", None)])
-    model = BiasModel.from_json(args.model)
-    table = None
-    if getattr(args, "table", None):
-        if args.impl != "fixed":
-            raise ValueError("--table needs --impl fixed")
-        from host_tools.quantize import read_table
-        table = read_table(args.table)
-    log = rl.read(args.run)
-    out = compensate(log, model, impl=args.impl, table=table)
-    flags.report(out, strict=args.strict)
-    rl.write(out, args.output)
-    print(f"{args.output}: {flags.summary(out)}")
-    return 0

@@ -80,7 +80,6 @@ causal: a longer run of the same seed and settings starts with the same samples.
 """
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import math
 import os
@@ -996,30 +995,10 @@ def simulate(scenario: str = "static", seed: int = 0, duration_s: float | None =
 # CLI
 # ---------------------------------------------------------------------------------------------
 
-def configure_cli(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--scenario", default=None, help="named scenario (see --list)")
-    parser.add_argument("-o", "--output", help="output run log (.csv or .npz)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    parser.add_argument("--duration", type=float, default=None, metavar="S",
-                        help="duration [s] (default: the scenario's)")
-    parser.add_argument("--rate", type=float, default=1.0, metavar="HZ", help="sample rate [Hz] (default 1)")
-    parser.add_argument("--profile", metavar="CSV", help="chamber profile table t_s,temp_c (replaces the scenario's)")
-    parser.add_argument("--reversal", choices=("on", "off"), help="mode reversal on/off (default: the scenario's)")
-    parser.add_argument("--exchange-s", type=float, help="mode-exchange duration [s] (default 30)")
-    parser.add_argument("--dwell-s", type=float, help="mode-1/2 window duration [s] (default 120)")
-    parser.add_argument("--inject", action="append", default=[], metavar="NAME[:p=v,...]",
-                        help="switch an effect on (declared) and/or set its parameters; repeatable")
-    parser.add_argument("--undeclared", action="append", default=[], metavar="NAME[:p=v,...]",
-                        help="switch an effect on without listing it in the metadata; repeatable")
-    parser.add_argument("--off", action="append", default=[], metavar="NAME", help="switch an effect off; repeatable")
-    parser.add_argument("--set", action="append", default=[], metavar="PARAM=VALUE",
-                        help="set a base parameter (e.g. tau_pkg_s=900, device=hdrg-02); repeatable")
-    parser.add_argument("--list", action="store_true", help="list scenarios and effects, then exit")
-    from host_tools.sim_foreign import add_cli_options
-    add_cli_options(parser)
 
-
-def _format_list() -> str:
+def format_list() -> str:
+    """The named scenarios and the effects (with their default parameters; * marks the effects on by
+    default) as the text `hdrg simulate --list` prints."""
     lines = ["scenarios:"]
     lines += [f"  {name:22s} {desc}" for name, desc in list_scenarios().items()]
     lines.append("effects (* on by default; NAME:param=value for --inject/--undeclared):")
@@ -1027,52 +1006,3 @@ def _format_list() -> str:
         pars = ", ".join(f"{f.name}={f.default!r}" for f in fields(spec.cls))
         lines.append(f"  {'*' if spec.default_on else ' '} {name:19s} {spec.help}; {pars}")
     return "\n".join(lines)
-
-
-def run_cli(args) -> int:
-    if getattr(args, "family", "hdrg") == "random":
-        from host_tools.sim_foreign import run_cli_random
-        return run_cli_random(args)
-    if args.list:
-        print(_format_list())
-        return 0
-    if not args.scenario:
-        raise ValueError("--scenario is required (see --list)")
-    if not args.output:
-        raise ValueError("-o/--output is required")
-    overrides = {}
-    for item in args.set:
-        key, eq, val = item.partition("=")
-        key = key.strip()
-        if not eq:
-            raise ValueError(f"--set {item!r}: expected PARAM=VALUE")
-        if key == "device":
-            overrides[key] = val.strip()
-        elif key == "reversal":
-            flag = val.strip().lower()
-            if flag not in ("on", "off", "true", "false", "yes", "no"):
-                raise ValueError(f"--set reversal={val!r}: use on or off")
-            overrides[key] = flag in ("on", "true", "yes")
-        else:
-            try:
-                overrides[key] = float(val)
-            except ValueError:
-                raise ValueError(f"--set {key}: {val!r} is not a number") from None
-    if args.profile:
-        overrides["profile"] = args.profile
-    if args.reversal:
-        overrides["reversal"] = args.reversal == "on"
-    if args.exchange_s is not None:
-        overrides["exchange_s"] = args.exchange_s
-    if args.dwell_s is not None:
-        overrides["dwell_s"] = args.dwell_s
-    if args.inject:
-        overrides["inject"] = args.inject
-    if args.off:
-        overrides["off"] = [n.strip() for item in args.off for n in item.split(",") if n.strip()]
-    log = simulate(args.scenario, seed=args.seed, duration_s=args.duration, sample_rate_hz=args.rate,
-                   undeclared=args.undeclared, **overrides)
-    from host_tools import runlog
-    runlog.write(log, args.output)
-    print(f"hdrg simulate: {len(log)} samples ({args.scenario}, seed {args.seed}) -> {args.output}")
-    return 0

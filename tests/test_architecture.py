@@ -133,3 +133,14 @@ def test_vocabulary_is_declared_once():
                 if lits & names:
                     bad.append(f"{path.relative_to(ROOT)}:{node.value.lineno}: choices {sorted(lits)}")
     assert not bad, "argparse choices repeating the vocabulary (use firmware_ref.vocabulary):\n" + "\n".join(bad)
+
+
+def test_only_the_commands_layer_imports_argparse():
+    """Stage modules hold no argument parsing: argparse is imported (module or function level) only
+    by host_tools/cli/ (the commands layer)."""
+    known = modules()
+    bad = [f"{path.relative_to(ROOT)}:{line}: imports argparse"
+           for name, path in known.items() if not name.startswith("host_tools.cli")
+           for line, mod in imports(name, path, known, top_level_only=False) if mod.split(".")[0] == "argparse"]
+    assert not bad, "argparse outside host_tools/cli:\n" + "\n".join(bad)
+    assert any(mod == "argparse" for _, mod in imports("host_tools.cli", known["host_tools.cli"], known, False))

@@ -79,11 +79,11 @@ def test_cli_compensate_fixed(tmp_path, capsys):
     gold = comp.compensate(dequantized_log(run, model), model)
     assert np.max(np.abs(fx.rate_dph - gold.rate_dph)) < GOAL_DPH
     # with a table file: the same words
-    from host_tools.quantize import configure_cli, run_cli
+    from host_tools.cli.quantize import configure, run
     import argparse
     p = argparse.ArgumentParser()
-    configure_cli(p)
-    assert run_cli(p.parse_args([str(tmp_path / "model.json"), "-o", str(tmp_path / "table.json"),
+    configure(p)
+    assert run(p.parse_args([str(tmp_path / "model.json"), "-o", str(tmp_path / "table.json"),
                                  "--memh", str(tmp_path / "t.memh")])) == 0
     for table in ("table.json", "t.memh"):
         assert cli_main(["compensate", *args, "-o", str(tmp_path / "fx2.csv"), "--impl", "fixed",
