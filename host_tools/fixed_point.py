@@ -18,7 +18,8 @@ from firmware_ref.aux import aux_columns
 from firmware_ref.compensate import run_reference
 from host_tools import compensate as hc
 from host_tools import runlog as rl
-from host_tools.quantize import aux_channel_fracs, quantize
+from host_tools.quantize import quantize
+from host_tools.quantize_parts import aux_channel_fracs
 from host_tools.regressors import power_on_counter
 
 

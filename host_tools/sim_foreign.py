@@ -97,7 +97,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from host_tools.runlog import RunLog
-from host_tools.sim import mode_sequence
+from host_tools.sim_physics import mode_sequence
 
 FOREIGN_VERSION = 1
 EXCHANGE_S = 30.0

@@ -27,7 +27,8 @@ from host_tools import runlog as rl
 from host_tools.diagnose import STAT_KEYS, _stats_one, diagnose
 from host_tools.fit import fit_logs
 from host_tools.fixed_point import dequantized_log
-from host_tools.quantize import QuantizeError, aux_channel_fracs, quantize, read_table
+from host_tools.quantize import QuantizeError, quantize, read_table
+from host_tools.quantize_parts import aux_channel_fracs
 from host_tools.regressors import aux_regressor
 from test_diagnose import CASES, world
 
