@@ -56,6 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from host_tools import runlog as rl
+from host_tools.checks import check_sample_rate
 from host_tools.flags import add_flags
 from host_tools.model import BiasModel, ModelConfig
 from host_tools.proxy import ProxyConfig, parse_range
@@ -66,7 +67,6 @@ from host_tools.reversal import ReversalConfig, check_modes, combine, combine_va
 
 from firmware_ref.vocabulary import (FLAG_EXCHANGE, FLAG_PROXY_CLAMPED, FLAG_RATE_CLAMPED, FLAG_STALE,  # noqa: F401
                                      FLAG_WARMUP, GOLDEN_FLAG_NAMES as FLAG_NAMES)
-FS_TOLERANCE = 0.01  # relative mismatch allowed between the log's sample rate and the model's fs
 # Defaults of a new model, the one place: fit_config_from_logs (and fit_logs for the terms) fill
 # what is not given, so hdrg fit / diagnose / demo and everything reading their model files follow.
 # Chosen on held-out runs at another temperature rate (docs/REGRESS_THEN_REVERSE.md "Defaults").
@@ -118,14 +118,6 @@ def _config_of(config) -> ModelConfig:
     if not isinstance(config, ModelConfig):
         raise TypeError(f"expected a ModelConfig or BiasModel, not {type(config).__name__}")
     return config
-
-
-def check_sample_rate(log, fs: float) -> None:
-    """Refuse a log whose sample rate differs from the model's nominal fs by more than 1 %."""
-    fs_log = log.sample_rate_hz
-    if np.isfinite(fs_log) and abs(fs_log / fs - 1.0) > FS_TOLERANCE:
-        raise ValueError(f"{log.source}: sample rate {fs_log:.6g} Hz does not match the model's "
-                         f"nominal fs {fs:.6g} Hz (the rate estimator assumes the nominal period)")
 
 
 def prepare(log, config) -> Prepared:
