@@ -13,7 +13,7 @@ forever.  Per sample::
         state = next(state); cnt = 0
     emit state; if state != FTR: cnt += 1
 
-so with ``power_on_n = 0`` the modes are those of host_tools.sim.mode_sequence (exchange first).
+so with ``power_on_n = 0`` the modes are those of host_tools.sim_physics.mode_sequence (exchange first).
 Each state has a run-log mode (3, 3, 1, 3, 2, 0), a rate sign and the virtual-switch bits
 (formats.STATE_VS).  A restart resets the timer as at power-on.  Driven by a logged mode column
 instead, the state is derived from the mode (an exchange is "to 2" after a mode-1 window, else

@@ -51,12 +51,12 @@ The log's sample rate (``RunLog.sample_rate_hz``) must match the model's ``rate.
 """
 from __future__ import annotations
 
-import argparse
 from dataclasses import dataclass
 
 import numpy as np
 
 from host_tools import runlog as rl
+from host_tools.checks import check_sample_rate
 from host_tools.flags import add_flags
 from host_tools.model import BiasModel, ModelConfig
 from host_tools.proxy import ProxyConfig, parse_range
@@ -67,7 +67,6 @@ from host_tools.reversal import ReversalConfig, check_modes, combine, combine_va
 
 from firmware_ref.vocabulary import (FLAG_EXCHANGE, FLAG_PROXY_CLAMPED, FLAG_RATE_CLAMPED, FLAG_STALE,  # noqa: F401
                                      FLAG_WARMUP, GOLDEN_FLAG_NAMES as FLAG_NAMES)
-FS_TOLERANCE = 0.01  # relative mismatch allowed between the log's sample rate and the model's fs
 # Defaults of a new model, the one place: fit_config_from_logs (and fit_logs for the terms) fill
 # what is not given, so hdrg fit / diagnose / demo and everything reading their model files follow.
 # Chosen on held-out runs at another temperature rate (docs/REGRESS_THEN_REVERSE.md "Defaults").
@@ -120,14 +119,6 @@ def _config_of(config) -> ModelConfig:
     if not isinstance(config, ModelConfig):
         raise TypeError(f"expected a ModelConfig or BiasModel, not {type(config).__name__}")
     return config
-
-
-def check_sample_rate(log, fs: float) -> None:
-    """Refuse a log whose sample rate differs from the model's nominal fs by more than 1 %."""
-    fs_log = log.sample_rate_hz
-    if np.isfinite(fs_log) and abs(fs_log / fs - 1.0) > FS_TOLERANCE:
-        raise ValueError(f"{log.source}: sample rate {fs_log:.6g} Hz does not match the model's "
-                         f"nominal fs {fs:.6g} Hz (the rate estimator assumes the nominal period)")
 
 
 def prepare(log, config) -> Prepared:
@@ -301,41 +292,3 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
         rate = RateConfig.from_data(ps, fs, rate_estimator, n, shift, restarts=[log.segments for log in logs],
                                     percentile=rate_percentile, margin=rate_margin, masks=keep)
     return ModelConfig(proxy, rate, rev, aux_cfg)
-
-
-# -- CLI ------------------------------------------------------------------------------------------
-
-def configure_cli(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("run", metavar="RUN", help="run log to compensate (CSV or .npz)")
-    parser.add_argument("--model", required=True, help="bias model JSON (hdrg fit)")
-    parser.add_argument("-o", "--output", required=True, help="compensated run log to write (CSV or .npz)")
-    parser.add_argument("--impl", choices=IMPLS, default="float",
-                        help="float: the float64 golden model (default); fixed: the bit-accurate "
-                             "fixed-point firmware reference")
-    parser.add_argument("--table", metavar="TABLE",
-                        help="with --impl fixed: coefficient table (table.json from hdrg quantize, .bin or "
-                             ".memh) instead of quantizing the model on the fly")
-    parser.add_argument("--strict", action="store_true",
-                        help="refuse (exit 2, nothing written) when the model is extrapolated (> 1 %% of the "
-                             "samples proxy/rate clamped) or any sample saturates, instead of warning")
-
-
-def run_cli(args) -> int:
-    from host_tools import flags
-    from host_tools.atomic import refuse_overwrite
-
-    check_impl(args.impl)
-    refuse_overwrite(args.output, [args.run, args.model, getattr(args, "table", None)])
-    model = BiasModel.from_json(args.model)
-    table = None
-    if getattr(args, "table", None):
-        if args.impl != "fixed":
-            raise ValueError("--table needs --impl fixed")
-        from host_tools.quantize import read_table
-        table = read_table(args.table)
-    log = rl.read(args.run)
-    out = compensate(log, model, impl=args.impl, table=table)
-    flags.report(out, strict=args.strict)
-    rl.write(out, args.output)
-    print(f"{args.output}: {flags.summary(out)}")
-    return 0

@@ -23,7 +23,6 @@ Nothing is copied from a table: every figure comes from the build and the run of
 """
 from __future__ import annotations
 
-import argparse
 import collections
 import json
 import re
@@ -559,21 +558,3 @@ def summary(r: dict) -> str:
                              f"{c['nominal']['max']})")
     lines.append("  tools: " + "; ".join(f"{k}: {v}" for k, v in r.get("tools", {}).items()))
     return "\n".join(lines)
-
-
-def configure_cli(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--target", required=True, choices=TARGETS)
-    parser.add_argument("--json", default=None, help="write the figures as JSON to this file")
-    parser.add_argument("--keep", default=None, help="build directory to keep (default: a temporary one)")
-
-
-def run_cli(args) -> int:
-    if args.keep:
-        r = measure(args.target, Path(args.keep), log=print)
-    else:
-        with tempfile.TemporaryDirectory(prefix="hdrg-cost-") as d:
-            r = measure(args.target, Path(d), log=print)
-    print(summary(r))
-    if args.json:
-        Path(args.json).write_text(json.dumps(r, indent=1, default=str) + "\n")
-    return 0 if r["bit_exact"] else 1

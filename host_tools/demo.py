@@ -16,25 +16,21 @@ from host_tools import runlog, sim
 from host_tools.compensate import compensate, fit_config_from_logs
 
 
-def configure_cli(parser) -> None:
-    parser.epilog = ("Takes about 0.5 to 1.5 min (measured: 66 s and 83 s on a 2-core machine shared "
-                     "with other work): two 6-h simulations, a fit, a report with figures and a closed-loop diagnosis.")
-    parser.add_argument("--out", default="hdrg-demo", help="output directory (default: ./hdrg-demo)")
-    parser.add_argument("--duration", type=float, default=6 * 3600.0, help="length of each simulated run [s]")
-
-
-def run_cli(args) -> int:
+def run_demo(out_dir: str = "hdrg-demo", duration_s: float = 6 * 3600.0) -> None:
+    """The demo: two simulated mode-reversal runs of ``duration_s`` seconds each, a fit, the
+    compensation of the held-out run, a report and the closed-loop diagnosis, all written below
+    ``out_dir`` (created); progress and tables are printed to stdout.  Returns nothing."""
     from host_tools.fit import fit_logs
     from host_tools.report import _table, report
 
-    os.makedirs(args.out, exist_ok=True)
+    os.makedirs(out_dir, exist_ok=True)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         print("1. simulate: two mode-reversal runs, -20..20 degC cycles at 4 degC/min (seeds 1 and 2)")
         paths = []
         for seed in (1, 2):
-            log = sim.simulate("paper-mr-cycle-4dpm", seed=seed, duration_s=args.duration)
-            path = os.path.join(args.out, f"run-seed{seed}.csv")
+            log = sim.simulate("paper-mr-cycle-4dpm", seed=seed, duration_s=duration_s)
+            path = os.path.join(out_dir, f"run-seed{seed}.csv")
             runlog.write(log, path)
             paths.append(path)
             print(f"   {path}: {len(log)} samples")
@@ -42,35 +38,34 @@ def run_cli(args) -> int:
         print("2. fit: 17-coefficient model (trend combiner, diff rate estimator) on the seed-1 run")
         cfg = fit_config_from_logs([train], reversal={"combiner": "trend"})
         model, res = fit_logs([train], cfg, "all")
-        model_path = os.path.join(args.out, "model.json")
+        model_path = os.path.join(out_dir, "model.json")
         model.to_json(model_path)
         print(f"   {model_path}: terms {list(res.terms)}, rms {res.rms:.4g} deg/h, cond {res.cond:.3g}")
         print("3. compensate the held-out seed-2 run")
         out = compensate(test, model)
-        out_path = os.path.join(args.out, "run-seed2-compensated.csv")
+        out_path = os.path.join(out_dir, "run-seed2-compensated.csv")
         runlog.write(out, out_path)
         from host_tools.flags import problems, summary
         print(f"   {out_path}: {summary(out)}")
         for p in problems(out):
             print(f"   warning: {p}")
         print("4. report: before / flight-stack baseline / 17-term model, on the held-out run")
-        doc = report([test], model, os.path.join(args.out, "report"), train_logs=[train])
+        doc = report([test], model, os.path.join(out_dir, "report"), train_logs=[train])
         print(_table(doc["rows"]))
-        print(f"   figures: {', '.join(doc.get('figures', []))} in {os.path.join(args.out, 'report')}")
-        _close_the_loop(args)
-    return 0
+        print(f"   figures: {', '.join(doc.get('figures', []))} in {os.path.join(out_dir, 'report')}")
+        _close_the_loop(out_dir, duration_s)
 
 
-def _close_the_loop(args) -> None:
+def _close_the_loop(out_dir: str, duration_s: float) -> None:
     from host_tools.diagnose import diagnose
 
     print("5. diagnose: runs with an UNDECLARED effect (periodic 0.5 deg/h, 600 s; not in the metadata, "
           "not in the model); train on seeds 1 and 3, hold out seed 2")
     undeclared = {"periodic": {"amp_dph": 0.5, "period_s": 600.0}}
-    train = [sim.simulate("paper-mr-cycle-4dpm", seed=s, duration_s=args.duration, undeclared=undeclared)
+    train = [sim.simulate("paper-mr-cycle-4dpm", seed=s, duration_s=duration_s, undeclared=undeclared)
              for s in (1, 3)]
-    hold = [sim.simulate("paper-mr-cycle-4dpm", seed=2, duration_s=args.duration, undeclared=undeclared)]
-    out_dir = os.path.join(args.out, "diagnose")
+    hold = [sim.simulate("paper-mr-cycle-4dpm", seed=2, duration_s=duration_s, undeclared=undeclared)]
+    out_dir = os.path.join(out_dir, "diagnose")
     rep, _ = diagnose(train, hold, out_dir=out_dir, progress=lambda msg: print(f"   ... {msg}", flush=True))
     keys = ("std_dph", "pp_dph", "std100_dph", "pp100_dph")
     print("| iteration | step (structure / effect) | parameters | held-out before: std 1 s, p-p 1 s, std 100 s, p-p 100 s "

@@ -4,7 +4,7 @@ scanned.
 
 Every candidate is one or two *generator terms* of host_tools.regressors (the k7 generators, module
 doc there): the diagnosis scores exactly the column that the model will use as z if the candidate
-wins.  Families (the names are the simulator's effect names, host_tools.sim.MISSING_EFFECTS):
+wins.  Families (the names are the simulator's effect names, host_tools.sim_params.MISSING_EFFECTS):
 
 ===================  =======================================================  ======================
 family               regressor (u: the model's normalized proxy, s: mode       scanned

@@ -25,7 +25,6 @@ file; it is checked (magic, version, length, CRC, field ranges) before anything 
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import re
@@ -193,29 +192,3 @@ def export(table: Table, outdir, formats=FORMATS, name: str = DEFAULT_NAME, info
                 fh.write(table.to_memh())
         paths[fmt] = path
     return paths
-
-
-# -- CLI ----------------------------------------------------------------------------------------------
-
-def configure_cli(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("table", metavar="TABLE", help="table.json (hdrg quantize), .bin or .memh")
-    parser.add_argument("--format", choices=FORMATS + ("all",), default="all",
-                        help="c: C99 header; json: table.json with the float originals; mem: $readmemh "
-                             "words; all (default): the three")
-    parser.add_argument("-o", "--output", required=True, metavar="DIR", help="directory to write into")
-    parser.add_argument("--name", default=DEFAULT_NAME,
-                        help=f"file base name and C symbol (upper-cased) (default {DEFAULT_NAME})")
-
-
-def run_cli(args) -> int:
-    from host_tools.atomic import refuse_overwrite
-
-    formats_ = FORMATS if args.format == "all" else (args.format,)
-    refuse_overwrite([os.path.join(args.output, args.name + EXTENSIONS[f]) for f in formats_], args.table)
-    table, info = load(args.table)
-    formats = FORMATS if args.format == "all" else (args.format,)
-    paths = export(table, args.output, formats, args.name, info)
-    print(f"{args.table}: layout version {LAYOUT_VERSION}, {len(table.to_words())} words, CRC-32 0x{table.crc:08x}")
-    for fmt, path in paths.items():
-        print(f"  {fmt:4s} {path}")
-    return 0

@@ -16,9 +16,10 @@ from firmware_ref import formats as F
 from firmware_ref import inputs
 from firmware_ref.aux import aux_columns
 from firmware_ref.compensate import run_reference
-from host_tools import compensate as hc
 from host_tools import runlog as rl
-from host_tools.quantize import aux_channel_fracs, quantize
+from host_tools.checks import check_sample_rate
+from host_tools.quantize import quantize
+from host_tools.quantize_parts import aux_channel_fracs
 from host_tools.regressors import power_on_counter
 
 
@@ -97,7 +98,7 @@ def compensate_log(log, model, table=None, impl: str = "numba", return_flags: bo
         raise ValueError(f"{log.source}: the log is already compensated (metadata 'compensated: yes' "
                          f"or a 'bias_dph' column)")
     cfg = model.config
-    hc.check_sample_rate(log, cfg.rate.fs)
+    check_sample_rate(log, cfg.rate.fs)
     if cfg.reversal is None and log.reversal:
         raise ValueError(f"{log.source}: the model is for force-to-rebalance (no mode reversal) "
                          f"but the log uses mode reversal (modes 1/2/3)")

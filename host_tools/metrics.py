@@ -68,11 +68,9 @@ is never overwritten; put ``--json`` after the RUN paths, or use ``--json -``).
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
-import sys
 import zipfile
 
 import numpy as np
@@ -480,49 +478,3 @@ def to_json(runs: list, rep: dict | None = None) -> str:
         return o
     return json.dumps(clean({"min_fill": MIN_FILL, "paper_tau_s": PAPER_TAU_S, "runs": runs,
                              "repeatability": rep}), indent=1)
-
-
-# -- CLI ----------------------------------------------------------------------------------
-
-def _parse_taus(text: str) -> tuple:
-    try:
-        taus = tuple(float(x) for x in text.split(",") if x.strip())
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--tau must be comma-separated seconds, e.g. 1,10,100, not {text!r}") from None
-    if not taus or any(not (t > 0 and math.isfinite(t)) for t in taus):
-        raise argparse.ArgumentTypeError(f"--tau values must be finite and > 0 s, not {text!r}")
-    return taus
-
-
-def configure_cli(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("runs", nargs="+", metavar="RUN", help="run logs (CSV or NPZ), raw or compensated")
-    parser.add_argument("--tau", type=_parse_taus, default=DEFAULT_TAUS, metavar="LIST",
-                        help="averaging times in s, comma-separated (default 1,10,100)")
-    from host_tools import reversal
-
-    parser.add_argument("--combiner", choices=reversal.COMBINERS, default=None,
-                        help=f"mode-reversal combiner for raw mode-reversal logs (default {reversal.DEFAULT_COMBINER}, "
-                             f"as hdrg fit)")
-    parser.add_argument("--json", nargs="?", const="-", default=None, metavar="FILE",
-                        help="JSON output: '--json' or '--json -' prints it instead of the table; "
-                             "'--json FILE' writes FILE and prints the table")
-
-
-def run_cli(args) -> int:
-    from host_tools.atomic import atomic_open, refuse_overwrite
-
-    if args.json not in (None, "-"):
-        refuse_overwrite(args.json, args.runs)
-    if args.json not in (None, "-") and args.json.lower().endswith((".csv", ".npz")):
-        raise ValueError(f"--json {args.json}: refusing to write JSON over a run-log name (.csv/.npz); "
-                         f"put --json after the RUN paths or use --json -")
-    runs = [run_metrics(load(p), taus=args.tau, combiner=args.combiner) for p in args.runs]
-    rep = repeatability(runs) if len(runs) >= 2 else None
-    if args.json == "-":
-        sys.stdout.write(to_json(runs, rep) + "\n")
-        return 0
-    if args.json is not None:
-        with atomic_open(args.json, "w", encoding="utf-8") as fh:
-            fh.write(to_json(runs, rep) + "\n")
-    sys.stdout.write(format_table(runs, rep))
-    return 0

@@ -19,7 +19,6 @@ tables; the 1-s figure is in the JSON too): variation = peak-to-peak, stability 
 """
 from __future__ import annotations
 
-import json
 import warnings
 
 import numpy as np
@@ -185,17 +184,3 @@ def format_results(res: dict) -> str:
         lines.append(f"{r['row']:24s} {_n(r['before']['pp'], 10)} {_n(pb[0], 7, 3)} {_n(r['before']['std'], 8)} "
                      f"{_n(pb[1], 7, 3)} | {_n(r['after']['pp'], 9)} {_n(pa[0], 7, 3)} {_n(r['after']['std'], 8)} {_n(pa[1], 7, 4)}")
     return "\n".join(lines)
-
-
-def configure_cli(parser) -> None:
-    parser.add_argument("--json", default=None, help="also write the results as JSON to this file")
-
-
-def run_cli(args) -> int:
-    res = run_all()
-    print(format_results(res))
-    if args.json:
-        from host_tools.atomic import atomic_open
-        with atomic_open(args.json, "w") as fh:
-            json.dump(res, fh, indent=1, default=float)
-    return 0

@@ -18,7 +18,7 @@ import os
 
 import numpy as np
 
-from host_tools import metrics, runlog
+from host_tools import metrics
 from host_tools.atomic import atomic_open, atomic_path
 from host_tools.compensate import compensate, prepare
 from host_tools.flags import problems as flag_problems
@@ -175,32 +175,4 @@ def report(logs, model: BiasModel, out_dir, train_logs=None, plots: bool = True)
     return doc
 
 
-def configure_cli(parser) -> None:
-    parser.add_argument("runs", metavar="RUN", nargs="+", help="run logs to evaluate (CSV or .npz)")
-    parser.add_argument("--model", required=True, help="bias model JSON (hdrg fit)")
-    parser.add_argument("--out", required=True, help="output directory (report.md, report.json, PNG figures)")
-    parser.add_argument("--train", nargs="*", default=None,
-                        help="training runs for the flight-stack baseline (default: the model's recorded training runs, when they exist)")
-    parser.add_argument("--no-plots", action="store_true", help="tables only")
-
-
 REPORT_FILES = ("report.md", "report.json", "timeseries.png", "loops.png", "allan.png")
-
-
-def run_cli(args) -> int:
-    from host_tools.atomic import refuse_overwrite
-
-    refuse_overwrite([os.path.join(args.out, f) for f in REPORT_FILES], list(args.runs) + [args.model]
-                     + list(args.train or []))
-    model = BiasModel.from_json(args.model)
-    train = args.train
-    if train is None:
-        train = [p for p in (model.fit or {}).get("train", []) if os.path.exists(p)]
-    logs = [runlog.read(p) for p in args.runs]
-    train_logs = [runlog.read(p) for p in train] if train else None
-    doc = report(logs, model, args.out, train_logs, plots=not args.no_plots)
-    print(_table(doc["rows"]))
-    for note in doc["notes"]:
-        print(f"note: {note}")
-    print(f"written: {os.path.join(args.out, 'report.md')}")
-    return 0

@@ -89,7 +89,6 @@ noise from ``default_rng([seed, 3, noise_seed])`` (fixed draw order, independent
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 from dataclasses import asdict, dataclass, field
@@ -98,7 +97,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from host_tools.runlog import RunLog
-from host_tools.sim import mode_sequence
+from host_tools.sim_physics import mode_sequence
 
 FOREIGN_VERSION = 1
 EXCHANGE_S = 30.0
@@ -482,54 +481,10 @@ def _effect_term(name, p, dev, t, mode, temps, since, b_d, vdd, acc) -> np.ndarr
     raise ValueError(f"unknown effect {name!r}")
 
 
-# -- CLI (called from host_tools.sim's `hdrg simulate --family random`) ---------------------------
-
-def add_cli_options(parser: argparse.ArgumentParser) -> None:
-    """Options of the random family, added to `hdrg simulate`."""
-    parser.add_argument("--family", choices=("hdrg", "random"), default="hdrg",
-                        help="simulator family: hdrg (the calibrated one, default) or random (the foreign, "
-                             "randomized-physics devices of host_tools.sim_foreign; a device is --seed)")
-    parser.add_argument("--chamber-rate", type=float, default=None, metavar="CPM",
-                        help="random family: chamber ramp rate [degC/min] (default 4)")
-    parser.add_argument("--power-on", type=int, default=0, metavar="K",
-                        help="random family: power-on index (selects the damping change; default 0)")
-    parser.add_argument("--noise-seed", type=int, default=0, help="random family: noise seed (default 0)")
-    parser.add_argument("--effect", action="append", default=[], metavar="NAME",
-                        help=f"random family: undeclared effect, repeatable; one of {', '.join(EFFECT_KINDS)}")
-    parser.add_argument("--strength", type=float, default=1.0, help="random family: effect strength (default 1)")
-    parser.add_argument("--no-thermal", action="store_true",
-                        help="random family: the noise-only floor run (every bias term zeroed)")
-    parser.add_argument("--describe", action="store_true",
-                        help="random family: print the device's parameters as JSON, then exit")
-
-
-def run_cli_random(args) -> int:
-    """`hdrg simulate --family random`."""
-    if args.list:
-        print("random family: a device is --seed; undeclared effects (--effect NAME, --strength X):")
-        for k in EFFECTS.values():
-            print(f"  {k.name:19s} runs {k.runs:6s} {'flips' if k.flips else 'no flip'}; follows "
-                  f"{k.columns or '-'}; strength 1 = nominal ({k.units})")
-        return 0
-    for opt, bad in (("--scenario", args.scenario), ("--profile", args.profile), ("--exchange-s", args.exchange_s),
-                     ("--dwell-s", args.dwell_s), ("--inject", args.inject), ("--undeclared", args.undeclared),
-                     ("--off", args.off), ("--set", args.set)):
-        if bad:
-            raise ValueError(f"{opt} belongs to the hdrg family; the random family takes --seed, --chamber-rate, "
-                             f"--reversal, --power-on, --noise-seed, --effect, --strength, --no-thermal, --duration")
-    if args.rate != 1.0:
-        raise ValueError(f"--rate is the sample rate [Hz]; the random family samples at 1 Hz only "
-                         f"(the chamber ramp rate is --chamber-rate)")
-    dev = foreign_device(args.seed)
-    if args.describe:
-        print(dev.to_json())
-        return 0
-    if not args.output:
-        raise ValueError("-o/--output is required")
-    cpm = 4.0 if args.chamber_rate is None else args.chamber_rate
-    log = simulate_foreign(dev, cpm, (args.reversal or "on") == "on", args.power_on, args.noise_seed,
-                           args.duration, not args.no_thermal, args.effect or None, args.strength)
-    from host_tools import runlog
-    runlog.write(log, args.output)
-    print(f"hdrg simulate: {len(log)} samples (random family, {dev.describe()}) -> {args.output}")
-    return 0
+def format_effects() -> str:
+    """The undeclared effect kinds of the random family (runs, flip, columns followed, units of
+    strength 1) as the text `hdrg simulate --family random --list` prints."""
+    lines = ["random family: a device is --seed; undeclared effects (--effect NAME, --strength X):"]
+    lines += [f"  {k.name:19s} runs {k.runs:6s} {'flips' if k.flips else 'no flip'}; follows "
+              f"{k.columns or '-'}; strength 1 = nominal ({k.units})" for k in EFFECTS.values()]
+    return "\n".join(lines)

@@ -6,7 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from host_tools import bench, bench_accuracy as ba, cli
+from host_tools import bench_accuracy as ba, cli
+from host_tools.cli import bench
 from host_tools.sim_foreign import foreign_device, simulate_foreign
 
 PIPES = ["ftr/raw", "ftr/diff", "ftr/iir9", "mr-trend/raw", "mr-trend/diff", "mr-pair/diff"]
@@ -85,7 +86,7 @@ def test_cli(tmp_path, capsys):
 
 
 def test_bench_registry_offers_only_importable_benchmarks(monkeypatch):
-    monkeypatch.setitem(bench.BENCHMARKS, "ghost", "host_tools.no_such_bench_module")
+    monkeypatch.setitem(bench.BENCHMARKS, "ghost", ("host_tools.cli.bench_accuracy", "host_tools.no_such_bench_module"))
     avail = bench.available()
     assert "accuracy" in avail and "ghost" not in avail
 

@@ -5,7 +5,8 @@ import json
 
 import pytest
 
-from host_tools import bench, bench_loop as bl, cli
+from host_tools import bench_loop as bl, cli
+from host_tools.cli import bench
 from host_tools.sim_foreign import EFFECT_KINDS
 
 
@@ -44,7 +45,7 @@ def test_fast_subset_structure_and_never_worse(result):
 
 
 def test_cli_is_registered_and_merges_shards(result, tmp_path, capsys):
-    assert bench.available()["loop"] == "host_tools.bench_loop"
+    assert bench.available()["loop"] == ("host_tools.cli.bench_loop", "host_tools.bench_loop")
     a, b = tmp_path / "a.json", tmp_path / "b.json"
     a.write_text(json.dumps({"records": result["records"][:1]}))
     b.write_text(json.dumps({"records": result["records"][1:]}))

@@ -296,7 +296,7 @@ def test_final_model_round_trips_and_compensates_like_the_report(results, tmp_pa
 
 def test_cli_writes_report_model_and_figures(tmp_path, capsys, monkeypatch):
     from host_tools import cli
-    monkeypatch.setitem(cli.COMMANDS, "diagnose", ("host_tools.diagnose", "trace the residual to a missing effect"))
+    monkeypatch.setitem(cli.COMMANDS, "diagnose", ("host_tools.cli.diagnose", "trace the residual to a missing effect"))
     und = {"periodic": {"amp_dph": 0.5, "period_s": 600.0}}
     paths = []
     for s in (1, 3, 2):

@@ -26,34 +26,22 @@ from host_tools import compensate as hc
 from host_tools import runlog as rl
 from host_tools.diagnose import STAT_KEYS, _stats_one, diagnose
 from host_tools.fit import fit_logs
-from host_tools.fixed_point import dequantized_log
-from host_tools.quantize import QuantizeError, aux_channel_fracs, quantize, read_table
+from host_tools.quantize import QuantizeError, quantize, read_table
+from host_tools.quantize_parts import aux_channel_fracs
 from host_tools.regressors import aux_regressor
+from host_tools.fixed_point import dequantized_log
+from fixed_compare import fixed_vs_golden
 from test_diagnose import CASES, world
 
 GOAL_DPH = 0.002
 COEF = [3e3, -2e3, 1e3, -5e2, 7e2, -3e2, 1e2, 5e2, -4e2, 3e2, -2e2, 1e2, -9e1, 8e1, -7e1, 6e1, -5e1]
 
 
-def fixed_vs_golden(log, model, table=None):
-    """(fixed log, golden log on the dequantized inputs, flags, quantized)."""
-    q = quantize(model)
-    fixed, flags = compensate_log(log, model, table=q.table if table is None else table, return_flags=True)
-    gold = hc.compensate(dequantized_log(log, model), model)
-    return fixed, gold, flags, q
-
-
 def check_close(log, model, what):
-    fixed, gold, flags, q = fixed_vs_golden(log, model)
-    np.testing.assert_array_equal(fixed["valid"], gold["valid"])
-    prep = hc.prepare(dequantized_log(log, model), model)
-    np.testing.assert_array_equal(flags & 31, prep.flags)
-    v = gold["valid"] > 0
-    err = fixed.rate_dph - gold.rate_dph
-    berr = fixed["bias_dph"] - gold["bias_dph"]
+    c = fixed_vs_golden(log, model)
+    q, flags, err, emax, bmax = c.q, c.flags, c.err, c.emax, c.bmax
     b = q.report["bound_dph"]
-    emax, bmax = float(np.max(np.abs(err))), float(np.max(np.abs(berr)))
-    print(f"\n{what}: |fixed - golden| max {emax:.3g}, 1 sigma {np.std(err[v]):.3g} deg/h, bias max {bmax:.3g}; "
+    print(f"\n{what}: |fixed - golden| max {emax:.3g}, 1 sigma {np.std(err[c.valid]):.3g} deg/h, bias max {bmax:.3g}; "
           f"bound {b['out']:.3g} (z part {b['parts']['z_error'] * b['parts']['k7_dph']:.2g}); z measured "
           f"{q.report['aux']['measured_z']['z_max']:.2g} <= {q.report['aux']['z_error']:.2g}")
     assert emax < GOAL_DPH and emax <= b["out"] and bmax <= b["bias_word"]

@@ -14,6 +14,7 @@ from host_tools.fixed_point import dequantized_log
 from host_tools.quantize import quantize
 from host_tools.reversal import ReversalConfig
 from host_tools.sim import simulate
+from fixed_compare import fixed_vs_golden
 
 GOAL_DPH = 0.002
 
@@ -40,17 +41,10 @@ def test_fixed_vs_golden_paper_scenarios(scenario, combiner, order):
     (two banks: none, pair, trend) and FTR."""
     log = simulate(scenario, seed=0)
     model = fitted(log, reversal=None if combiner is None else ReversalConfig(combiner, order=order))
-    q = quantize(model)
+    c = fixed_vs_golden(log, model)
+    q, fixed, gold, flags, err, v = c.q, c.fixed, c.gold, c.flags, c.err, c.valid
     assert q.table.n_banks == (2 if order == "regress_first" else 1)
-    gold = comp.compensate(dequantized_log(log, model), model)
-    fixed, flags = compensate_log(log, model, table=q.table, return_flags=True)
-    np.testing.assert_array_equal(fixed["valid"], gold["valid"])
-    prep = comp.prepare(dequantized_log(log, model), model)
-    np.testing.assert_array_equal(flags & 31, prep.flags)
-    v = gold["valid"] > 0
-    err = fixed.rate_dph - gold.rate_dph
-    berr = fixed["bias_dph"] - gold["bias_dph"]
-    emax, esig, bmax = float(np.max(np.abs(err))), float(np.std(err[v])), float(np.max(np.abs(berr)))
+    emax, esig, bmax = c.emax, float(np.std(err[v])), c.bmax
     print(f"\n{scenario} {combiner} {order}: |fixed - golden| max {emax:.3g} deg/h, 1 sigma {esig:.3g} deg/h, "
           f"bias max {bmax:.3g} deg/h; bound {q.report['bound_dph']['out']:.3g} deg/h")
     assert emax < GOAL_DPH
@@ -79,11 +73,11 @@ def test_cli_compensate_fixed(tmp_path, capsys):
     gold = comp.compensate(dequantized_log(run, model), model)
     assert np.max(np.abs(fx.rate_dph - gold.rate_dph)) < GOAL_DPH
     # with a table file: the same words
-    from host_tools.quantize import configure_cli, run_cli
+    from host_tools.cli.quantize import configure, run
     import argparse
     p = argparse.ArgumentParser()
-    configure_cli(p)
-    assert run_cli(p.parse_args([str(tmp_path / "model.json"), "-o", str(tmp_path / "table.json"),
+    configure(p)
+    assert run(p.parse_args([str(tmp_path / "model.json"), "-o", str(tmp_path / "table.json"),
                                  "--memh", str(tmp_path / "t.memh")])) == 0
     for table in ("table.json", "t.memh"):
         assert cli_main(["compensate", *args, "-o", str(tmp_path / "fx2.csv"), "--impl", "fixed",

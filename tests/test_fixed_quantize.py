@@ -16,7 +16,8 @@ from firmware_ref.kernel import evaluate_words
 from firmware_ref.table import FIELD_INDEX, MAGIC, N_FIXED, Table, TableError
 from firmware_ref.terms import K_AUX, N_TERMS, TERM_POWERS
 from host_tools.vectors.builders import make_model
-from host_tools.quantize import QuantizeError, configure_cli, quantize, read_table, run_cli
+from host_tools.cli.quantize import configure, run
+from host_tools.quantize import QuantizeError, quantize, read_table
 
 CORNERS = [-F.ONE, -F.ONE + 1, -1, 0, 1, F.ONE - 1, F.ONE]
 
@@ -223,11 +224,11 @@ def test_table_json_and_cli(tmp_path, capsys):
     model = make_model(combiner="pair")
     model.to_json(tmp_path / "model.json")
     parser = argparse.ArgumentParser()
-    configure_cli(parser)
+    configure(parser)
     out = tmp_path / "table.json"
     args = parser.parse_args([str(tmp_path / "model.json"), "-o", str(out), "--memh", str(tmp_path / "t.memh"),
                               "--header", str(tmp_path / "t.h"), "--bin", str(tmp_path / "t.bin")])
-    assert run_cli(args) == 0
+    assert run(args) == 0
     text = capsys.readouterr().out
     assert "CRC-32" in text and "bound" in text
     d = json.loads(out.read_text())
@@ -252,7 +253,7 @@ def test_table_json_and_cli(tmp_path, capsys):
 def test_hdrg_quantize_through_the_cli_registry(tmp_path, capsys, monkeypatch):
     """`hdrg quantize` as the lead registers it (host_tools.cli.COMMANDS); refusals exit 2."""
     from host_tools import cli
-    monkeypatch.setitem(cli.COMMANDS, "quantize", ("host_tools.quantize", "quantize a bias model"))
+    monkeypatch.setitem(cli.COMMANDS, "quantize", ("host_tools.cli.quantize", "quantize a bias model"))
     make_model().to_json(tmp_path / "model.json")
     assert cli.main(["quantize", str(tmp_path / "model.json"), "-o", str(tmp_path / "t.json")]) == 0
     assert read_table(tmp_path / "t.json").combiner == 1
@@ -292,6 +293,6 @@ def test_two_banks_per_bank_exponents_bounds_and_refusals(tmp_path, capsys):
         quantize(make_model(combiner="pair", order="regress_first", coef=coef, coef2=big))
     make_model(combiner="trend", order="regress_first").to_json(tmp_path / "m.json")
     parser = argparse.ArgumentParser()
-    configure_cli(parser)
-    assert run_cli(parser.parse_args([str(tmp_path / "m.json"), "-o", str(tmp_path / "t.json")])) == 0
+    configure(parser)
+    assert run(parser.parse_args([str(tmp_path / "m.json"), "-o", str(tmp_path / "t.json")])) == 0
     assert "bank 2 rows" in capsys.readouterr().out and read_table(tmp_path / "t.json").n_banks == 2

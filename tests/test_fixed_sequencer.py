@@ -12,7 +12,7 @@ from host_tools.vectors.builders import make_model
 from host_tools import runlog as rl
 from host_tools.quantize import quantize
 from host_tools.reversal import combine
-from host_tools.sim import mode_sequence
+from host_tools.sim_physics import mode_sequence
 
 ZERO = np.zeros(17)
 

@@ -527,19 +527,20 @@ def test_host_refuses_bad_tables_before_sending(run, tmp_path):
     d = json.loads(good_json.read_text())
     d["words"][T.FIELD_INDEX["m_0"]] = "0x7fffffff"                   # hand-edited: CRC no longer matches
     bad_json.write_text(json.dumps(d))
+    from host_tools.cli import upload as upload_cmd
     parser = argparse.ArgumentParser(prog="hdrg upload")
-    SL.configure_cli(parser)
+    upload_cmd.configure(parser)
     with PtyDevice(log, t1, speed=200.0) as pd:
         link = SL.HostLink(pd.port)
         with pytest.raises(T.TableError, match="refused before sending"):
             SL.upload(link, overflow)
         args = parser.parse_args(["--port", pd.name, str(bad_json)])
         with pytest.raises(T.TableError, match="refused before sending.*CRC-32 mismatch"):
-            SL.run_cli(args)
+            upload_cmd.run(args)
         time.sleep(0.1)
         assert pd.dev.stats.requests == 0 and pd.dev.table.crc == t1.crc     # nothing was sent
         args = parser.parse_args(["--port", pd.name, str(good_json)])
-        assert SL.run_cli(args) == 0
+        assert upload_cmd.run(args) == 0
         assert pd.dev.table.crc == t2.crc == q2.table.crc
 
 
@@ -616,9 +617,9 @@ def test_device_on_loop_url_and_capture_from_loop_url(run, tmp_path):
 
 def test_cli_device_on_pty_capture_and_ctrl_c(tmp_path):
     code = ("import argparse, sys\n"
-            "from host_tools.link import device\n"
-            "p = argparse.ArgumentParser(prog='hdrg device'); device.configure_cli(p)\n"
-            "sys.exit(device.run_cli(p.parse_args(sys.argv[1:])))\n")
+            "from host_tools.cli import device\n"
+            "p = argparse.ArgumentParser(prog='hdrg device'); device.configure(p)\n"
+            "sys.exit(device.run(p.parse_args(sys.argv[1:])))\n")
     proc = subprocess.Popen([sys.executable, "-c", code, "--pty", "--scenario", "static", "--duration", "600",
                              "--speed", "0", "--name", "cli-gyro"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -629,11 +630,12 @@ def test_cli_device_on_pty_capture_and_ctrl_c(tmp_path):
         first = proc.stdout.readline()
         assert first.startswith("hdrg device: virtual gyroscope on /dev/"), first + proc.stderr.read()
         name = first.split(" on ", 1)[1].strip()
+        from host_tools.cli import capture as capture_cmd
         parser = argparse.ArgumentParser(prog="hdrg capture")
-        SL.configure_cli(parser)
+        capture_cmd.configure(parser)
         args = parser.parse_args(["--port", name, "-o", str(tmp_path / "cli.csv"), "--duration", "200",
                                   "--idle-timeout", "20"])
-        assert SL.run_cli(args) == 0
+        assert capture_cmd.run(args) == 0
         cap = runlog.read(tmp_path / "cli.csv")
         assert len(cap) == 200 and cap.metadata["device"] == "cli-gyro"
         proc.send_signal(signal.SIGINT)

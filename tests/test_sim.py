@@ -7,7 +7,7 @@ import allantools
 import numpy as np
 import pytest
 
-from host_tools import runlog, sim
+from host_tools import runlog, sim, sim_params, sim_physics
 from host_tools.cli import main
 
 COLUMNS = ["t_s", "freq_hz", "rate_dph", "mode", "temp_c", "aux_vdd"]
@@ -135,7 +135,7 @@ def test_effect_switch_channels(name, column):
         np.testing.assert_allclose(off["freq_hz"], tr_off["freq_hz"], rtol=0, atol=0)
         assert np.max(np.abs(full["freq_hz"] - off["freq_hz"])) < 1e-3  # 0.1 mHz noise, 0.36 uHz LSB
     if name == "pll_quant":
-        lsb = sim.PllQuant().lsb_hz
+        lsb = sim_params.PllQuant().lsb_hz
         q = full["freq_hz"] / lsb
         assert np.max(np.abs(q - np.round(q))) < 1e-3
     if name == "temp_sensor":
@@ -208,7 +208,7 @@ def test_lag_exact_for_ramp():
     dt, tau = 1.0, 50.0
     t = np.arange(0, 1000.0, dt)
     u = 0.1 * t
-    y = sim.lag(u, tau, dt)
+    y = sim_physics.lag(u, tau, dt)
     exact = 0.1 * (t - tau * (1.0 - np.exp(-t / tau)))
     np.testing.assert_allclose(y, exact, atol=1e-9)
 
@@ -230,7 +230,7 @@ def test_frequency_law_and_rate_resolution():
 
 def test_mode_sequence_paper_and_custom():
     t = np.arange(0, 600.0)
-    m = sim.mode_sequence(t, True, 30.0, 120.0)
+    m = sim_physics.mode_sequence(t, True, 30.0, 120.0)
     expect = np.concatenate([np.full(30, 3), np.full(120, 1), np.full(30, 3), np.full(120, 2)])
     np.testing.assert_array_equal(m, np.tile(expect, 2))
     log = sim.simulate("static", duration_s=260, reversal=True, exchange_s=10, dwell_s=50, sample_rate_hz=2)
@@ -273,7 +273,7 @@ def test_allan_deviation_of_static_run():
     n = 200_000
     # the damping-axis wander (a Gauss-Markov bias, cancelled by mode reversal) is not a noise term of the model
     log = sim.simulate("static", seed=3, duration_s=n, off=("damping_wander",))
-    arw, bi, rrw = sim.Arw().arw_deg_per_sqrt_h, sim.BiasInstability().bi_dph, sim.Rrw().rrw_dph_per_sqrt_h
+    arw, bi, rrw = sim_params.Arw().arw_deg_per_sqrt_h, sim_params.BiasInstability().bi_dph, sim_params.Rrw().rrw_dph_per_sqrt_h
     taus, adev, _, _ = allantools.oadev(log.rate_dph, rate=1.0, data_type="freq", taus="octave")
     keep = taus <= n / 12
     taus, adev = taus[keep], adev[keep]

@@ -323,10 +323,11 @@ def test_check_impl_reports_a_program_that_answers_nothing(manifest):
 @needs_gcc
 def test_cli(capsys, broken_exe):
     parser = argparse.ArgumentParser()
-    V.configure_cli(parser)
-    assert V.run_cli(parser.parse_args(["verify", str(VECTORS), "--sets", "primitives,evaluator"])) == 0
+    from host_tools.cli import vectors as vectors_cmd
+    vectors_cmd.configure(parser)
+    assert vectors_cmd.run(parser.parse_args(["verify", str(VECTORS), "--sets", "primitives,evaluator"])) == 0
     assert "vectors OK" in capsys.readouterr().out
-    assert V.run_cli(parser.parse_args(["check-impl", "--cmd", str(broken_exe), str(VECTORS),
+    assert vectors_cmd.run(parser.parse_args(["check-impl", "--cmd", str(broken_exe), str(VECTORS),
                                         "--sets", "evaluator"])) == 1
     out = capsys.readouterr().out
     assert "FAIL:" in out and "first mismatch" in out and "set evaluator, row " in out

@@ -9,13 +9,12 @@ those below it (as pyserial separates transport, framing and tools):
 * :mod:`~host_tools.link.capture`: :class:`RunLogWriter` and :func:`capture`;
 * :mod:`~host_tools.link.transport` and :mod:`~host_tools.link.device`: the virtual controller
   (`hdrg device`) on a pty or a pyserial port;
-* :mod:`~host_tools.link.cli`: `hdrg capture` and `hdrg upload`.
+* the commands `hdrg capture`, `hdrg upload` and `hdrg device` are in host_tools.cli.
 
 This package namespace gathers the host-side API of the layers (not the device's).
 """
 from host_tools.link.capture import CAPTURE_COLUMNS, CaptureOutputError, CaptureResult, RunLogWriter, capture, \
     check_output_path
-from host_tools.link.cli import configure_cli, run_cli
 from host_tools.link.codec import CAP_NAMES, CAP_SAMPLES, CAP_TABLE_READ, CAP_TABLE_UPLOAD, CAP_VIRTUAL, R_BAD_LENGTH, \
     R_OK, R_TABLE_CRC, R_TABLE_FORMAT, R_TABLE_MODE, R_TABLE_RANGE, R_UNKNOWN_TYPE, R_UNSUPPORTED, R_VERSION, \
     REASONS, SAMPLE, SAMPLE_FIELDS, ST_RUN_ENDED, ST_STREAMING, DeviceInfo, Reply, pack_sample, table_mode_problem, \

@@ -36,9 +36,7 @@ wait is bounded, so :meth:`VirtualDevice.stop` always returns.
 """
 from __future__ import annotations
 
-import argparse
 import os
-import sys
 import threading
 import time
 from dataclasses import dataclass, field
@@ -396,58 +394,15 @@ def decode_benchmark(n_frames: int = 50000) -> dict:
     return {"frames": got, "seconds": dt, "frames_per_s": got / dt}
 
 
-# -- CLI ----------------------------------------------------------------------------------------------------
-
-def configure_cli(parser: argparse.ArgumentParser) -> None:
-    where = parser.add_mutually_exclusive_group(required=True)
-    where.add_argument("--pty", action="store_true", help="serve on a new pseudo-terminal (prints its name)")
-    where.add_argument("--port", help="serve on a serial port or pyserial URL (loop://, /dev/ttyUSB1, ...)")
-    parser.add_argument("--baud", type=int, default=115200, help="baud rate with --port (default 115200)")
-    parser.add_argument("--scenario", default="paper-mr-cycle-4dpm",
-                        help="simulator scenario (hdrg simulate --list; default paper-mr-cycle-4dpm)")
-    parser.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
-    parser.add_argument("--duration", type=float, default=None, metavar="S", help="run length [s] (default: the scenario's)")
-    parser.add_argument("--rate", type=float, default=1.0, metavar="HZ", help="sample rate [Hz] (default 1)")
-    parser.add_argument("--speed", type=float, default=1.0, metavar="X",
-                        help="X times real time (default 1; 0: as fast as the link takes frames)")
-    parser.add_argument("--table", metavar="FILE", help="initial coefficient table (table.json, .bin, .memh); "
-                                                        "default: the run's identity table (coefficients 0)")
-    parser.add_argument("--name", default=None, help="device name reported in INFO")
-    parser.add_argument("--exit-at-end", action="store_true", help="exit when the simulated run has been sent")
-
-
-def run_cli(args) -> int:
-    from host_tools.quantize import read_table
-
-    table = read_table(args.table) if args.table else None
-    link = None
-    if args.port:
-        import serial
-        try:
-            link = PortLink(serial.serial_for_url(args.port, baudrate=args.baud, timeout=0, write_timeout=1.0))
-        except serial.SerialException as exc:
-            print(f"hdrg device: error: cannot open {args.port}: {exc}", file=sys.stderr)
-            return 2
-    kw = {} if args.name is None else {"name": args.name}
-    dev, name, log = make_device(args.scenario, args.seed, args.duration, args.rate, table, link,
-                                 speed=args.speed, **kw)
-    speed = "as fast as the link takes" if args.speed == 0 else f"{args.speed:g}x real time"
-    print(f"hdrg device: virtual gyroscope on {name or args.port}", flush=True)
-    print(f"  {dev.name}: {len(log)} samples at {dev.run.fs_hz:g} Hz, {speed}; table CRC-32 0x{dev.table.crc:08x}; "
-          f"protocol {FR.PROTO_MAJOR}.{FR.PROTO_MINOR}; Ctrl-C stops", flush=True)
+def serve(dev: VirtualDevice, exit_at_end: bool = False, poll_s: float = 0.1) -> None:
+    """Run ``dev`` (started here) until its link closes, Ctrl-C, or - with ``exit_at_end`` - the
+    end of its simulated run; then unplug it.  ``poll_s``: how often the state is looked at [s].
+    Returns nothing; ``dev.stats``, ``dev.closed_reason`` and ``dev.error`` tell what happened."""
     dev.start()
     try:
-        while dev.alive and not (args.exit_at_end and dev.ended):
-            time.sleep(0.1)
+        while dev.alive and not (exit_at_end and dev.ended):
+            time.sleep(poll_s)
     except KeyboardInterrupt:
         pass
     finally:
         dev.unplug()
-    s = dev.stats
-    print(f"hdrg device: sent {s.samples_sent} samples ({s.frames_dropped} frames dropped, link not ready); "
-          f"uploads accepted {s.uploads_accepted}, refused {s.uploads_refused}"
-          + (f"; link closed: {dev.closed_reason}" if dev.closed_reason else ""))
-    if dev.error is not None:
-        print(f"hdrg device: error: {dev.error!r}", file=sys.stderr)
-        return 1
-    return 0

@@ -3,7 +3,7 @@ device's frames with sequence accounting (:class:`HostLink`), and upload a coeff
 ACK/NACK, retries and read-back (:func:`upload`).
 
 Layering: host_tools.link.frame (bytes <-> frames) and host_tools.link.codec (payloads) below;
-host_tools.link.capture and the CLIs (host_tools.link.cli) above.
+host_tools.link.capture and the commands (host_tools.cli.capture, host_tools.cli.upload) above.
 """
 from __future__ import annotations
 

@@ -48,7 +48,7 @@ Layout (CMSIS-DSP style: generators, pattern files and the runner apart): ``spec
 versions), ``files`` (file formats + manifest), one case generator per set (``primitives``,
 ``evaluator``, ``sequencer``, ``e2e``, ``aux``; model/stream builders in ``builders``),
 ``pipeline`` (recomputing the pipeline sets through the kernel and the reference), ``build``
-(generate/verify), ``runner`` (``check-impl``), ``cli``.  The names below are re-exported here.
+(generate/verify), ``runner`` (``check-impl``); the command is host_tools.cli.vectors.  The names below are re-exported here.
 """
 from host_tools.vectors.spec import (AUX_FIELDS, AUX_IN_FIELDS, AUX_INPUTS, DEFAULT_DIR, E2E_FIELDS, EVAL_EXTRA,  # noqa: F401
                                      EVAL_FIELDS, EVAL_INPUTS, FORMAT_VERSION, GENERATOR_VERSION, IN_FIELDS,
@@ -59,4 +59,3 @@ from host_tools.vectors.files import (VectorSet, dump_manifest, make_manifest, p
                                       read_manifest, render_all, render_csv, render_mem, source_fingerprint)
 from host_tools.vectors.build import build_sets, generate, load_set, staleness, verify  # noqa: F401
 from host_tools.vectors.runner import check_impl  # noqa: F401
-from host_tools.vectors.cli import configure_cli, run_cli  # noqa: F401

@@ -1,14 +1,7 @@
-"""``python -m host_tools.vectors ACTION ...``: the same as ``hdrg vectors``."""
-import argparse
+"""``python -m host_tools.vectors ACTION ...``: the same as ``hdrg vectors ACTION ...`` (the
+command, its options and its error boundary are host_tools.cli's)."""
 import sys
 
-from host_tools.vectors import __doc__ as _doc
-from host_tools.vectors.cli import configure_cli, run_cli
+from host_tools.cli import main
 
-_parser = argparse.ArgumentParser(prog="hdrg vectors", description=_doc.split("\n\n")[0])
-configure_cli(_parser)
-try:
-    sys.exit(run_cli(_parser.parse_args()))
-except ValueError as _exc:
-    print(f"hdrg vectors: error: {_exc}", file=sys.stderr)
-    sys.exit(2)
+sys.exit(main(["vectors", *sys.argv[1:]]))

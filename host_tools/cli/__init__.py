@@ -1,7 +1,9 @@
-"""`hdrg`: the command-line entry point.
+"""`hdrg`: the command-line entry point, the registry of commands and the error boundary.
 
-Each subcommand lives in the module of its stage; that module defines ``configure_cli(parser)``
-(adds its arguments) and ``run_cli(args) -> int`` (exit code).  Errors that the user can fix
+The commands layer: each subcommand is one small module of this package (``host_tools.cli.fit``,
+...) that defines ``configure(parser)`` (adds its arguments) and ``run(args) -> int`` (exit code);
+it parses and checks the arguments and calls plain functions of the stage modules, which hold no
+argparse.  Shared option groups are in ``host_tools.cli.options``.  Errors that the user can fix
 (bad input files, refused models: every ValueError subclass of the project) and every OSError
 (missing, unreadable or directory paths, a full disk) are printed as one line
 ``hdrg <cmd>: error: ...`` with exit code 2 and no traceback; ``hdrg --debug CMD ...`` shows the
@@ -21,22 +23,22 @@ import warnings
 
 # command -> (module, one-line help); the order is the order of the data flow
 COMMANDS = {
-    "simulate": ("host_tools.sim", "generate a simulated run log (virtual gyroscope in a chamber)"),
-    "metrics": ("host_tools.metrics", "the paper's figures of merit of run logs or compensated outputs"),
-    "fit": ("host_tools.fit", "fit the 17-coefficient bias model to run logs"),
-    "diagnose": ("host_tools.diagnose", "trace a model's residual to a missing effect, add it through k7, report before/after"),
-    "quantize": ("host_tools.quantize", "quantize a bias model into the fixed-point coefficient table (table.json)"),
-    "export": ("host_tools.export", "export a coefficient table as a C header, table.json and a $readmemh memory file"),
-    "compensate": ("host_tools.compensate", "apply a bias model to a run log (float golden or fixed point)"),
-    "report": ("host_tools.report", "before/after tables and figures of a model on run logs"),
-    "paper": ("host_tools.paper", "reproduce every experiment of Chen et al. 2022 on the simulator"),
-    "vectors": ("host_tools.vectors", "deterministic test vectors: generate, verify, check an external implementation"),
-    "capture": ("host_tools.link.cli", "record a run log from the gyroscope's controller over a serial port"),
-    "upload": ("host_tools.link.cli", "load a coefficient table into the controller (ack, read back, compare)"),
-    "device": ("host_tools.link.device", "virtual gyroscope controller on a pseudo-terminal or a pyserial URL"),
-    "demo": ("host_tools.demo", "simulate -> fit -> compensate -> report on embedded defaults"),
-    "bench": ("host_tools.bench", "measurement benchmarks: accuracy on random foreign devices, the closed loop"),
-    "cost": ("host_tools.cost", "build and run the pipeline on Cortex-M4/M7 (QEMU), iCE40/7-series (Yosys) or the host: cycles, size"),
+    "simulate": ("host_tools.cli.simulate", "generate a simulated run log (virtual gyroscope in a chamber)"),
+    "metrics": ("host_tools.cli.metrics", "the paper's figures of merit of run logs or compensated outputs"),
+    "fit": ("host_tools.cli.fit", "fit the 17-coefficient bias model to run logs"),
+    "diagnose": ("host_tools.cli.diagnose", "trace a model's residual to a missing effect, add it through k7, report before/after"),
+    "quantize": ("host_tools.cli.quantize", "quantize a bias model into the fixed-point coefficient table (table.json)"),
+    "export": ("host_tools.cli.export", "export a coefficient table as a C header, table.json and a $readmemh memory file"),
+    "compensate": ("host_tools.cli.compensate", "apply a bias model to a run log (float golden or fixed point)"),
+    "report": ("host_tools.cli.report", "before/after tables and figures of a model on run logs"),
+    "paper": ("host_tools.cli.paper", "reproduce every experiment of Chen et al. 2022 on the simulator"),
+    "vectors": ("host_tools.cli.vectors", "deterministic test vectors: generate, verify, check an external implementation"),
+    "capture": ("host_tools.cli.capture", "record a run log from the gyroscope's controller over a serial port"),
+    "upload": ("host_tools.cli.upload", "load a coefficient table into the controller (ack, read back, compare)"),
+    "device": ("host_tools.cli.device", "virtual gyroscope controller on a pseudo-terminal or a pyserial URL"),
+    "demo": ("host_tools.cli.demo", "simulate -> fit -> compensate -> report on embedded defaults"),
+    "bench": ("host_tools.cli.bench", "measurement benchmarks: accuracy on random foreign devices, the closed loop"),
+    "cost": ("host_tools.cli.cost", "build and run the pipeline on Cortex-M4/M7 (QEMU), iCE40/7-series (Yosys) or the host: cycles, size"),
 }
 
 
@@ -71,10 +73,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
     for name, (module, helptext) in _available().items():
         mod = importlib.import_module(module)
-        if not hasattr(mod, "configure_cli"):
-            continue
         p = sub.add_parser(name, help=helptext, description=helptext[0].upper() + helptext[1:] + ".")
-        mod.configure_cli(p)
+        mod.configure(p)
         p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                        help="show the Python traceback of an error")
         p.set_defaults(_module=module)
@@ -117,7 +117,7 @@ def _run(args, mod) -> int:
             warnings.simplefilter("default")
             warnings.showwarning = lambda message, category, *a, **k: print(
                 f"hdrg {args.command}: warning: {message}", file=sys.stderr)
-            rc = int(mod.run_cli(args) or 0)
+            rc = int(mod.run(args) or 0)
         sys.stdout.flush()      # a closed pipe shows here, not at interpreter exit
         return rc
     except BrokenPipeError:

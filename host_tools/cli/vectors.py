@@ -1,17 +1,13 @@
-"""``hdrg vectors generate|verify|check-impl``: argument parsing over build and runner.
-"""
+"""`hdrg vectors generate|verify|check-impl` (also ``python -m host_tools.vectors ...``): argument
+parsing over host_tools.vectors.build and host_tools.vectors.runner."""
 from __future__ import annotations
 
 import argparse
 
 from host_tools.vectors.spec import FORMAT_VERSION, GENERATOR_VERSION, O_NAMES
-from host_tools.vectors.build import generate, verify
-from host_tools.vectors.runner import check_impl
 
 
-# -- CLI ----------------------------------------------------------------------------------------------
-
-def configure_cli(parser: argparse.ArgumentParser) -> None:
+def configure(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", metavar="ACTION")
     sub.required = True
     g = sub.add_parser("generate", help="generate the vectors into a directory")
@@ -34,7 +30,10 @@ def _names(text):
     return None if text is None else [s.strip() for s in text.split(",") if s.strip()]
 
 
-def run_cli(args) -> int:
+def run(args) -> int:
+    from host_tools.vectors.build import generate, verify
+    from host_tools.vectors.runner import check_impl
+
     if args.action == "generate":
         m = generate(args.output, force=args.force)
         total = sum(f["bytes"] for f in m["files"].values())

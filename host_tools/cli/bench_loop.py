@@ -1,0 +1,90 @@
+"""`hdrg bench loop`: the closed loop on random foreign runs with undeclared effects (host_tools.bench_loop)."""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--runs", type=int, default=120, help="runs (a third clean; default 120)")
+    parser.add_argument("--seed", type=int, default=0, help="benchmark seed (devices S*100000 + i)")
+    parser.add_argument("--shard", default="0/1", metavar="K/M", help="only runs i with i %% M == K (parallel parts)")
+    parser.add_argument("--merge", nargs="+", default=None, metavar="JSON",
+                        help="instead: summarize the records of these --json files together")
+    parser.add_argument("--duration", type=float, default=None, help="cut every run to this many seconds")
+    parser.add_argument("--json", default=None, metavar="FILE", help="write records and summary to FILE")
+    parser.add_argument("--hdrg-clean", action="store_true",
+                        help="instead: false discovery on 20 clean runs of hdrg's own simulator (FTR/MR, 1 and 2 cycles)")
+    parser.add_argument("--measured", default=None, metavar="DIR",
+                        help="instead: run the loop on the measured logs (held out by leg and by blocks), "
+                             "figures and measured.json into DIR")
+
+
+def run(args) -> int:
+    from host_tools.bench_loop import hdrg_clean_study, measured_study, run_benchmark, summarize
+
+    if args.hdrg_clean:
+        rows = hdrg_clean_study(progress=lambda m: print(m, file=sys.stderr, flush=True))
+        fd = sum(r["verdict"] == "effect found" for r in rows)
+        st = sum(r["verdict"] == "model structure improved" for r in rows)
+        print(f"hdrg-sim clean runs: {len(rows)}, 'effect found' {fd} ({100 * fd / len(rows):.1f} %), "
+              f"'model structure improved' {st}")
+        if args.json:
+            with open(args.json, "w", encoding="utf-8") as fh:
+                json.dump(rows, fh, indent=1)
+        return 0
+    if args.measured:
+        res = measured_study(args.measured, progress=lambda m: print(m, file=sys.stderr, flush=True))
+        with open(os.path.join(args.measured, "measured.json"), "w", encoding="utf-8") as fh:
+            json.dump(res, fh, indent=1, default=float)
+            fh.write("\n")
+        for key, r in res.items():
+            b, f = r["base"], r["final"]
+            print(f"{key:24s} {r['verdict']:30s} held-out std 1 s {b['std_dph']:.4g} -> {f['std_dph']:.4g}, "
+                  f"100 s {b['std100_dph'] if b['std100_dph'] is None else round(b['std100_dph'], 3)} -> "
+                  f"{f['std100_dph'] if f['std100_dph'] is None else round(f['std100_dph'], 3)} deg/h; {r['detail']}")
+        return 0
+    if args.merge:
+        records = []
+        for path in args.merge:
+            with open(path, encoding="utf-8") as fh:
+                records += json.load(fh)["records"]
+        res = {"summary": summarize(sorted(records, key=lambda r: r["i"])), "records": records}
+    else:
+        if args.runs < 1:
+            raise ValueError("--runs must be >= 1")
+        k, m = (int(x) for x in args.shard.split("/"))
+        if not 0 <= k < m:
+            raise ValueError(f"--shard K/M needs 0 <= K < M, not {args.shard}")
+        res = run_benchmark(args.runs, args.seed, args.duration, shard=(k, m), json_path=args.json,
+                            progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+    s = res["summary"]
+    print(f"hdrg bench loop: {s['runs']} foreign runs (seed {args.seed}), {s['effect_runs']} with an undeclared effect")
+    print(_line("  clean runs", {"k": s["runs"] - s["effect_runs"], "n": s["runs"], "rate": None}))
+    print(_line("detection (ratio >= 2)", s["detection"]))
+    for kind, f in s["detection_per_kind"].items():
+        print(_line(f"  {kind}", f))
+    print(_line("detection, effect or structure", s["detection_or_structure"]))
+    for kind, f in s["detection_or_structure_per_kind"].items():
+        print(_line(f"  {kind}", f))
+    print(_line("false discovery (clean)", s["false_discovery"]))
+    print(_line("  FTR clean", s["false_discovery_ftr"]))
+    print(_line("  MR control", s["mr_control"]))
+    print(f"  clean runs with 'model structure improved' (rate estimator, lag block, board_temp, combiner): {s['structural_only']}")
+    print(f"  clean runs with 'effect found' that do NOT improve an independent third run: "
+          f"{s['clean_found_not_generalizing']}; their third-run gains (base/final): {s['clean_found_third_run_gain']}")
+    print(f"  'effect found' runs worse on the third run: {s['found_third_run_worse']}")
+    print(f"  confirmed steps {s['confirmed_steps']}, held-out-worse confirmed {s['worse_confirmed']}, "
+          f"'effect found' without a held-out drop {s['found_without_drop']}, never worse: {s['never_worse']}")
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as fh:
+            json.dump(res, fh, indent=1)
+            fh.write("\n")
+    return 0
+
+
+def _line(name, f):
+    rate = "n/a" if f["rate"] is None else f"{100 * f['rate']:.1f} %"
+    return f"  {name:<28s} {f['k']:>4d} / {f['n']:<4d} {rate}"

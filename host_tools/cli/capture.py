@@ -1,0 +1,56 @@
+"""`hdrg capture`: record a run log from the controller over a serial port
+(host_tools.link.capture)."""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from host_tools.cli.options import add_port_options
+from host_tools.link.capture import CaptureResult, capture, check_output_path
+from host_tools.link.host import open_port
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    add_port_options(parser)
+    parser.add_argument("-o", "--output", required=True, help="run log (CSV) to write")
+    parser.add_argument("--duration", type=float, default=None, metavar="S",
+                        help="stop after S seconds of device time (default: until the device stops or Ctrl-C)")
+    parser.add_argument("--idle-timeout", type=float, default=30.0, metavar="S",
+                        help="stop when no frame arrives for S seconds (default 30; 0: never)")
+    parser.add_argument("--flush-every", type=int, default=256, metavar="N", help="flush every N rows (and every second)")
+    parser.add_argument("--quiet", action="store_true", help="no live progress line")
+
+
+class _Progress:
+    def __init__(self, stream=sys.stderr, interval_s: float = 0.25):
+        self.stream, self.interval_s, self._last = stream, interval_s, 0.0
+
+    def __call__(self, res: CaptureResult) -> None:
+        now = time.monotonic()
+        if now - self._last >= self.interval_s:
+            self._last = now
+            self.stream.write("\r" + res.progress_line() + "   ")
+            self.stream.flush()
+
+
+def run(args) -> int:
+    import serial
+
+    check_output_path(args.output)
+    try:
+        port = open_port(args.port, args.baud)
+    except serial.SerialException as exc:
+        print(f"hdrg capture: error: cannot open {args.port}: {exc}", file=sys.stderr)
+        return 2
+    idle = None if not args.idle_timeout or args.idle_timeout <= 0 else args.idle_timeout
+    prog = None if args.quiet else _Progress()
+    try:
+        res = capture(port, args.output, duration_s=args.duration, idle_timeout_s=idle,
+                      flush_every=args.flush_every, progress=prog)
+    finally:
+        port.close()
+    if prog is not None:
+        sys.stderr.write("\n")
+    print(res.summary())
+    return 0 if res.written else 1

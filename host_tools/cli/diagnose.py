@@ -1,0 +1,69 @@
+"""`hdrg diagnose`: trace a model's residual to a missing effect and add it (host_tools.diagnose)."""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from host_tools.cli.options import add_model_options
+from host_tools.diagnose import CV_BLOCKS, CV_FOLDS, G_MIN, MAX_ITER, N_SURROGATES, _fmt, diagnose
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("runs", metavar="RUN", nargs="+", help="training run logs (CSV or .npz)")
+    parser.add_argument("--holdout", nargs="+", default=[], metavar="RUN",
+                        help="held-out run logs: the errors before/after are reported on them")
+    parser.add_argument("--out", required=True, help="output directory (diagnose.md, diagnose.json, model.json, PNG)")
+    parser.add_argument("--json", default=None, metavar="FILE", help="also write the JSON report to FILE")
+    add_model_options(parser, "the starting model")
+    parser.add_argument("--max-iter", type=int, default=MAX_ITER, help="most effects to add (default 3)")
+    parser.add_argument("--surrogates", type=int, default=N_SURROGATES,
+                        help=f"surrogate residuals for the significance threshold (default {N_SURROGATES})")
+    parser.add_argument("--g-min", type=float, default=G_MIN, help=f"minimum CV gain (default {G_MIN})")
+    parser.add_argument("--cv-blocks", type=int, default=CV_BLOCKS, help="single run: contiguous CV blocks")
+    parser.add_argument("--cv-folds", type=int, default=CV_FOLDS, help="single run: folds the blocks are dealt into")
+    parser.add_argument("--seed", type=int, default=0, help="random seed of the surrogates")
+    parser.add_argument("--no-plots", action="store_true", help="no PNG figures")
+
+
+def run(args) -> int:
+    from host_tools import runlog as rl
+    from host_tools.atomic import atomic_open, refuse_overwrite
+    from host_tools.checks import check_fit_inputs
+
+    refuse_overwrite([args.json] + [os.path.join(args.out, f) for f in ("model.json", "diagnose.json", "diagnose.md")],
+                     list(args.runs) + list(args.holdout))
+    train = [rl.read(p) for p in args.runs]
+    hold = [rl.read(p) for p in args.holdout]
+    check_fit_inputs(train + hold, args.proxy)
+    print(f"hdrg diagnose: {len(train)} training run(s), {len(hold)} held-out; fitting and tracing the residual "
+          f"(up to {args.max_iter} iteration(s), {args.surrogates} surrogates each; this takes a while) ...",
+          file=sys.stderr, flush=True)
+    if args.max_iter < 0 or args.surrogates < 0:
+        raise ValueError("--max-iter and --surrogates must be >= 0")
+    report, model = diagnose(train, hold, proxy=args.proxy, rate_estimator=args.rate_estimator,
+                             rate_n=args.rate_n, rate_shift=args.rate_shift, terms=args.terms,
+                             combiner=args.combiner, order=args.order, settle_s=args.settle, proxy_range=args.proxy_range,
+                             rate_range=args.rate_range, max_iter=args.max_iter, n_surrogates=args.surrogates,
+                             g_min=args.g_min, cv_blocks=args.cv_blocks, cv_folds=args.cv_folds,
+                             seed=args.seed, out_dir=args.out, plots=not args.no_plots,
+                             progress=lambda msg: print(f"hdrg diagnose: {msg}", file=sys.stderr, flush=True))
+    if args.json:
+        with open(os.path.join(args.out, "diagnose.json"), encoding="utf-8") as src, \
+                atomic_open(args.json, "w", encoding="utf-8") as dst:
+            dst.write(src.read())
+    on = "held-out" if hold else "training"
+    base = report["baseline"][report["evaluated_on"]]
+    print(f"hdrg diagnose: {report['verdict']} ({on} runs; std 1 s / std 100 s in deg/h)")
+    print(f"  base model: {_fmt(base['std_dph'])} / {_fmt(base['std100_dph'])}")
+    for k, it in enumerate(report["iterations"], 1):
+        params = ", ".join(f"{a}={_fmt(b) if isinstance(b, float) else b}" for a, b in it["params"].items())
+        print(f"  {k}. {it['effect']} ({params}): {_fmt(it['after']['std_dph'])} / {_fmt(it['after']['std100_dph'])}"
+              f"  [CV gain {it['cv_gain']:.3f} >= {it['threshold']:.3f}; {it['status']}]")
+    print(f"  {report['verdict_detail']}")
+    for a in (report.get("artifacts") or {}).get("lines", []):
+        print(f"  line at {a['period_s']:.4g} s ({a['at']}): {a['cause']}; fix: {a['structural_fix']}")
+    if report.get("stopped"):
+        print(f"  stopped: {report['stopped']['reason']}")
+    print(f"written: {os.path.join(args.out, 'diagnose.md')}, diagnose.json, model.json")
+    return 0

@@ -1,0 +1,30 @@
+"""`hdrg export`: a coefficient table as C header, table.json and $readmemh file (host_tools.export)."""
+from __future__ import annotations
+
+import argparse
+import os
+
+from host_tools.export import DEFAULT_NAME, EXTENSIONS, FORMATS, LAYOUT_VERSION, export, load
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("table", metavar="TABLE", help="table.json (hdrg quantize), .bin or .memh")
+    parser.add_argument("--format", choices=FORMATS + ("all",), default="all",
+                        help="c: C99 header; json: table.json with the float originals; mem: $readmemh "
+                             "words; all (default): the three")
+    parser.add_argument("-o", "--output", required=True, metavar="DIR", help="directory to write into")
+    parser.add_argument("--name", default=DEFAULT_NAME,
+                        help=f"file base name and C symbol (upper-cased) (default {DEFAULT_NAME})")
+
+
+def run(args) -> int:
+    from host_tools.atomic import refuse_overwrite
+
+    formats = FORMATS if args.format == "all" else (args.format,)
+    refuse_overwrite([os.path.join(args.output, args.name + EXTENSIONS[f]) for f in formats], args.table)
+    table, info = load(args.table)
+    paths = export(table, args.output, formats, args.name, info)
+    print(f"{args.table}: layout version {LAYOUT_VERSION}, {len(table.to_words())} words, CRC-32 0x{table.crc:08x}")
+    for fmt, path in paths.items():
+        print(f"  {fmt:4s} {path}")
+    return 0

@@ -1,0 +1,76 @@
+"""`hdrg fit`: fit the 17-coefficient bias model to run logs (host_tools.fit)."""
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from firmware_ref.terms import TERM_NAMES
+from host_tools.cli.options import add_model_options
+from host_tools.fit import MIN_SAMPLES_PER_TERM, UnidentifiableError, fit_auto_rate, fit_logs
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("runs", metavar="RUN", nargs="+", help="training run logs (CSV or .npz)")
+    parser.add_argument("-o", "--output", required=True, help="model JSON to write")
+    add_model_options(parser)
+    parser.add_argument("--drop-unidentifiable", action="store_true",
+                        help="drop terms the data cannot identify (and report them) instead of refusing")
+    parser.add_argument("--cv-blocks", type=int, default=8, help="time blocks for 'auto' on a single run")
+    parser.add_argument("--force", action="store_true",
+                        help=f"fit even with fewer than {MIN_SAMPLES_PER_TERM} valid samples per coefficient")
+
+
+def run(args) -> int:
+    from host_tools import runlog
+    from host_tools.atomic import refuse_overwrite
+    from host_tools.checks import check_fit_inputs
+    from host_tools.compensate import DEFAULT_RATE_SELECTION_MR, fit_config_from_logs
+
+    refuse_overwrite(args.output, args.runs)
+    logs = [runlog.read(p) for p in args.runs]
+    check_fit_inputs(logs, args.proxy)
+    reversal = ({"combiner": args.combiner, "settle_s": args.settle, "order": args.order}
+                if any(log.reversal for log in logs) else None)
+    kw = dict(proxy_kind=args.proxy, proxy_range=args.proxy_range, rate_range=args.rate_range, reversal=reversal)
+    if (args.rate_estimator is None and args.rate_n is None and args.rate_shift is None and reversal is not None
+            and DEFAULT_RATE_SELECTION_MR == "auto"):
+        args.rate_estimator = "auto"   # the default for mode-reversal logs (host_tools.compensate)
+        kw["drop_unidentifiable"] = args.drop_unidentifiable   # (an explicit 'auto' drops them, as before)
+    try:
+        if args.rate_estimator == "auto":
+            model, res = fit_auto_rate(logs, args.terms, cv_blocks=args.cv_blocks, **kw)
+            sel = model.fit["rate_selection"]
+            print(f"rate estimator auto: {sel['chosen']} (" + ", ".join(
+                f"{r['estimator']} {r['cv_rms']:.4g}" if "cv_rms" in r else f"{r['estimator']} failed"
+                for r in sel["candidates"]) + " deg/h cross-validated rms)")
+        else:
+            cfg = fit_config_from_logs(logs, rate_estimator=args.rate_estimator, n=args.rate_n, shift=args.rate_shift, **kw)
+            model, res = fit_logs(logs, cfg, args.terms, drop_unidentifiable=args.drop_unidentifiable,
+                                  cv_blocks=args.cv_blocks)
+    except UnidentifiableError as exc:
+        raise ValueError(str(exc).replace("drop_unidentifiable=True", "--drop-unidentifiable (or --terms auto / "
+                                          "--terms k0,k1,...)")) from None
+    if res.dof <= 0 or not np.all(np.isfinite(res.stderr)):
+        raise ValueError(f"{res.n} valid samples for {len(res.terms)} coefficients: no degrees of freedom left, "
+                         f"the error bars are undefined; record more data or fit fewer terms (--terms)")
+    if res.n < MIN_SAMPLES_PER_TERM * len(res.terms) and not args.force:
+        raise ValueError(f"{res.n} valid samples for {len(res.terms)} coefficients (fewer than "
+                         f"{MIN_SAMPLES_PER_TERM} per coefficient): the fit would follow the noise; record more "
+                         f"data, fit fewer terms (--terms), or pass --force")
+    model.to_json(args.output)
+    print(f"{args.output}: {len(res.terms)} terms {['k%d' % k for k in res.terms]}, n={res.n}, "
+          f"rms={res.rms:.4g} deg/h, cond={res.cond:.3g}")
+    if res.dropped:
+        print(f"dropped as unidentifiable: {['k%d' % k for k in res.dropped]} (collinear: {res.collinear})")
+    weak = model.fit.get("insignificant", [])
+    if weak:
+        print(f"warning: the data do not identify {['k%d' % k for k in weak]} (|coef| < 2 standard errors); "
+              f"they fit noise: consider --terms auto")
+    if res.cv:
+        print(f"cross-validated rms: {res.cv['cv_rms']:.4g} deg/h over {res.cv['groups']} groups")
+    for k in res.terms:
+        print(f"  k{k:<2d} {TERM_NAMES[k]:>9s} = {res.coef[k]: .6g} +- {res.stderr[k]:.2g} deg/h"
+              + ("" if res.coef_mode2 is None else
+                 f"   (mode 2: {res.coef_mode2[k]: .6g} +- {res.stderr_mode2[k]:.2g})"))
+    return 0

@@ -1,0 +1,21 @@
+"""`hdrg paper`: every experiment of Chen et al. 2022 on the simulator (host_tools.paper)."""
+from __future__ import annotations
+
+import argparse
+import json
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", default=None, help="also write the results as JSON to this file")
+
+
+def run(args) -> int:
+    from host_tools.paper import format_results, run_all
+
+    res = run_all()
+    print(format_results(res))
+    if args.json:
+        from host_tools.atomic import atomic_open
+        with atomic_open(args.json, "w") as fh:
+            json.dump(res, fh, indent=1, default=float)
+    return 0
