@@ -643,26 +643,29 @@ def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, 
     return model, res
 
 
-def fit_default(logs, terms=None, *, drop_unidentifiable=None, **config_kw):
+def fit_default(logs, terms=None, *, drop_unidentifiable=None, cv_blocks=8, **config_kw):
     """What `hdrg fit` does without rate flags: mode-reversal logs with
     host_tools.compensate.DEFAULT_RATE_SELECTION_MR 'auto' -> :func:`fit_auto_rate`, else
     :func:`fit_logs` with the default configuration (host_tools.compensate.fit_config_from_logs
     with ``config_kw``).  Then, with host_tools.compensate.DEFAULT_LAG_BLOCK 'auto' and no aux given,
     the lag-state block of the proxy as k7 when cross-validation supports it
     (host_tools.fit_lag.add_lag_block).  ``drop_unidentifiable`` None: each path's own default
-    (auto True, else False).  Returns (model, FitResult)."""
+    (auto True, else False); ``cv_blocks``: the time blocks of cross-validation on a single run.
+    Returns (model, FitResult)."""
     from host_tools.compensate import DEFAULT_LAG_BLOCK, DEFAULT_RATE_SELECTION_MR, fit_config_from_logs
 
     logs = list(logs)
     lag = DEFAULT_LAG_BLOCK == "auto" and config_kw.get("aux") is None
     if DEFAULT_RATE_SELECTION_MR == "auto" and logs and all(log.reversal for log in logs):
-        model, res = fit_auto_rate(logs, terms, drop_unidentifiable=drop_unidentifiable is not False, **config_kw)
+        model, res = fit_auto_rate(logs, terms, drop_unidentifiable=drop_unidentifiable is not False,
+                                   cv_blocks=cv_blocks, **config_kw)
     else:
         model, res = fit_logs(logs, fit_config_from_logs(logs, **config_kw), terms, blocks=True if lag else None,
-                              drop_unidentifiable=bool(drop_unidentifiable))
+                              drop_unidentifiable=bool(drop_unidentifiable), cv_blocks=cv_blocks)
     if lag:
         from host_tools.fit_lag import add_lag_block
-        model, res = add_lag_block(logs, model, res, terms, drop_unidentifiable=drop_unidentifiable is not False)
+        model, res = add_lag_block(logs, model, res, terms, cv_blocks=cv_blocks,
+                                   drop_unidentifiable=drop_unidentifiable is not False)
     return model, res
 
 

@@ -7,7 +7,7 @@ import numpy as np
 
 from firmware_ref.terms import TERM_NAMES
 from host_tools.cli.options import add_model_options
-from host_tools.fit import MIN_SAMPLES_PER_TERM, UnidentifiableError, fit_auto_rate, fit_logs
+from host_tools.fit import MIN_SAMPLES_PER_TERM, UnidentifiableError, fit_auto_rate, fit_default, fit_logs
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -25,7 +25,7 @@ def run(args) -> int:
     from host_tools import runlog
     from host_tools.atomic import refuse_overwrite
     from host_tools.checks import check_fit_inputs
-    from host_tools.compensate import DEFAULT_RATE_SELECTION_MR, fit_config_from_logs
+    from host_tools.compensate import fit_config_from_logs
 
     refuse_overwrite(args.output, args.runs)
     logs = [runlog.read(p) for p in args.runs]
@@ -33,21 +33,30 @@ def run(args) -> int:
     reversal = ({"combiner": args.combiner, "settle_s": args.settle, "order": args.order}
                 if any(log.reversal for log in logs) else None)
     kw = dict(proxy_kind=args.proxy, proxy_range=args.proxy_range, rate_range=args.rate_range, reversal=reversal)
-    if (args.rate_estimator is None and args.rate_n is None and args.rate_shift is None and reversal is not None
-            and DEFAULT_RATE_SELECTION_MR == "auto"):
-        args.rate_estimator = "auto"   # the default for mode-reversal logs (host_tools.compensate)
-        kw["drop_unidentifiable"] = args.drop_unidentifiable   # (an explicit 'auto' drops them, as before)
+    default = args.rate_estimator is None and args.rate_n is None and args.rate_shift is None
     try:
-        if args.rate_estimator == "auto":
+        if default:
+            # what the benchmark picked (host_tools.fit.fit_default): rate auto for mode-reversal logs,
+            # the lag-state block of the proxy when cross-validation supports it
+            model, res = fit_default(logs, args.terms, drop_unidentifiable=args.drop_unidentifiable,
+                                     cv_blocks=args.cv_blocks, **kw)
+        elif args.rate_estimator == "auto":
             model, res = fit_auto_rate(logs, args.terms, cv_blocks=args.cv_blocks, **kw)
-            sel = model.fit["rate_selection"]
-            print(f"rate estimator auto: {sel['chosen']} (" + ", ".join(
-                f"{r['estimator']} {r['cv_rms']:.4g}" if "cv_rms" in r else f"{r['estimator']} failed"
-                for r in sel["candidates"]) + " deg/h cross-validated rms)")
         else:
             cfg = fit_config_from_logs(logs, rate_estimator=args.rate_estimator, n=args.rate_n, shift=args.rate_shift, **kw)
             model, res = fit_logs(logs, cfg, args.terms, drop_unidentifiable=args.drop_unidentifiable,
                                   cv_blocks=args.cv_blocks)
+        sel = model.fit.get("rate_selection")
+        if sel:
+            print(f"rate estimator auto: {sel['chosen']} (" + ", ".join(
+                f"{r['estimator']} {r['cv_rms']:.4g}" if "cv_rms" in r else f"{r['estimator']} failed"
+                for r in sel["candidates"]) + " deg/h cross-validated rms)")
+        lag = model.fit.get("lag_block")
+        if lag:
+            print(f"lag-state block of the proxy: {lag['chosen'] or 'not kept'} (cross-validated rms "
+                  f"{lag['base_cv_rms']:.4g} -> {lag.get('cv_rms', float('nan')):.4g} deg/h; kept when "
+                  f"{100 * lag['margin']:.0f} % lower)" if lag.get("base_cv_rms") is not None else
+                  f"lag-state block of the proxy: not kept ({lag.get('error', 'no cross-validated rms')})")
     except UnidentifiableError as exc:
         raise ValueError(str(exc).replace("drop_unidentifiable=True", "--drop-unidentifiable (or --terms auto / "
                                           "--terms k0,k1,...)")) from None
