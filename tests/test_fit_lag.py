@@ -77,8 +77,8 @@ def test_block_found_on_a_lagged_device_and_holds_out(monkeypatch):
     dev = foreign_device(LAGGED)
     tr = simulate_foreign(dev, 4.0, False, 0, 0, DUR)
     ho = simulate_foreign(dev, 2.0, False, 1, 1, DUR)
-    monkeypatch.setattr(hc, "DEFAULT_LAG_BLOCK", "off")
-    base, _ = fit_default([tr])
+    base, _ = fit_default([tr], lag_block="off")
+    assert base.config.aux.generator == "none" and "lag_block" not in base.fit
     monkeypatch.setattr(hc, "DEFAULT_LAG_BLOCK", "auto")
     model, res = fit_default([tr])
     info = model.fit["lag_block"]
@@ -87,6 +87,11 @@ def test_block_found_on_a_lagged_device_and_holds_out(monkeypatch):
     assert _std_held_out(model, ho) < 0.7 * _std_held_out(base, ho)
     assert model.to_dict()["fit"]["lag_block"]["chosen"] == info["chosen"]
     check_close(ho, model, "lag block, FTR")   # the FTR block (up to two taus) in fixed point too
+
+
+def test_lag_block_option_is_checked():
+    with pytest.raises(ValueError, match="lag_block"):
+        fit_default([simulate_foreign(foreign_device(LAGGED), 4.0, False, 0, 0, 600.0)], lag_block="on")
 
 
 def test_block_not_taken_when_the_proxy_sees_every_bias(monkeypatch):
