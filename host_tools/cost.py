@@ -12,11 +12,13 @@ building and running it (docs/COST.md).
   return site); a sample is the window from the entry of ``hdrg_step_aux`` to the return to the
   driver (callees and libgcc helpers included).  Cycles: a per-instruction model of the Cortex-M4
   TRM (r0p1, table 3-1) over that executed stream (``M4_MODEL`` below; nominal and low/high).
-  Per stage: the same trace of a ``-fno-inline`` build, each instruction attributed to the stage
-  of its function (``STAGES``; primitives and libgcc helpers to the calling stage).
-  Code bytes: per function (``nm``) of the library object; ``code_bytes`` is the per-sample path
-  (functions reachable from ``hdrg_step_aux`` in GCC's call graph, ``-fcallgraph-info=su``, plus
-  the libgcc helpers they call); stack: the worst path of that graph over ``-fstack-usage``.
+  Per stage: the same trace of the -O2 build, each address attributed by its inline chain
+  (``addr2line -i``; the build has ``-g``) to the stage function it enters from hdrg_step_aux
+  (``STAGES``; primitives and library helpers called as functions to the calling stage).
+  Code bytes: ``code_bytes`` is the per-sample path at -Os (functions of the linked ELF reachable
+  from ``hdrg_step_aux``, library helpers included), ``code_bytes_no_aux_gen`` the same of a
+  ``-DHDRG_AUX_GEN=0`` build; per stage from ``nm`` of a ``-fno-inline`` object; stack: the worst
+  path of GCC's call graph (``-fcallgraph-info=su``).
 * ``host``: the same C twin with the host gcc, check-impl, and ns/sample of the driver's ``BENCH``.
 
 Nothing is copied from a table: every figure comes from the build and the run of this call.

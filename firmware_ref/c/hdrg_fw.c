@@ -12,7 +12,7 @@
  *    and int64_t are two's complement by definition, C99 7.18.1.1), its shift is defined, and
  *    ~(~x >> s) = -floor((-x - 1) / 2^s) - 1 = -ceil(-x / 2^s) = floor(x / 2^s).  GCC and Clang
  *    recognize the idiom and emit one arithmetic shift (ASR on Cortex-M, SAR on x86-64; a 64-bit
- *    variable shift is the usual three-register sequence), so portability costs nothing.
+ *    variable shift is the usual 9-instruction sequence on Cortex-M), so portability costs nothing.
  *  - Left shift of a negative value is undefined, so x << k is written x * ((int64_t)1 << k).
  *  - Signed overflow is undefined: every product and sum below is bounded by FORMATS.md
  *    ("Every signal"); the bounds rest on table checks that hdrg_table_parse() enforces (gains,
