@@ -11,8 +11,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from host_tools import vectors as V
-from host_tools.cost import (CostError, HDL, _offsets_file, _run, _tb_result, need, record_positions, resources,
-                             yosys_cells)
+from host_tools.cost import CostError, _run, need
+from host_tools.cost_fpga import HDL, _offsets_file, _tb_result, record_positions, resources, yosys_cells
 
 AUX_SOURCES = (HDL / "tb_aux.v", HDL / "hdrg_aux.v")
 SET = "aux"
