@@ -23,8 +23,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 class _Progress:
-    def __init__(self, stream=sys.stderr, interval_s: float = 0.25):
-        self.stream, self.interval_s, self._last = stream, interval_s, 0.0
+    """The live progress line on ``stream`` (default: sys.stderr as it is when the line is created,
+    not when this module was imported)."""
+
+    def __init__(self, stream=None, interval_s: float = 0.25):
+        self.stream = sys.stderr if stream is None else stream
+        self.interval_s, self._last = interval_s, 0.0
 
     def __call__(self, res: CaptureResult) -> None:
         now = time.monotonic()
