@@ -36,7 +36,7 @@
 // operations (six oscillators; six filtered power-5 input terms: 73); aux_gen 0: 1.
 //   OP_CYCLES = 2 (default): worst case 160 cycles; the aux vector set's tables 6..94 (the fitted
 //     decay + 2 lags of `sim_aux`: 48).  Fmax 14 MHz on an UP5K (docs/COST_AUX.md).
-//   OP_CYCLES = 4 (the add and the shift registered): worst case 322; the set 10..186 (`sim_aux`
+//   OP_CYCLES = 4 (the add and the shift registered): worst case 318; the set 10..186 (`sim_aux`
 //     98); for Fmax (docs/COST_AUX.md).
 // Started together with hdrg_eval_tm (whose k7 operation Z begins 116 cycles after its start),
 // z is ready in time for tables of at most 56 operations (OP_CYCLES 2) or 27 (OP_CYCLES 4).
