@@ -42,7 +42,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from host_tools.compensate import compensate, fit_config_from_logs
-from host_tools.fit import fit_auto_rate, fit_default, fit_logs
+from host_tools.fit import fit_auto_rate, fit_logs
+from host_tools.fit_pipeline import fit_default
 from host_tools.reversal import ReversalConfig, combine
 from host_tools.sim_foreign import ForeignDevice, damping_bias, foreign_device, simulate_foreign
 
@@ -63,7 +64,7 @@ SEED_STRIDE = 100000
 @dataclass(frozen=True)
 class Option:
     """One pipeline option: ``kind`` ftr | mr-pair | mr-trend | rf-none | rf-pair | rf-trend (or
-    ``ftr/default``, ``mr/default``: host_tools.fit.fit_default, i.e. `hdrg fit RUN` without options),
+    ``ftr/default``, ``mr/default``: host_tools.fit_pipeline.fit_default, i.e. `hdrg fit RUN` without options),
     ``est`` a key of ESTIMATORS or 'raw' (no model), ``terms`` 'all' (17 terms) or 'auto'
     (cross-validated term selection of host_tools.fit; name suffix '+auto')."""
 

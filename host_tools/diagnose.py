@@ -100,14 +100,11 @@ nominal sample rate.
 """
 from __future__ import annotations
 
-import os
 from dataclasses import replace
 
 import numpy as np
 
 from firmware_ref.terms import K_AUX
-from host_tools import runlog as rl
-from host_tools.atomic import atomic_open
 from host_tools.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE, CONFIRM_TOL_1S, CONFIRM_TOL_RMS,  # noqa: F401
                                          HELDOUT_METRIC, REPORT_TAUS, STAT_KEYS, _clean, _fmt, _residuals, _score,
                                          _stats_one, _step_metric, confirmed_on_holdout, error_stats, leg_rms,
@@ -119,7 +116,8 @@ from host_tools.diagnose_scan import (CV_BLOCKS, CV_FOLDS, G_MIN, MAX_ITER, N_SU
                                       PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, _Accepted, _config, _explicit_weights,
                                       _poly_terms, _scan, _step_key, kind_of)
 from host_tools.diagnose_structure import _order_step, _settle_step
-from host_tools.fit import fit_default, fit_logs
+from host_tools.fit import fit_logs
+from host_tools.fit_pipeline import fit_default
 from host_tools.model import jsonable
 from host_tools.regressors import AuxConfig
 
@@ -152,11 +150,13 @@ def base_model(train, opts, terms=None):
     """(model, config): the loop's starting model, fitted like ``hdrg fit`` (host_tools.fit.fit_logs;
     ``terms`` None -> compensate.DEFAULT_TERMS; terms the data cannot identify are dropped).  With no
     rate option given, mode-reversal runs get the rate estimator `hdrg fit` chooses by default
-    (host_tools.fit.fit_default: compensate.DEFAULT_RATE_SELECTION_MR), so the loop starts from
-    exactly the model `hdrg fit` writes."""
+    (host_tools.fit_pipeline.fit_default: compensate.DEFAULT_RATE_SELECTION_MR), so the loop starts
+    from the model `hdrg fit` writes WITHOUT its lag-state block (``lag_block='off'``): the loop's
+    k7 is rebuilt from the generators it accepts, and its structure phase offers the lag-state
+    block itself under the same CV and held-out confirmation as every other step."""
     if all(opts.get(k) is None for k in ("rate_estimator", "n", "shift")):
         kw = {k: v for k, v in opts.items() if k not in ("rate_estimator", "n", "shift")}
-        model = fit_default(train, terms, drop_unidentifiable=True, **kw)[0]
+        model = fit_default(train, terms, drop_unidentifiable=True, lag_block="off", **kw)[0]
         return model, model.config
     cfg = _config(train, opts)
     return fit_logs(train, cfg, terms, drop_unidentifiable=True)[0], cfg

@@ -643,33 +643,4 @@ def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, 
     return model, res
 
 
-def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, cv_blocks=8, **config_kw):
-    """What `hdrg fit` does without rate flags: mode-reversal logs with
-    host_tools.compensate.DEFAULT_RATE_SELECTION_MR 'auto' -> :func:`fit_auto_rate`, else
-    :func:`fit_logs` with the default configuration (host_tools.compensate.fit_config_from_logs
-    with ``config_kw``).  Then, with ``lag_block`` 'auto' (None: host_tools.compensate.DEFAULT_LAG_BLOCK;
-    'off' skips it) and no aux given, the lag-state block of the proxy as k7 when cross-validation
-    supports it (host_tools.fit_lag.add_lag_block).  ``drop_unidentifiable`` None: each path's own default
-    (auto True, else False); ``cv_blocks``: the time blocks of cross-validation on a single run.
-    Returns (model, FitResult)."""
-    from host_tools.compensate import DEFAULT_LAG_BLOCK, DEFAULT_RATE_SELECTION_MR, fit_config_from_logs
-
-    logs = list(logs)
-    lag_block = DEFAULT_LAG_BLOCK if lag_block is None else lag_block
-    if lag_block not in ("auto", "off"):
-        raise ValueError(f"lag_block must be 'auto' or 'off', not {lag_block!r}")
-    lag = lag_block == "auto" and config_kw.get("aux") is None
-    if DEFAULT_RATE_SELECTION_MR == "auto" and logs and all(log.reversal for log in logs):
-        model, res = fit_auto_rate(logs, terms, drop_unidentifiable=drop_unidentifiable is not False,
-                                   cv_blocks=cv_blocks, **config_kw)
-    else:
-        model, res = fit_logs(logs, fit_config_from_logs(logs, **config_kw), terms, blocks=True if lag else None,
-                              drop_unidentifiable=bool(drop_unidentifiable), cv_blocks=cv_blocks)
-    if lag:
-        from host_tools.fit_lag import add_lag_block
-        model, res = add_lag_block(logs, model, res, terms, cv_blocks=cv_blocks,
-                                   drop_unidentifiable=drop_unidentifiable is not False)
-    return model, res
-
-
 MIN_SAMPLES_PER_TERM = 10   # `hdrg fit` refuses fewer valid samples per coefficient unless --force

@@ -10,7 +10,8 @@ import pytest
 import host_tools.compensate as hc
 from host_tools import bench_accuracy as ba
 from host_tools import fit_lag as FL
-from host_tools.fit import block_groups, fit_default, fit_logs
+from host_tools.fit import block_groups, fit_logs
+from host_tools.fit_pipeline import fit_default
 from host_tools.regressors import aux_regressor, generator_values, regressor_matrix
 from host_tools.sim_foreign import foreign_device, simulate_foreign
 from test_fixed_aux import check_close

@@ -1,6 +1,6 @@
 # Measurement script of docs/ACCURACY.md "Lag-state block" (not part of the package).
 """Measured FTR data (tests/data): fit on one leg / half, hold out the other; std at 1 s of the
-compensated held-out output [deg/h] of the default fit (host_tools.fit.fit_default) with the
+compensated held-out output [deg/h] of the default fit (host_tools.fit_pipeline.fit_default) with the
 lag-state block off and on (host_tools.compensate.DEFAULT_LAG_BLOCK), and the block chosen.
 Usage: PYTHONPATH=. python docs/lag/measured.py [NAME=VALUE ...]  (host_tools.fit_lag constants)"""
 import os
@@ -15,7 +15,7 @@ import host_tools.compensate as C
 import host_tools.fit_lag as FL
 from host_tools import metrics
 from host_tools import runlog as rl
-from host_tools.fit import fit_default
+from host_tools.fit_pipeline import fit_default
 
 warnings.simplefilter("ignore")
 D = os.path.join(os.path.dirname(__file__), "..", "..", "tests", "data")

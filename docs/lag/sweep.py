@@ -6,7 +6,8 @@ import numpy as np
 import host_tools.compensate as C
 from host_tools import fit_lag as FL
 from host_tools.sim_foreign import foreign_device, simulate_foreign, damping_bias
-from host_tools.fit import fit_default, fit_logs
+from host_tools.fit import fit_logs
+from host_tools.fit_pipeline import fit_default
 from host_tools.compensate import compensate
 from host_tools.bench_accuracy import floor_of
 a, b, outp = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]

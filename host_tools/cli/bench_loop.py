@@ -6,6 +6,8 @@ import json
 import os
 import sys
 
+from host_tools.atomic import atomic_open
+
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--runs", type=int, default=120, help="runs (a third clean; default 120)")
@@ -20,11 +22,24 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--measured", default=None, metavar="DIR",
                         help="instead: run the loop on the measured logs (held out by leg and by blocks), "
                              "figures and measured.json into DIR")
+    parser.add_argument("--calibrate", action="store_true",
+                        help="instead: false discovery and detection on seeds disjoint from the benchmark's "
+                             "(host_tools.bench_loop.calibration_study)")
 
 
 def run(args) -> int:
-    from host_tools.bench_loop import hdrg_clean_study, measured_study, run_benchmark, summarize
+    from host_tools.bench_loop import calibration_study, hdrg_clean_study, measured_study, run_benchmark, summarize
 
+    if args.calibrate:
+        res = calibration_study(progress=lambda m: print(m, file=sys.stderr, flush=True))
+        for part in ("clean", "effect"):
+            print(f"{part}: " + json.dumps({k: v for k, v in res[part].items() if k != "records"}, default=float))
+        hd = res["hdrg_clean"]
+        print(f"hdrg-sim clean runs: {len(hd)}, 'effect found' {sum(r['verdict'] == 'effect found' for r in hd)}")
+        if args.json:
+            with atomic_open(args.json, "w", encoding="utf-8") as fh:
+                json.dump(res, fh, indent=1, default=float)
+        return 0
     if args.hdrg_clean:
         rows = hdrg_clean_study(progress=lambda m: print(m, file=sys.stderr, flush=True))
         fd = sum(r["verdict"] == "effect found" for r in rows)

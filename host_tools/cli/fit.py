@@ -7,7 +7,8 @@ import numpy as np
 
 from firmware_ref.terms import TERM_NAMES
 from host_tools.cli.options import add_model_options
-from host_tools.fit import MIN_SAMPLES_PER_TERM, UnidentifiableError, fit_auto_rate, fit_default, fit_logs
+from host_tools.fit import MIN_SAMPLES_PER_TERM, UnidentifiableError, fit_auto_rate, fit_logs
+from host_tools.fit_pipeline import fit_default
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -36,7 +37,7 @@ def run(args) -> int:
     default = args.rate_estimator is None and args.rate_n is None and args.rate_shift is None
     try:
         if default:
-            # what the benchmark picked (host_tools.fit.fit_default): rate auto for mode-reversal logs,
+            # what the benchmark picked (host_tools.fit_pipeline.fit_default): rate auto for mode-reversal logs,
             # the lag-state block of the proxy when cross-validation supports it
             model, res = fit_default(logs, args.terms, drop_unidentifiable=args.drop_unidentifiable,
                                      cv_blocks=args.cv_blocks, **kw)
