@@ -5,6 +5,9 @@ The testbench takes the record layout as parameters (the LSB position of each fi
 ``$readmemh`` record, manifest "mem_record") and a file of each case's table start word; its inputs
 per sample are the record's F, T, A0..A3, K, RESTART, Z and, from the pipeline's outputs in the
 record, the sample's mode, the rate sum S and the warm-up flag (bit 4); it compares z and flag bit 32.
+:func:`write_directed` writes any tables and streams in the same layout (expected values from
+firmware_ref.compensate.run_reference); :func:`synth_aux` / :func:`pnr_aux` give the resources and
+Fmax (hdrg_aux_pnr.v); ``op_cycles`` selects the module's OP_CYCLES (2 or 4).  docs/COST_AUX.md.
 """
 from __future__ import annotations
 
@@ -64,9 +67,10 @@ def rtl_aux_check(work: Path, simulator: str = "icarus", defines=(), n_vec: int 
     return {**_tb_result(out, f"{simulator} aux"), **_cycles(out)}
 
 
-def lint_aux() -> str:
+def lint_aux(op_cycles: int = 2) -> str:
     """``verilator --lint-only -Wall`` of hdrg_aux.v: its output (empty when clean); CostError if it fails."""
-    return _run([need("verilator"), "--lint-only", "-Wall", HDL / "hdrg_aux.v"], what="verilator lint")
+    return _run([need("verilator"), "--lint-only", "-Wall", f"-GOP_CYCLES={op_cycles}", HDL / "hdrg_aux.v"],
+                what="verilator lint")
 
 
 def synth_aux(family: str, work: Path, op_cycles: int = 2) -> dict:

@@ -32,12 +32,12 @@
 //
 // WHEN z IS READY: done comes 2 + OP_CYCLES * (ops + 1) cycles after start (start and first memory
 // read, OP_CYCLES per datapath operation below, the last one `FIN` writes z), ops = the sum over
-// the table's terms of the operation counts in the table below: at most 6 x 13 + 1 = 79
-// operations (six oscillators; six filtered power-5 input terms: 73); aux_gen 0: 1.
+// the table's terms of the operation counts in the table below: at most 6 x 13 = 78 (six
+// oscillators; six filtered power-5 input terms: 72); aux_gen 0: 0.
 //   OP_CYCLES = 2 (default): worst case 160 cycles; the aux vector set's tables 6..94 (the fitted
-//     decay + 2 lags of `sim_aux`: 48).  Fmax 14 MHz on an UP5K (docs/COST_AUX.md).
-//   OP_CYCLES = 4 (the add and the shift registered): worst case 322; the set 10..186 (`sim_aux`
-//     98); for Fmax (docs/COST_AUX.md).
+//     decay + 2 lags of `sim_aux`: 48).  Fmax 14.4 MHz on an UP5K (docs/COST_AUX.md).
+//   OP_CYCLES = 4 (the add and the shift registered): worst case 318; the set 10..186 (`sim_aux`
+//     98); Fmax 18.8 MHz (docs/COST_AUX.md).
 // Started together with hdrg_eval_tm (whose k7 operation Z begins 116 cycles after its start),
 // z is ready in time for tables of at most 56 operations (OP_CYCLES 2) or 27 (OP_CYCLES 4).
 //
@@ -73,7 +73,8 @@
 // w' = w, -w (sign and m = 2, xor osc quadrant >= 2) or 0 (sign and m = 3; rate in warm-up).
 //
 // Storage: the terms' 32-bit words (weight, c0..c5) in two 64 x 32 memories (two read ports), the
-// small fields (kind, sign, src, power, the shift fields) in an 8 x 22 memory, the states Y_j in an
+// small fields (kind, sign, src, power, the shift fields) in an 8 x 22 memory (and the kinds in an
+// 8 x 3 copy, read at the next term), the states Y_j in an
 // 8 x 64 memory (Yosys: 10 SB_RAM40_4K on iCE40), ex_j in registers; the sample's inputs are
 // registered at start.
 //
@@ -348,7 +349,23 @@ module hdrg_aux #(
     end
 
     // C, D and the rounding constant
-    wire [63:0] rnd = (rk == 6'd0) ? 64'd0 : (64'd1 << (rk - 6'd1));          // 2^(rk-1)
+    wire [63:0] rnd_x = (rk == 6'd0) ? 64'd0 : (64'd1 << (rk - 6'd1));        // 2^(rk-1)
+    // OP_CYCLES 4: the next op's rounding constant, registered in the write-back (or prime) cycle,
+    // when the memories already show the next op's term (off the X cycle's critical path)
+    reg  [5:0]  rk_n;
+    always @* begin
+        case (nop)
+            OP_Q, OP_RP2, OP_RM: rk_n = cur_fa;
+            OP_P1: rk_n = cur_fb;
+            OP_R1, OP_R2, OP_R3: rk_n = cur_fb + 6'd1;
+            OP_YR, OP_PW, OP_O6, OP_H, OP_O12: rk_n = 6'd30;
+            OP_O4: rk_n = 6'd32;
+            OP_FIN: rk_n = aux_gen ? 6'd30 : 6'd0;
+            default: rk_n = 6'd0;
+        endcase
+    end
+    reg  [63:0] rnd_q;
+    wire [63:0] rnd = (OP_CYCLES == 4) ? rnd_q : rnd_x;
     reg signed [63:0] c_val, d_val;
     always @* begin
         case (csel)
@@ -473,6 +490,7 @@ module hdrg_aux #(
                 ph <= 2'd0;
             end
         end else if (prime) begin
+            rnd_q <= (rk_n == 6'd0) ? 64'd0 : (64'd1 << (rk_n - 6'd1));
             // the first op: needs rs, warmq, mq registered (this cycle), the memories read its words
             prime <= 1'b0;
             op <= nop;
@@ -501,6 +519,7 @@ module hdrg_aux #(
             ph <= ph + 2'd1;
         end else begin
             // Y cycle: write back
+            rnd_q <= (rk_n == 6'd0) ? 64'd0 : (64'd1 << (rk_n - 6'd1));
             case (op)
                 OP_DX: dxr <= r32;
                 OP_Q: begin dxr <= r32; yv <= r32; g <= r32; end
