@@ -26,26 +26,19 @@ Nothing is copied from a table: every figure comes from the build and the run of
 from __future__ import annotations
 
 import collections
-import json
 import re
-import shutil
 import subprocess
-import tempfile
 from pathlib import Path
 
 from host_tools import vectors as V
+from host_tools.cost_fpga import measure_fpga, summary_lines
+from host_tools.cost_tools import CostError, need, run_tool, tool_version
 from host_tools.vectors.runner import requests
 
 ROOT = Path(__file__).resolve().parent.parent
 C_DIR = ROOT / "firmware_ref" / "c"
 ARM_DIR = C_DIR / "arm"
 TARGETS = ("cortex-m4", "cortex-m7", "ice40", "xc7", "host")
-# tool -> the Debian package that ships it
-PACKAGES = {"arm-none-eabi-gcc": "gcc-arm-none-eabi", "arm-none-eabi-nm": "binutils-arm-none-eabi",
-            "arm-none-eabi-objdump": "binutils-arm-none-eabi", "arm-none-eabi-size": "binutils-arm-none-eabi",
-            "arm-none-eabi-addr2line": "binutils-arm-none-eabi",
-            "qemu-system-arm": "qemu-system-arm", "gcc": "gcc", "yosys": "yosys", "nextpnr-ice40": "nextpnr-ice40",
-            "iverilog": "iverilog", "vvp": "iverilog", "verilator": "verilator"}
 NEWLIB_SPECS = Path("/usr/lib/arm-none-eabi/newlib/rdimon.specs")
 MCU = {"cortex-m4": ("cortex-m4", "mps2-an386"), "cortex-m7": ("cortex-m7", "mps2-an500")}
 ARM_FLAGS = ("-std=c99", "-mthumb", "-mfloat-abi=soft", "-Wall", "-Wextra", "-Werror",
@@ -76,32 +69,6 @@ PRIMITIVES = ("hdrg_asr", "hdrg_rhu", "hdrg_mul_rhu", "hdrg_floor_div", "hdrg_di
 STAGE_OF = {f: s for s, fs in STAGES.items() for f in fs}
 
 
-class CostError(ValueError):
-    """A target that cannot be measured: a missing tool, a failed build or run."""
-
-
-def need(tool: str) -> str:
-    """The path of ``tool`` or a CostError naming the Debian package to install."""
-    path = shutil.which(tool)
-    if path is None:
-        pkg = PACKAGES.get(tool, tool)
-        raise CostError(f"{tool} not found: install the Debian package {pkg} (apt-get install -y {pkg})")
-    return path
-
-
-def tool_version(tool: str, arg: str = "--version") -> str:
-    pr = subprocess.run([need(tool), arg], capture_output=True, text=True)
-    text = (pr.stdout or pr.stderr).strip().splitlines()
-    return text[0].strip() if text else "?"
-
-
-def _run(argv, cwd=None, what="command", **kw):
-    pr = subprocess.run([str(a) for a in argv], cwd=cwd, capture_output=True, text=True, **kw)
-    if pr.returncode != 0:
-        raise CostError(f"{what} failed ({' '.join(map(str, argv))[:300]}):\n{(pr.stderr or pr.stdout)[-2000:]}")
-    return pr.stdout
-
-
 # -- MCU: build ----------------------------------------------------------------------------------------
 
 def build_mcu(target: str, opt: str, out: Path, defines=(), noinline: bool = False) -> dict:
@@ -117,11 +84,11 @@ def build_mcu(target: str, opt: str, out: Path, defines=(), noinline: bool = Fal
     if noinline:
         cc.append("-fno-inline")
     lib, drv, start = out / "hdrg_fw.o", out / "hdrg_fw_main.o", out / "startup.o"
-    _run(cc + ["-fcallgraph-info=su", "-c", C_DIR / "hdrg_fw.c", "-o", lib], cwd=out, what="arm-none-eabi-gcc")
-    _run(cc + ["-c", C_DIR / "hdrg_fw_main.c", "-o", drv], what="arm-none-eabi-gcc")
-    _run(cc + ["-c", ARM_DIR / "startup.c", "-o", start], what="arm-none-eabi-gcc")
+    run_tool(cc + ["-fcallgraph-info=su", "-c", C_DIR / "hdrg_fw.c", "-o", lib], cwd=out, what="arm-none-eabi-gcc")
+    run_tool(cc + ["-c", C_DIR / "hdrg_fw_main.c", "-o", drv], what="arm-none-eabi-gcc")
+    run_tool(cc + ["-c", ARM_DIR / "startup.c", "-o", start], what="arm-none-eabi-gcc")
     elf, mp = out / "hdrg_fw.elf", out / "hdrg_fw.map"
-    _run(cc + ["--specs=rdimon.specs", "-nostartfiles", "-T", ARM_DIR / "link.ld", f"-Wl,-Map={mp}",
+    run_tool(cc + ["--specs=rdimon.specs", "-nostartfiles", "-T", ARM_DIR / "link.ld", f"-Wl,-Map={mp}",
                lib, drv, start, "-o", elf], what="arm-none-eabi-gcc (link)")
     return {"elf": elf, "lib": lib, "ci": out / "hdrg_fw.ci", "map": mp}
 
@@ -137,7 +104,7 @@ def qemu_argv(target: str, elf: Path, extra=()) -> list:
 def symbols(obj: Path) -> dict:
     """name -> (address, size in bytes) of the function symbols (Thumb bit cleared)."""
     out = {}
-    for line in _run([need("arm-none-eabi-nm"), "-S", obj], what="nm").splitlines():
+    for line in run_tool([need("arm-none-eabi-nm"), "-S", obj], what="nm").splitlines():
         p = line.split()
         if len(p) == 4 and p[2] in "tTwW":
             out[p[3]] = (int(p[0], 16) & ~1, int(p[1], 16))
@@ -146,7 +113,7 @@ def symbols(obj: Path) -> dict:
 
 def section_sizes(obj: Path) -> dict:
     """text, data, bss bytes of an object (arm-none-eabi-size, Berkeley format)."""
-    line = _run([need("arm-none-eabi-size"), obj], what="size").splitlines()[1].split()
+    line = run_tool([need("arm-none-eabi-size"), obj], what="size").splitlines()[1].split()
     return {"text": int(line[0]), "data": int(line[1]), "bss": int(line[2])}
 
 
@@ -196,7 +163,7 @@ def elf_functions(elf: Path) -> tuple:
     or calls to}); a function spans from its label to the next one (libgcc's assembler helpers have no
     symbol size)."""
     starts, edges, cur = [], collections.defaultdict(set), None
-    for line in _run([need("arm-none-eabi-objdump"), "-d", elf], what="objdump").splitlines():
+    for line in run_tool([need("arm-none-eabi-objdump"), "-d", elf], what="objdump").splitlines():
         m = re.match(r"([0-9a-f]+) <([^>]+)>:$", line)
         if m:
             cur = m.group(2)
@@ -231,7 +198,7 @@ def mcu_sizes(b: dict) -> dict:
 def disassembly(elf: Path) -> dict:
     """address -> (mnemonic, operands, size in bytes) of every instruction in the ELF."""
     out = {}
-    for line in _run([need("arm-none-eabi-objdump"), "-d", elf], what="objdump").splitlines():
+    for line in run_tool([need("arm-none-eabi-objdump"), "-d", elf], what="objdump").splitlines():
         m = re.match(r"\s*([0-9a-f]+):\t([0-9a-f ]+?)\s*\t(\S+)\s*(.*)$", line)
         if m:
             size = 2 * len(m.group(2).split())
@@ -360,7 +327,7 @@ def inline_chains(elf: Path, addrs) -> dict:
     """address -> [function, ...] of the inline chain at that address (innermost first), from
     ``addr2line -a -f -i`` on the ELF's debug info."""
     addrs = sorted(set(addrs))
-    out = _run([need("arm-none-eabi-addr2line"), "-e", elf, "-a", "-f", "-i", *(hex(a) for a in addrs)],
+    out = run_tool([need("arm-none-eabi-addr2line"), "-e", elf, "-a", "-f", "-i", *(hex(a) for a in addrs)],
                what="addr2line").splitlines()
     chains, cur = {}, None
     for line in out:
@@ -494,9 +461,9 @@ def measure_host(work: Path, log=print) -> dict:
     gcc = need("gcc")
     work.mkdir(parents=True, exist_ok=True)
     exe = work / "hdrg_fw"
-    _run([gcc, "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-c", C_DIR / "hdrg_fw.c", "-o", work / "hdrg_fw.o"],
+    run_tool([gcc, "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-c", C_DIR / "hdrg_fw.c", "-o", work / "hdrg_fw.o"],
          what="gcc")
-    _run([gcc, "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-o", exe, work / "hdrg_fw.o",
+    run_tool([gcc, "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-o", exe, work / "hdrg_fw.o",
           C_DIR / "hdrg_fw_main.c"], what="gcc")
     rep = V.check_impl([str(exe)], log=lambda s: log(f"  {s}"))
     # BENCH on the e2e inputs (binary records), best of 5 passes
@@ -513,7 +480,7 @@ def measure_host(work: Path, log=print) -> dict:
 
 
 def section_sizes_host(obj: Path) -> int:
-    line = _run(["size", obj], what="size").splitlines()[1].split()
+    line = run_tool(["size", obj], what="size").splitlines()[1].split()
     return int(line[0])
 
 
@@ -524,7 +491,6 @@ def measure(target: str, work: Path, log=print) -> dict:
         return measure_mcu(target, work, log)
     if target == "host":
         return measure_host(work, log)
-    from host_tools.cost_fpga import measure_fpga       # cost_fpga imports this module's tool helpers
     return measure_fpga(target, work, log)
 
 
@@ -536,7 +502,6 @@ def summary(r: dict) -> str:
         if k in r:
             lines.append(f"  {k}: {r[k]}")
     if "evaluator_alone" in r:
-        from host_tools.cost_fpga import summary_lines
         lines.extend(summary_lines(r))
     if "per_stage" in r:
         for w, d in r["per_stage"].items():

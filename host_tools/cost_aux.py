@@ -14,7 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from host_tools import vectors as V
-from host_tools.cost import CostError, _run, need
+from host_tools.cost_tools import CostError, run_tool, need
 from host_tools.cost_fpga import HDL, _offsets_file, _tb_result, record_positions, resources, yosys_cells
 
 AUX_SOURCES = (HDL / "tb_aux.v", HDL / "hdrg_aux.v")
@@ -53,15 +53,15 @@ def rtl_aux_check(work: Path, simulator: str = "icarus", defines=(), n_vec: int 
     tag = simulator + f"_c{op_cycles}" + "".join("_" + d for d in defines)
     if simulator == "icarus":
         exe = work / f"tb_aux_{tag}"
-        _run([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines),
+        run_tool([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines),
               *(f"-Ptb_aux.{k}={v}" for k, v in params.items()), "-o", exe, *AUX_SOURCES], what="iverilog")
-        out = _run([need("vvp"), "-n", exe, *plus], what="vvp", timeout=1800)
+        out = run_tool([need("vvp"), "-n", exe, *plus], what="vvp", timeout=1800)
     elif simulator == "verilator":
         obj = work / f"vl_aux_{tag}"
-        _run([need("verilator"), "--binary", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_aux",
+        run_tool([need("verilator"), "--binary", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_aux",
               *(f"-D{d}" for d in defines), *(f"-G{k}={v}" for k, v in params.items()), "-Mdir", obj,
               *AUX_SOURCES], what="verilator", timeout=900)
-        out = _run([obj / "Vtb_aux", *plus], what="verilator run", timeout=1800)
+        out = run_tool([obj / "Vtb_aux", *plus], what="verilator run", timeout=1800)
     else:
         raise CostError(f"simulator {simulator!r}: icarus or verilator")
     return {**_tb_result(out, f"{simulator} aux"), **_cycles(out)}
@@ -69,7 +69,7 @@ def rtl_aux_check(work: Path, simulator: str = "icarus", defines=(), n_vec: int 
 
 def lint_aux(op_cycles: int = 2) -> str:
     """``verilator --lint-only -Wall`` of hdrg_aux.v: its output (empty when clean); CostError if it fails."""
-    return _run([need("verilator"), "--lint-only", "-Wall", f"-GOP_CYCLES={op_cycles}", HDL / "hdrg_aux.v"],
+    return run_tool([need("verilator"), "--lint-only", "-Wall", f"-GOP_CYCLES={op_cycles}", HDL / "hdrg_aux.v"],
                 what="verilator lint")
 
 
@@ -80,7 +80,7 @@ def synth_aux(family: str, work: Path, op_cycles: int = 2) -> dict:
     cmd = (f"read_verilog {HDL / 'hdrg_aux.v'}; chparam -set OP_CYCLES {op_cycles} hdrg_aux; "
            + ("synth_ice40 -dsp" if family == "ice40" else "synth_xilinx")
            + f" -top hdrg_aux; tee -o {stat} stat")
-    _run([need("yosys"), "-q", "-p", cmd], what="yosys", timeout=1800)
+    run_tool([need("yosys"), "-q", "-p", cmd], what="yosys", timeout=1800)
     cells = yosys_cells(stat.read_text())
     return {"cells": cells, **resources(family, cells)}
 
@@ -137,7 +137,7 @@ def pnr_aux(work: Path, seed: int = 1, freq_mhz: float = 24.0, op_cycles: int = 
 
     work.mkdir(parents=True, exist_ok=True)
     js = work / f"aux_pnr_c{op_cycles}.json"
-    _run([need("yosys"), "-q", "-p", f"read_verilog {HDL / 'hdrg_aux.v'} {HDL / 'hdrg_aux_pnr.v'}; "
+    run_tool([need("yosys"), "-q", "-p", f"read_verilog {HDL / 'hdrg_aux.v'} {HDL / 'hdrg_aux_pnr.v'}; "
                                      f"chparam -set OP_CYCLES {op_cycles} hdrg_aux_pnr; "
                                      f"synth_ice40 -dsp -top hdrg_aux_pnr -json {js}"], what="yosys", timeout=1800)
     pr = subprocess.run([need("nextpnr-ice40"), "--up5k", "--package", "sg48", "--json", str(js),

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from host_tools import cost_rtl
 from host_tools import vectors as V
-from host_tools.cost import CostError, _run, need, tool_version
+from host_tools.cost_tools import CostError, run_tool, need, tool_version
 
 # -- FPGA: the evaluator alone (tb_eval_tm) ------------------------------------------------------------
 
@@ -89,9 +89,9 @@ def rtl_check_icarus(work: Path, defines=()) -> dict:
     """The time-multiplexed evaluator's testbench under Icarus on the evaluator vectors."""
     params, plus = _eval_tb_args(work)
     exe = work / ("tb_eval_tm" + "".join("_" + d for d in defines))
-    _run([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines),
+    run_tool([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines),
           *(f"-Ptb_eval_tm.{k}={v}" for k, v in params.items()), "-o", exe, *TM_SOURCES], what="iverilog")
-    out = _run([need("vvp"), "-n", exe, *plus], what="vvp", timeout=900)
+    out = run_tool([need("vvp"), "-n", exe, *plus], what="vvp", timeout=900)
     return _tb_result(out, "icarus")
 
 
@@ -99,9 +99,9 @@ def rtl_check_verilator(work: Path) -> dict:
     """The same testbench compiled by Verilator 5 (--binary)."""
     params, plus = _eval_tb_args(work)
     obj = work / "verilator"
-    _run([need("verilator"), "--binary", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_eval_tm",
+    run_tool([need("verilator"), "--binary", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_eval_tm",
           *(f"-G{k}={v}" for k, v in params.items()), "-Mdir", obj, *TM_SOURCES], what="verilator", timeout=900)
-    out = _run([obj / "Vtb_eval_tm", *plus], what="verilator run", timeout=900)
+    out = run_tool([obj / "Vtb_eval_tm", *plus], what="verilator run", timeout=900)
     return _tb_result(out, "verilator")
 
 
@@ -135,7 +135,7 @@ def synth(family: str, work: Path, full: bool = True) -> dict:
         cmd = _synth_cmd(family, cost_rtl.top_sources(), "hdrg_top", {"N_HIST": TOP_N_HIST}, f"tee -o {stat} stat")
     else:
         cmd = _synth_cmd(family, [HDL / "hdrg_eval_tm.v"], TM_TOP, {}, f"tee -o {stat} stat")
-    _run([need("yosys"), "-q", "-p", cmd], what="yosys", timeout=3600)
+    run_tool([need("yosys"), "-q", "-p", cmd], what="yosys", timeout=3600)
     cells = yosys_cells(stat.read_text())
     return {"cells": cells, **resources(family, cells)}
 
@@ -149,7 +149,7 @@ def pnr_ice40(work: Path, full: bool = True, seed: int = 1) -> dict:
                          {"N_HIST": TOP_N_HIST}, "")
     else:
         cmd = _synth_cmd("ice40", [HDL / "hdrg_eval_tm.v", HDL / "hdrg_eval_tm_pnr.v"], TM_PNR_TOP, {}, "")
-    _run([need("yosys"), "-q", "-p", cmd.replace("synth_ice40 -dsp -top", f"synth_ice40 -dsp -json {js} -top")],
+    run_tool([need("yosys"), "-q", "-p", cmd.replace("synth_ice40 -dsp -top", f"synth_ice40 -dsp -json {js} -top")],
          what="yosys", timeout=3600)
     pr = subprocess.run([need("nextpnr-ice40"), "--up5k", "--package", "sg48", "--json", str(js),
                          "--pcf-allow-unconstrained", "--freq", str(FMAX_GOAL_MHZ), "--seed", str(seed)],

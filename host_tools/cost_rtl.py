@@ -12,7 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from host_tools import vectors as V
-from host_tools.cost import CostError, _run, need
+from host_tools.cost_tools import CostError, run_tool, need
 from host_tools.vectors.runner import check_impl
 
 HDL = V.DEFAULT_DIR / "hdl"
@@ -39,11 +39,11 @@ def build_top(sim: str, work: Path, defines=()) -> list:
     src = [TB_TOP, *top_sources()]
     if sim == "icarus":
         exe = work / f"tb_top_{tag}.vvp"
-        _run([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines), "-o", exe, *src], what="iverilog")
+        run_tool([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines), "-o", exe, *src], what="iverilog")
         return [need("vvp"), "-n", str(exe)]
     if sim == "verilator":
         obj = work / f"vl_top_{tag}"
-        _run([need("verilator"), "--binary", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_top",
+        run_tool([need("verilator"), "--binary", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_top",
               *(f"-D{d}" for d in defines), "-Mdir", obj, *src], what="verilator", timeout=1800)
         return [str(obj / "Vtb_top")]
     raise CostError(f"unknown simulator {sim!r} (icarus, verilator)")

@@ -1,9 +1,10 @@
 """The default fitting pipeline: what `hdrg fit RUN` does without rate options (and what the
 `*/default` rows of `hdrg bench accuracy` measure).  It composes the fitter (host_tools.fit) and
-the lag-state block (host_tools.fit_lag); neither of those imports this module."""
+the lag-state block (host_tools.fit_lag); neither of those imports this module.  The defaults
+(host_tools.compensate.DEFAULT_*) are read at call time."""
 from __future__ import annotations
 
-from host_tools.compensate import DEFAULT_LAG_BLOCK, DEFAULT_RATE_SELECTION_MR, fit_config_from_logs
+from host_tools import compensate
 from host_tools.fit import fit_auto_rate, fit_logs
 from host_tools.fit_lag import add_lag_block
 
@@ -18,15 +19,15 @@ def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, c
     (auto True, else False); ``cv_blocks``: the time blocks of cross-validation on a single run.
     Returns (model, FitResult)."""
     logs = list(logs)
-    lag_block = DEFAULT_LAG_BLOCK if lag_block is None else lag_block
+    lag_block = compensate.DEFAULT_LAG_BLOCK if lag_block is None else lag_block
     if lag_block not in ("auto", "off"):
         raise ValueError(f"lag_block must be 'auto' or 'off', not {lag_block!r}")
     lag = lag_block == "auto" and config_kw.get("aux") is None
-    if DEFAULT_RATE_SELECTION_MR == "auto" and logs and all(log.reversal for log in logs):
+    if compensate.DEFAULT_RATE_SELECTION_MR == "auto" and logs and all(log.reversal for log in logs):
         model, res = fit_auto_rate(logs, terms, drop_unidentifiable=drop_unidentifiable is not False,
                                    cv_blocks=cv_blocks, **config_kw)
     else:
-        model, res = fit_logs(logs, fit_config_from_logs(logs, **config_kw), terms, blocks=True if lag else None,
+        model, res = fit_logs(logs, compensate.fit_config_from_logs(logs, **config_kw), terms, blocks=True if lag else None,
                               drop_unidentifiable=bool(drop_unidentifiable), cv_blocks=cv_blocks)
     if lag:
         model, res = add_lag_block(logs, model, res, terms, cv_blocks=cv_blocks,

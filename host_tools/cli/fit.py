@@ -53,11 +53,12 @@ def run(args) -> int:
                 f"{r['estimator']} {r['cv_rms']:.4g}" if "cv_rms" in r else f"{r['estimator']} failed"
                 for r in sel["candidates"]) + " deg/h cross-validated rms)")
         lag = model.fit.get("lag_block")
-        if lag:
-            print(f"lag-state block of the proxy: {lag['chosen'] or 'not kept'} (cross-validated rms "
-                  f"{lag['base_cv_rms']:.4g} -> {lag.get('cv_rms', float('nan')):.4g} deg/h; kept when "
-                  f"{100 * lag['margin']:.0f} % lower)" if lag.get("base_cv_rms") is not None else
-                  f"lag-state block of the proxy: not kept ({lag.get('error', 'no cross-validated rms')})")
+        if lag and lag.get("chosen"):
+            print(f"lag-state block of the proxy: {lag['chosen']} (cross-validated rms "
+                  f"{lag['base_cv_rms']:.4g} -> {lag['cv_rms']:.4g} deg/h)")
+        elif lag:
+            why = lag.get("error") or f"no candidate lowered the cross-validated rms by {100 * lag['margin']:.0f} %"
+            print(f"lag-state block of the proxy: not kept ({why})")
     except UnidentifiableError as exc:
         raise ValueError(str(exc).replace("drop_unidentifiable=True", "--drop-unidentifiable (or --terms auto / "
                                           "--terms k0,k1,...)")) from None
