@@ -1,5 +1,5 @@
 """The auxiliary regressor z in fixed point: the generators of aux_gen 1 ('sum') per sample
-(Python-integer reference of host_tools.regressors.aux_regressor, whose module doc is the spec).
+(Python-integer reference of host_tools.golden.regressors.aux_regressor, whose module doc is the spec).
 
 Inputs per sample: the channel words (code 0 F, 1 T, 2 + c the aux word A_c; firmware_ref.inputs),
 the sample counter K since power-on, the mode m (logged or the timer's), restart, and the rate

@@ -19,9 +19,9 @@ bit-identical)::
                   | 32 zc | 128 (any saturation: window count, trend, residual r, OUT, BIAS)
 
 OUT and BIAS are int32 words, LSB 2^-10 deg/h; the hold is not reset at restarts (as the golden
-host_tools.compensate).  K is the sample counter since power-on (the golden's ``rint(t_s fs)``);
+host_tools.golden.compensate).  K is the sample counter since power-on (the golden's ``rint(t_s fs)``);
 when not given, the pipeline counts itself: K = the previous sample's K + 1, 0 at power-on.  Bit 64 (an input value saturated when converted to a word) is added by
-the host side (host_tools.fixed_point.compensate_log, which is ``hdrg compensate --impl
+the host side (host_tools.fixed.fixed_point.compensate_log, which is ``hdrg compensate --impl
 fixed``: run log + model (+ optional table) -> compensated run log).
 """
 from __future__ import annotations

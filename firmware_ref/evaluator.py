@@ -20,7 +20,7 @@ m[POLY_INDEX[i][j]]`` and u, v, z int32 Q1.30 (z clamped to [-2^30, 2^30], flag)
 Two banks (a regress_first table, order 1): ``bank`` 2 (mode-2 samples) evaluates the same scheme
 with bank 2's mantissas and exponents (m2_k, e2_g, E2); every other sample uses bank 1.
 
-host_tools.quantize chooses the exponents so that every p, q, a and t satisfies
+host_tools.fixed.quantize chooses the exponents so that every p, q, a and t satisfies
 ``|.| <= 2^31 - 1`` for every |u|, |v|, |z| <= 2^30 (interval analysis; the rounded product
 ``RHU(x * w, 30)`` with |w| <= 2^30 never exceeds |x|), hence every product is below 2^61.
 """

@@ -59,7 +59,7 @@ ALIGN_MAX = 31             # e_group - E in 0..31 (row and aux alignment shifts)
 OUT_FRAC = 10              # compensated output and bias words: int32, LSB 2^-10 deg/h
 OUT_SHIFT = Y_FRAC - OUT_FRAC        # 11: the one final rounding
 
-# -- status flags (uint8; bits 1..16 are host_tools.compensate's): firmware_ref.vocabulary ---------------
+# -- status flags (uint8; bits 1..16 are host_tools.golden.compensate's): firmware_ref.vocabulary ---------------
 
 # -- sequencer states and virtual-switch control bits (paper Fig. 3c) -------------------------------------
 ST_POWER_ON, ST_EXCH_TO_1, ST_MODE_1, ST_EXCH_TO_2, ST_MODE_2, ST_FTR = range(6)
@@ -89,7 +89,7 @@ MODE_SIGN = (1, 1, -1, 0)           # rate sign per run-log mode 0..3
 
 # COMBINERS, ORDERS, ESTIMATORS, PROXY_KINDS, AUX_GENERATORS (table codes): firmware_ref.vocabulary
 
-# -- the aux regressor z: generators of aux_gen 1 'sum' (host_tools.regressors module doc) -------------
+# -- the aux regressor z: generators of aux_gen 1 'sum' (host_tools.golden.regressors module doc) -------------
 # AUX_KINDS (term kind 0..6): firmware_ref.vocabulary
 AUX_MAX_TERMS = 6         # terms of the sum (hdrg diagnose: 3 iterations x at most 2 terms)
 AUX_MAX_CHANNELS = 4      # aux input words A0..A3 (run-log aux_* columns)
@@ -226,7 +226,7 @@ SIGNALS = (
 
 @dataclass(frozen=True)
 class NoiseFigures:
-    """The stated figures the input formats are derived against (host_tools.sim defaults when this
+    """The stated figures the input formats are derived against (host_tools.simulation.sim defaults when this
     was written): drive frequency f0 [Hz], its temperature coefficient [1/degC], white frequency
     noise [Hz, 1 sigma per sample], PLL step [Hz]; ARW [deg/sqrt(h)]; board-sensor noise [degC];
     sample rate [Hz]; the rate the rate term must resolve [degC/min]; allowed noise increase."""

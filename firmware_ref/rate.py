@@ -1,6 +1,6 @@
 """Normalized proxy rate in fixed point: proxy words -> v, int32 Q1.30 (Python-integer reference).
 
-Copies host_tools.rate (its module doc is the spec) with integer sums of proxy words:
+Copies host_tools.golden.rate (its module doc is the spec) with integer sums of proxy words:
 
 * ``diff``  ``S = P[i] - P[i-1]``; ``diffn`` ``S = P[i] - P[i-n]``;
 * ``lsq``   ``S = sum_{j=0}^{n-1} (2j - (n-1)) (P[i-n+1+j] - P[i])``, summed in order j = 0..n-1;

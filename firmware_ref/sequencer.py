@@ -1,6 +1,6 @@
 """The mode-reversal sequencer in fixed point (Python-integer reference): a timer state machine
 that drives the virtual switches (paper Fig. 3c) and the combiner that turns the raw rate words
-into the bias-cancelled output, exactly per host_tools.reversal (its module doc is the spec).
+into the bias-cancelled output, exactly per host_tools.golden.reversal (its module doc is the spec).
 
 Timer (self-timed operation)
 ----------------------------
@@ -13,13 +13,13 @@ forever.  Per sample::
         state = next(state); cnt = 0
     emit state; if state != FTR: cnt += 1
 
-so with ``power_on_n = 0`` the modes are those of host_tools.sim_physics.mode_sequence (exchange first).
+so with ``power_on_n = 0`` the modes are those of host_tools.simulation.sim_physics.mode_sequence (exchange first).
 Each state has a run-log mode (3, 3, 1, 3, 2, 0), a rate sign and the virtual-switch bits
 (formats.STATE_VS).  A restart resets the timer as at power-on.  Driven by a logged mode column
 instead, the state is derived from the mode (an exchange is "to 2" after a mode-1 window, else
 "to 1").
 
-Combiner (integer form of host_tools.reversal)
+Combiner (integer form of host_tools.golden.reversal)
 ----------------------------------------------
 State: ``cur`` (open window's mode, 0 none), ``acc`` (int64 sum of c = s R), ``cnt`` (used
 samples), ``pos`` (settle counter, saturating at settle_n); per mode o in {1, 2}: ``ncommit[o]``
@@ -52,7 +52,7 @@ wraps on long runs.  Per sample with mode m, rate word R, restart r::
                 y = (c << 10) + other; valid                        # y: LSB 2^-21 deg/h
         else: pos += 1
 
-Regress, then reverse (order 1, /work/spec-rtr.md; golden host_tools.reversal)
+Regress, then reverse (order 1, /work/spec-rtr.md; golden host_tools.golden.reversal)
 -----------------------------------------------------------------------------
 The combiner takes the **residual word** instead of c: at a sample past settling (``pos >=
 settle_n``) whose rate estimator is warm (``warm`` false)::

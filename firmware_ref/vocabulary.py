@@ -2,7 +2,7 @@
 orders, proxy kinds, aux generators and aux term kinds, the sequencer states, the status flag bits
 with their names and meanings.
 
-At the bottom of the dependency graph (imports nothing): the golden model (host_tools.proxy, rate,
+At the bottom of the dependency graph (imports nothing): the golden model (host_tools.golden.proxy, rate,
 reversal, compensate, flags), the fixed point (firmware_ref.formats, table), the CLI ``choices``
 and the generated docs (FORMATS.md and the constants block of firmware_ref/c/hdrg_fw.h, both
 rendered by firmware_ref.docgen) read these names.
@@ -17,7 +17,7 @@ STAGES = ("inputs", "proxy", "rate", "aux", "table", "evaluator", "sequencer", "
 PROXY_KINDS = ("freq", "temp")                     # table proxy_kind: 0 F word, 1 T word
 ESTIMATORS = ("diff", "diffn", "lsq", "iir")       # table rate_est 0..3
 COMBINERS = ("ftr", "pair", "trend", "none")       # table combiner 0..3 (0: no mode reversal; 3: order 1 only)
-REVERSAL_COMBINERS = COMBINERS[1:]                 # the golden's mode-reversal combiners (host_tools.reversal)
+REVERSAL_COMBINERS = COMBINERS[1:]                 # the golden's mode-reversal combiners (host_tools.golden.reversal)
 ORDERS = ("combine_first", "regress_first")        # table order 0, 1
 AUX_GENERATORS = ("none", "sum")                   # table aux_gen 0 (z = the external Z word), 1
 AUX_KINDS = ("input", "rate", "one", "decay_on", "decay_exchange", "ramp", "osc")   # aux term kind 0..6
@@ -42,6 +42,6 @@ FLAGS = {
     FLAG_INPUT_SAT: ("input_saturated", "a float input beyond its word's range was saturated (host)"),
     FLAG_SAT: ("saturated", "saturation in the pipeline: window count, trend slope/distance, output word"),
 }
-# The flags of the float golden model (host_tools.compensate): bits 1..16, same meanings.
+# The flags of the float golden model (host_tools.golden.compensate): bits 1..16, same meanings.
 GOLDEN_FLAG_NAMES = {bit: FLAGS[bit][0] for bit in (FLAG_PROXY_CLAMPED, FLAG_RATE_CLAMPED, FLAG_WARMUP,
                                                     FLAG_EXCHANGE, FLAG_STALE)}

@@ -12,16 +12,17 @@ from __future__ import annotations
 import os
 import warnings
 
-from host_tools import runlog, sim
-from host_tools.compensate import compensate, fit_config_from_logs
+from host_tools.golden import runlog
+from host_tools.simulation import sim
+from host_tools.golden.compensate import compensate, fit_config_from_logs
 
 
 def run_demo(out_dir: str = "hdrg-demo", duration_s: float = 6 * 3600.0) -> None:
     """The demo: two simulated mode-reversal runs of ``duration_s`` seconds each, a fit, the
     compensation of the held-out run, a report and the closed-loop diagnosis, all written below
     ``out_dir`` (created); progress and tables are printed to stdout.  Returns nothing."""
-    from host_tools.fit import fit_logs
-    from host_tools.report import _table, report
+    from host_tools.fitting.fit import fit_logs
+    from host_tools.fitting.report import _table, report
 
     os.makedirs(out_dir, exist_ok=True)
     with warnings.catch_warnings():
@@ -45,7 +46,7 @@ def run_demo(out_dir: str = "hdrg-demo", duration_s: float = 6 * 3600.0) -> None
         out = compensate(test, model)
         out_path = os.path.join(out_dir, "run-seed2-compensated.csv")
         runlog.write(out, out_path)
-        from host_tools.flags import problems, summary
+        from host_tools.golden.flags import problems, summary
         print(f"   {out_path}: {summary(out)}")
         for p in problems(out):
             print(f"   warning: {p}")
@@ -57,7 +58,7 @@ def run_demo(out_dir: str = "hdrg-demo", duration_s: float = 6 * 3600.0) -> None
 
 
 def _close_the_loop(out_dir: str, duration_s: float) -> None:
-    from host_tools.diagnose import diagnose
+    from host_tools.fitting.diagnose import diagnose
 
     print("5. diagnose: runs with an UNDECLARED effect (periodic 0.5 deg/h, 600 s; not in the metadata, "
           "not in the model); train on seeds 1 and 3, hold out seed 2")

@@ -6,9 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from host_tools import compensate as hc
-from host_tools.fixed_point import compensate_log, dequantized_log
-from host_tools.quantize import Quantized, quantize
+from host_tools.golden import compensate as hc
+from host_tools.fixed.fixed_point import compensate_log, dequantized_log
+from host_tools.fixed.quantize import Quantized, quantize
 
 
 @dataclass

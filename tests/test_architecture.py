@@ -144,19 +144,19 @@ def test_the_checks_can_fail():
     assert find_cycles({"a": ["b"], "b": ["c"], "c": ["a"], "d": ["a"]}) == [["a", "b", "c"]]
     assert find_cycles({"a": ["b"], "b": []}) == []
     known = modules()
-    found = [m for _, m in imports("host_tools.fixed_point", known["host_tools.fixed_point"], known, False)]
-    assert "firmware_ref.compensate" in found and "host_tools.runlog" in found
+    found = [m for _, m in imports("host_tools.fixed.fixed_point", known["host_tools.fixed.fixed_point"], known, False)]
+    assert "firmware_ref.compensate" in found and "host_tools.golden.runlog" in found
     assert "firmware_ref.formats" in module_graph()["firmware_ref.table"]
     # a function-level import is seen only when imports inside functions count
-    assert "host_tools.fixed_point" in module_graph(top_level_only=False)["host_tools.compensate"]
-    assert "host_tools.fixed_point" not in module_graph()["host_tools.compensate"]
+    assert "host_tools.fixed.fixed_point" in module_graph(top_level_only=False)["host_tools.golden.compensate"]
+    assert "host_tools.fixed.fixed_point" not in module_graph()["host_tools.golden.compensate"]
 
 
 def test_vocabulary_is_declared_once():
     """The golden model reads the vocabulary's tuples (not copies), and no argparse ``choices`` is a
     literal tuple/list repeating a vocabulary name."""
     from firmware_ref import vocabulary as VOC
-    from host_tools import compensate, flags, proxy, rate, regressors, reversal
+    from host_tools.golden import compensate, flags, proxy, rate, regressors, reversal
 
     assert rate.ESTIMATORS is VOC.ESTIMATORS and proxy.KINDS is VOC.PROXY_KINDS
     assert reversal.COMBINERS is VOC.REVERSAL_COMBINERS and reversal.ORDERS is VOC.ORDERS

@@ -1,4 +1,4 @@
-"""`hdrg bench accuracy` (host_tools.bench_accuracy) on a fast subset: 4 foreign devices, short
+"""`hdrg bench accuracy` (host_tools.bench.accuracy) on a fast subset: 4 foreign devices, short
 runs.  Structure and sanity only; the 50-device table is measured with the command (docs/ACCURACY.md)."""
 import copy
 import json
@@ -6,9 +6,10 @@ import json
 import numpy as np
 import pytest
 
-from host_tools import bench_accuracy as ba, cli
+from host_tools.bench import accuracy as ba
+from host_tools import cli
 from host_tools.cli import bench
-from host_tools.sim_foreign import foreign_device, simulate_foreign
+from host_tools.simulation.sim_foreign import foreign_device, simulate_foreign
 
 PIPES = ["ftr/raw", "ftr/diff", "ftr/iir9", "mr-trend/raw", "mr-trend/diff", "mr-pair/diff"]
 DUR = 4000.0
@@ -113,7 +114,7 @@ def test_easy_device_reaches_the_floor_so_the_family_adds_no_unfittable_artefact
 def test_plausibility_against_measured(tmp_path):
     log = simulate_foreign(3, 3.0, False, 0, 0, 3000.0)
     path = tmp_path / "m.csv"
-    from host_tools import runlog
+    from host_tools.golden import runlog
     runlog.write(log, path)
     text = ba.plausibility(2, 0, [str(path)])
     assert text.startswith("foreign (2 devices") and f"{path}: cubic residual" in text
@@ -125,7 +126,7 @@ def test_plausibility_against_measured(tmp_path):
 
 
 def test_effect_sizes_are_positive_for_every_kind():
-    from host_tools.sim_foreign import EFFECT_KINDS
+    from host_tools.simulation.sim_foreign import EFFECT_KINDS
     sizes = ba.effect_sizes(1, 0)
     assert list(sizes) == list(EFFECT_KINDS)
     assert all(len(v) == 1 and 0.1 < v[0] < 100 for v in sizes.values())

@@ -12,8 +12,8 @@ import pytest
 
 from firmware_ref.kernel import run_words
 from host_tools.vectors.builders import make_model
-from host_tools.quantize import quantize
-from host_tools.sim_physics import mode_sequence
+from host_tools.fixed.quantize import quantize
+from host_tools.simulation.sim_physics import mode_sequence
 from test_c_twin import CFLAGS, GCC, build, input_records, table_line
 
 pytestmark = [pytest.mark.benchmark,

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from firmware_ref.terms import N_TERMS
-from host_tools import fit as F
+from host_tools.fitting import fit as F
 
 ALL = tuple(range(N_TERMS))
 

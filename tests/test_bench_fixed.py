@@ -14,8 +14,8 @@ from firmware_ref.compensate import run_reference
 from firmware_ref.kernel import run_words
 from firmware_ref.terms import K_AUX, POLY_INDEX
 from host_tools.vectors.builders import make_model
-from host_tools.quantize import quantize
-from host_tools.sim_physics import mode_sequence
+from host_tools.fixed.quantize import quantize
+from host_tools.simulation.sim_physics import mode_sequence
 
 pytestmark = pytest.mark.benchmark
 N = 2_000_000

@@ -1,13 +1,14 @@
-"""`hdrg bench loop` (host_tools.bench_loop) on a fast subset: 3 foreign runs cut to 1500 s, 5 surrogates.
+"""`hdrg bench loop` (host_tools.bench.loop) on a fast subset: 3 foreign runs cut to 1500 s, 5 surrogates.
 Structure and the never-worse invariants only; the 120-run numbers are measured with the command
 (docs/LOOP.md)."""
 import json
 
 import pytest
 
-from host_tools import bench_loop as bl, cli
+from host_tools.bench import loop as bl
+from host_tools import cli
 from host_tools.cli import bench
-from host_tools.sim_foreign import EFFECT_KINDS
+from host_tools.simulation.sim_foreign import EFFECT_KINDS
 
 
 def test_plan_has_a_third_clean_runs_and_every_kind():
@@ -45,7 +46,7 @@ def test_fast_subset_structure_and_never_worse(result):
 
 
 def test_cli_is_registered_and_merges_shards(result, tmp_path, capsys):
-    assert bench.available()["loop"] == ("host_tools.cli.bench_loop", "host_tools.bench_loop")
+    assert bench.available()["loop"] == ("host_tools.cli.bench_loop", "host_tools.bench.loop")
     a, b = tmp_path / "a.json", tmp_path / "b.json"
     a.write_text(json.dumps({"records": result["records"][:1]}))
     b.write_text(json.dumps({"records": result["records"][1:]}))
@@ -60,7 +61,7 @@ def test_measured_splits_are_disjoint_and_cover_both_legs():
 
     import os
 
-    from host_tools import runlog
+    from host_tools.golden import runlog
     path = f"{bl.MEASURED_ROOT}/{bl.MEASURED['tofupilot-x']}"
     if not os.path.exists(path):
         pytest.skip(f"measured data not here: {path}")

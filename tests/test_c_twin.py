@@ -21,14 +21,14 @@ import firmware_ref
 from firmware_ref import arith
 from firmware_ref import formats as F
 from firmware_ref.compensate import run_reference
-from host_tools.fixed_point import log_words
+from host_tools.fixed.fixed_point import log_words
 from firmware_ref.evaluator import evaluate
 from firmware_ref.kernel import evaluate_words, run_words
 from firmware_ref.table import FIELD_INDEX, Table, TableError, crc32_words
 from firmware_ref.terms import K_AUX
 from host_tools.vectors.builders import (aux_stream, corner_stream, make_model, random_aux_model, random_model,
                                   random_stream, with_aux)
-from host_tools.quantize import quantize
+from host_tools.fixed.quantize import quantize
 
 GCC = shutil.which("gcc")
 pytestmark = pytest.mark.skipif(GCC is None, reason="gcc not found on PATH: the C twin cannot be built")
@@ -620,10 +620,10 @@ def test_binary_block_errors_are_fatal(c_exe):
                                                         ("paper-mr-cycle-4dpm", "trend", 20000.0),
                                                         ("paper-ftr-cycle-4dpm", None, 8000.0)])
 def test_paper_scenarios(c_exe, scenario, combiner, duration):
-    from host_tools import compensate as hc
-    from host_tools.fit import fit_logs
-    from host_tools.reversal import ReversalConfig
-    from host_tools.sim import simulate
+    from host_tools.golden import compensate as hc
+    from host_tools.fitting.fit import fit_logs
+    from host_tools.golden.reversal import ReversalConfig
+    from host_tools.simulation.sim import simulate
 
     log = simulate(scenario, seed=3, duration_s=duration)
     cfg = hc.fit_config_from_logs([log], reversal=None if combiner is None else ReversalConfig(combiner))

@@ -7,7 +7,8 @@ import textwrap
 
 import pytest
 
-from host_tools import cli, cost, cost_fpga
+from host_tools import cli
+from host_tools.bench import cost, cost_fpga
 
 ARM = shutil.which("arm-none-eabi-gcc") and shutil.which("qemu-system-arm") and cost.NEWLIB_SPECS.is_file()
 FPGA = all(shutil.which(t) for t in ("yosys", "iverilog", "vvp", "verilator"))

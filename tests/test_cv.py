@@ -1,10 +1,10 @@
-"""host_tools.cv: the one fold definition and held-out SSE algebra of fit.py and diagnose."""
+"""host_tools.fitting.cv: the one fold definition and held-out SSE algebra of fit.py and diagnose."""
 import numpy as np
 import pytest
 
-from host_tools import cv
-from host_tools.diagnose_scan import cv_groups
-from host_tools.fit import block_groups
+from host_tools.fitting import cv
+from host_tools.fitting.diagnose_scan import cv_groups
+from host_tools.fitting.fit import block_groups
 
 
 def test_folds_are_contiguous_blocks_dealt_round_robin():

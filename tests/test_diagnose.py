@@ -1,4 +1,4 @@
-"""Tests of the closed loop `hdrg diagnose` (host_tools/diagnose.py, host_tools/effects.py).
+"""Tests of the closed loop `hdrg diagnose` (host_tools/fitting/diagnose.py, host_tools/fitting/effects.py).
 
 Every family test simulates two training runs and one held-out run (different seeds) with the
 missing effect injected *undeclared* (the run's metadata does not list it; the starting model has
@@ -19,11 +19,12 @@ import warnings
 import numpy as np
 import pytest
 
-from host_tools import runlog, sim
+from host_tools.golden import runlog
+from host_tools.simulation import sim
 from host_tools.cli import main
-from host_tools.compensate import compensate
-from host_tools.diagnose import RULE, diagnose
-from host_tools.model import BiasModel
+from host_tools.golden.compensate import compensate
+from host_tools.fitting.diagnose import RULE, diagnose
+from host_tools.golden.model import BiasModel
 
 OFF = ["turn_on", "electronics", "damping_asym"]
 ONE_CYCLE = sim.cycle_profile(2.0, hold_s=1200, n_cycles=1)       # 4800 s
@@ -376,7 +377,7 @@ def test_confirmed_steps_lower_the_held_out_error(results):
 
 
 def test_noise_model_recovers_white_and_flicker_and_ignores_a_slow_effect():
-    from host_tools.diagnose import _noise_series, noise_model
+    from host_tools.fitting.diagnose import _noise_series, noise_model
     rng = np.random.default_rng(5)
     n = 40000
     t = np.arange(n, dtype=float)
@@ -396,7 +397,7 @@ def test_noise_model_recovers_white_and_flicker_and_ignores_a_slow_effect():
 
 
 def test_combiner_lines_are_the_reversal_cycle_and_its_chamber_sidebands():
-    from host_tools.diagnose import artifact_of
+    from host_tools.fitting.diagnose import artifact_of
     cl = {"reversal_period_s": 300.0, "chamber_period_s": 2400.0, "tolerance_hz": 1.5 / 9600, "combiner": "trend"}
     for period in (300.0, 150.0, 1 / (1 / 300 + 1 / 2400), 1 / (1 / 300 + 3 / 2400), 1 / (1 / 300 - 1 / 2400)):
         assert artifact_of(period, cl), period
@@ -412,7 +413,7 @@ def test_the_default_mode_reversal_run_never_gets_a_periodic_bias_at_a_combiner_
         warnings.simplefilter("ignore")
         logs = [sim.simulate("paper-mr-cycle-4dpm", seed=s, profile=TWO_CYCLES, off=["turn_on"]) for s in (1, 3, 2)]
     rep, _ = diagnose(logs[:2], logs[2:], plots=False)
-    from host_tools.diagnose import artifact_of
+    from host_tools.fitting.diagnose import artifact_of
     cl = rep["artifacts"]["combiner_lines"]
     assert cl["reversal_period_s"] == pytest.approx(300.0)
     for it in rep["iterations"]:
@@ -442,7 +443,7 @@ def test_cli_prints_progress(tmp_path, capsys):
 def test_the_loops_base_model_is_hdrg_fits_default(mr, tmp_path):
     """No options: the loop starts from exactly the model `hdrg fit` writes with its defaults
     (compensate.DEFAULT_*: rate estimator, terms auto, regress_first + pair for mode reversal)."""
-    from host_tools import compensate as comp
+    from host_tools.golden import compensate as comp
     scen = "paper-mr-cycle-4dpm" if mr else "paper-ftr-cycle-4dpm"
     paths = []
     for s in (1, 2):
@@ -469,7 +470,7 @@ def test_a_step_that_shifts_a_held_out_leg_is_not_confirmed():
     """Confirmation includes the rms WITH the mean offset per held-out run and leg: a step whose
     std drops but which moves one leg by tens of deg/h (tofupilot x heat->cool) is refused; the
     same std drop without the shift is confirmed."""
-    from host_tools.diagnose import _stats_one, confirmed_on_holdout, leg_rms
+    from host_tools.fitting.diagnose import _stats_one, confirmed_on_holdout, leg_rms
     rng = np.random.default_rng(3)
     n = 4000
     t = np.arange(n, dtype=float)
@@ -504,9 +505,9 @@ def test_one_held_out_metric_compares_two_models_on_their_common_samples():
     """diagnose.step_errors is the held-out error that confirms a step and that bench_loop scores:
     with a long rate warm-up on one side, both models are judged on the samples valid under both
     (a step used to be confirmed on the common samples and scored by the bench on each model's own)."""
-    from host_tools.diagnose import _score, _stats_one, base_model, base_options, error_stats, step_errors
-    from host_tools.fit import fit_logs
-    from host_tools.compensate import fit_config_from_logs
+    from host_tools.fitting.diagnose import _score, _stats_one, base_model, base_options, error_stats, step_errors
+    from host_tools.fitting.fit import fit_logs
+    from host_tools.golden.compensate import fit_config_from_logs
     train, hold = world(1), world(2)
     diff = base_model([train], base_options(rate_estimator="diff", reversal=True))[0]
     cfg = fit_config_from_logs([train], rate_estimator="iir", shift=9, reversal={"settle_s": 0.0})
@@ -524,7 +525,7 @@ def test_steps_keep_the_rate_estimator_hdrg_fit_chose():
     """From the default start (rate auto on mode reversal) a step that is not a rate_estimator step
     keeps the estimator `hdrg fit` chose: the refit of a step used to fall back to DEFAULT_RATE,
     so a lag block was confirmed on the common samples while the bench scored it worse."""
-    from host_tools.diagnose import base_model, base_options
+    from host_tools.fitting.diagnose import base_model, base_options
     und, kw, _ = CASES["thermal_lag"]
     train, hold = world(1, und, **kw), world(2, und, **kw)
     rep, model = diagnose([train], [hold], plots=False, max_iter=1, n_surrogates=9)

@@ -12,9 +12,9 @@ import pytest
 
 from firmware_ref.table import MAGIC, Table, TableError
 from host_tools.vectors.builders import make_model, random_model, random_stream
-from host_tools import export as ex
+from host_tools.fixed import export as ex
 from host_tools.cli import export as export_cmd
-from host_tools.quantize import quantize, read_table
+from host_tools.fixed.quantize import quantize, read_table
 from test_c_twin import C_DIR, CFLAGS, GCC, assert_same, build, kernel, run_bin, run_text
 
 needs_gcc = pytest.mark.skipif(GCC is None, reason="gcc not found on PATH: the C twin cannot be built")

@@ -1,4 +1,4 @@
-"""Tests of the numeric core of the fitter (host_tools/fit.py)."""
+"""Tests of the numeric core of the fitter (host_tools/fitting/fit.py)."""
 import json
 
 import numpy as np
@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from scipy.signal import lfilter
 
 from firmware_ref.terms import K_AUX, N_TERMS, PAPER_TERMS
-from host_tools import fit as F
+from host_tools.fitting import fit as F
 
 ALL = tuple(range(N_TERMS))
 
@@ -278,9 +278,9 @@ def test_bench_fit_time_rate_auto_vs_fixed(benchmark, how):
     accuracy benchmark's training run) with terms auto: the fixed default rate estimator (diff)
     against rate estimator 'auto' (every RATE_CANDIDATE fitted).  Run:
     python -m pytest tests/test_fit.py -m benchmark -k rate_auto"""
-    from host_tools.compensate import fit_config_from_logs
-    from host_tools.fit import fit_auto_rate, fit_logs
-    from host_tools.sim_foreign import foreign_device, simulate_foreign
+    from host_tools.golden.compensate import fit_config_from_logs
+    from host_tools.fitting.fit import fit_auto_rate, fit_logs
+    from host_tools.simulation.sim_foreign import foreign_device, simulate_foreign
 
     log = simulate_foreign(foreign_device(3), 4.0, True, 0, 0)
     rev = {"combiner": "pair", "order": "regress_first"}

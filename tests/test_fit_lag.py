@@ -1,4 +1,4 @@
-"""The lag-state block of the default fit (host_tools.fit_lag): the shared-Gram screen equals a direct
+"""The lag-state block of the default fit (host_tools.fitting.fit_lag): the shared-Gram screen equals a direct
 per-fold least squares, the packing into one k7 sum reproduces each bank's lag polynomial, the
 block is found on a device whose bias sits on a lagged node (held out better), it is not taken
 when the proxy sees every bias, and its model runs in fixed point within 0.002 deg/h of the golden."""
@@ -7,13 +7,13 @@ import copy
 import numpy as np
 import pytest
 
-import host_tools.compensate as hc
-from host_tools import bench_accuracy as ba
-from host_tools import fit_lag as FL
-from host_tools.fit import block_groups, fit_logs
-from host_tools.fit_pipeline import fit_default
-from host_tools.regressors import aux_regressor, generator_values, regressor_matrix
-from host_tools.sim_foreign import foreign_device, simulate_foreign
+import host_tools.golden.compensate as hc
+from host_tools.bench import accuracy as ba
+from host_tools.fitting import fit_lag as FL
+from host_tools.fitting.fit import block_groups, fit_logs
+from host_tools.fitting.fit_pipeline import fit_default
+from host_tools.golden.regressors import aux_regressor, generator_values, regressor_matrix
+from host_tools.simulation.sim_foreign import foreign_device, simulate_foreign
 from test_fixed_aux import check_close
 
 DUR = 4000.0

@@ -1,5 +1,5 @@
 """The k7 auxiliary regressor z in fixed point (table aux_gen 1, firmware_ref/aux.py): the
-primitives (RHUW, the sine), every generator against the golden (host_tools.regressors) within the
+primitives (RHUW, the sine), every generator against the golden (host_tools.golden.regressors) within the
 quantizer's bound, long filters without a dead band, exchange resets, the table's aux words, the
 quantizer's refusals, the host path (``compensate(impl='fixed')`` computes z from the log's
 channels), |fixed - golden| < 0.002 deg/h on models that ``hdrg diagnose`` finds, an aux table
@@ -18,18 +18,18 @@ from firmware_ref import formats as F
 from firmware_ref import inputs
 from firmware_ref.aux import sin_q30
 from firmware_ref.compensate import run_reference
-from host_tools.fixed_point import compensate_log, log_words
+from host_tools.fixed.fixed_point import compensate_log, log_words
 from firmware_ref.kernel import _rhu_wide, _sin_q30, run_words
 from firmware_ref.table import FIELD_INDEX, Table, TableError, encode_aux
 from host_tools.vectors.builders import make_model, with_aux
-from host_tools import compensate as hc
-from host_tools import runlog as rl
-from host_tools.diagnose import STAT_KEYS, _stats_one, diagnose
-from host_tools.fit import fit_logs
-from host_tools.quantize import QuantizeError, quantize, read_table
-from host_tools.quantize_parts import aux_channel_fracs
-from host_tools.regressors import aux_regressor
-from host_tools.fixed_point import dequantized_log
+from host_tools.golden import compensate as hc
+from host_tools.golden import runlog as rl
+from host_tools.fitting.diagnose import STAT_KEYS, _stats_one, diagnose
+from host_tools.fitting.fit import fit_logs
+from host_tools.fixed.quantize import QuantizeError, quantize, read_table
+from host_tools.fixed.quantize_parts import aux_channel_fracs
+from host_tools.golden.regressors import aux_regressor
+from host_tools.fixed.fixed_point import dequantized_log
 from fixed_compare import fixed_vs_golden
 from test_diagnose import CASES, world
 
@@ -242,7 +242,7 @@ def test_quantize_refuses_aux(terms, match):
 # -- the host path -----------------------------------------------------------------------------------------
 
 def _sim_log(seed=4, duration=3000.0, **kw):
-    from host_tools.sim import simulate
+    from host_tools.simulation.sim import simulate
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         log = simulate("paper-mr-cycle-4dpm", seed=seed, duration_s=duration, **kw)
@@ -251,8 +251,8 @@ def _sim_log(seed=4, duration=3000.0, **kw):
 
 
 def fitted_aux_model(log, terms, combiner="trend"):
-    from host_tools.reversal import ReversalConfig
-    from host_tools.regressors import AuxConfig
+    from host_tools.golden.reversal import ReversalConfig
+    from host_tools.golden.regressors import AuxConfig
     cfg = hc.fit_config_from_logs([log], reversal=ReversalConfig(combiner))
     cfg = dataclasses.replace(cfg, aux=AuxConfig.from_terms(terms, cfg.rate.fs))
     model, _ = fit_logs([log], cfg, tuple(range(17)), drop_unidentifiable=True)
@@ -260,7 +260,7 @@ def fitted_aux_model(log, terms, combiner="trend"):
 
 
 def test_compensate_fixed_computes_z_from_the_log():
-    """impl='fixed' (host_tools.compensate) runs the generators on the log's channels: numba ==
+    """impl='fixed' (host_tools.golden.compensate) runs the generators on the log's channels: numba ==
     the Python reference; the aux column matters; a table of other aux parameters is refused; a
     log without the aux column is refused naming it; 'none' keeps z = 0."""
     log = _sim_log(duration=1500.0)
@@ -332,9 +332,9 @@ def test_acceptance_effect_found_exported_quantized_and_run_in_fixed_point(tmp_p
     dequantized words) within the golden-vs-fixed bound (std) and twice it (pp: two samples),
     and the raw float numbers within the measured |fixed - float|; the effect is removed in
     fixed point as in float."""
-    from host_tools import export as ex
+    from host_tools.fixed import export as ex
     from host_tools.cli import COMMANDS, main
-    from host_tools.reversal import ReversalConfig
+    from host_tools.golden.reversal import ReversalConfig
 
     und, sim_kw, diag_kw = CASES["turn_on"]
     train = [world(s, und, **sim_kw) for s in (1, 3)]
@@ -404,7 +404,7 @@ def test_aux_table_uploads_to_the_virtual_device():
     from host_tools import link as SL
     from test_serial import PtyDevice, stream_around_upload
 
-    from host_tools.reversal import ReversalConfig
+    from host_tools.golden.reversal import ReversalConfig
     log = _sim_log(seed=5, duration=1200.0)
     base = quantize(fit_logs([log], hc.fit_config_from_logs([log], reversal=ReversalConfig("pair")))[0]).table
     aux = quantize(fitted_aux_model(log, [{"gen": "decay_on", "tau_s": 60.0, "weight": 0.5},

@@ -10,7 +10,7 @@ from firmware_ref.kernel import evaluate_words, run_words
 from firmware_ref.terms import K_AUX, POLY_INDEX
 from host_tools.vectors.builders import (aux_stream, corner_stream, make_model, random_aux_model, random_model,
                                   random_stream)
-from host_tools.quantize import quantize
+from host_tools.fixed.quantize import quantize
 
 KEYS = ("out", "bias", "valid", "flags", "u", "v", "z", "b", "y", "s", "state")
 

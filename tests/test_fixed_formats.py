@@ -6,7 +6,7 @@ from firmware_ref import docgen
 from firmware_ref import formats as F
 from firmware_ref import vocabulary as VOC
 from firmware_ref.table import LAYOUT
-from host_tools import compensate as hc
+from host_tools.golden import compensate as hc
 
 
 def test_formats_md_generated_blocks_are_current():

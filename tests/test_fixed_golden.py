@@ -4,16 +4,16 @@ import numpy as np
 import pytest
 
 from firmware_ref import formats as F
-from host_tools.fixed_point import compensate_log
-from host_tools import compensate as comp
-from host_tools import runlog as rl
+from host_tools.fixed.fixed_point import compensate_log
+from host_tools.golden import compensate as comp
+from host_tools.golden import runlog as rl
 from host_tools.cli import main as cli_main
-from host_tools.fit import fit, fit_logs
-from host_tools.model import BiasModel
-from host_tools.fixed_point import dequantized_log
-from host_tools.quantize import quantize
-from host_tools.reversal import ReversalConfig
-from host_tools.sim import simulate
+from host_tools.fitting.fit import fit, fit_logs
+from host_tools.golden.model import BiasModel
+from host_tools.fixed.fixed_point import dequantized_log
+from host_tools.fixed.quantize import quantize
+from host_tools.golden.reversal import ReversalConfig
+from host_tools.simulation.sim import simulate
 from fixed_compare import fixed_vs_golden
 
 GOAL_DPH = 0.002

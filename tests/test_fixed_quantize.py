@@ -17,7 +17,7 @@ from firmware_ref.table import FIELD_INDEX, MAGIC, N_FIXED, Table, TableError
 from firmware_ref.terms import K_AUX, N_TERMS, TERM_POWERS
 from host_tools.vectors.builders import make_model
 from host_tools.cli.quantize import configure, run
-from host_tools.quantize import QuantizeError, quantize, read_table
+from host_tools.fixed.quantize import QuantizeError, quantize, read_table
 
 CORNERS = [-F.ONE, -F.ONE + 1, -1, 0, 1, F.ONE - 1, F.ONE]
 
@@ -238,7 +238,7 @@ def test_table_json_and_cli(tmp_path, capsys):
         assert key in d
     t = read_table(out)
     assert read_table(tmp_path / "t.memh") == t == read_table(tmp_path / "t.bin")
-    from host_tools.export import decode_c_header
+    from host_tools.fixed.export import decode_c_header
     assert decode_c_header((tmp_path / "t.h").read_text()) == t.to_words()   # the one header writer
     assert struct.unpack("<I", (tmp_path / "t.bin").read_bytes()[-4:])[0] == t.crc
     d["fields"]["m_0"] += 1

@@ -1,6 +1,6 @@
 """The fixed-point sequencer: timer states and virtual-switch bits (paper and another timing),
 power-on, counter edges (long runs, saturation instead of wrap), and the integer combiner vs the
-golden host_tools.reversal.combine."""
+golden host_tools.golden.reversal.combine."""
 import numpy as np
 import pytest
 
@@ -9,10 +9,10 @@ from firmware_ref.compensate import Pipeline
 from firmware_ref.kernel import run_words
 from firmware_ref.sequencer import Combiner, Sequencer, Timer
 from host_tools.vectors.builders import make_model
-from host_tools import runlog as rl
-from host_tools.quantize import quantize
-from host_tools.reversal import combine
-from host_tools.sim_physics import mode_sequence
+from host_tools.golden import runlog as rl
+from host_tools.fixed.quantize import quantize
+from host_tools.golden.reversal import combine
+from host_tools.simulation.sim_physics import mode_sequence
 
 ZERO = np.zeros(17)
 

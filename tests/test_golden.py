@@ -7,14 +7,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from firmware_ref.terms import K_AUX, N_TERMS, PAPER_TERMS, TERM_POWERS
-from host_tools import compensate as comp
-from host_tools import runlog as rl
+from host_tools.golden import compensate as comp
+from host_tools.golden import runlog as rl
 from host_tools.cli import main as cli_main
-from host_tools.model import BiasModel, ModelConfig, ModelError
-from host_tools.proxy import ProxyConfig, parse_range
-from host_tools.rate import ESTIMATORS, RateConfig, parse_rate_range
-from host_tools.regressors import AuxConfig, aux_regressor, bias_horner, bias_plain, regressor_matrix
-from host_tools.reversal import ReversalConfig, combine
+from host_tools.golden.model import BiasModel, ModelConfig, ModelError
+from host_tools.golden.proxy import ProxyConfig, parse_range
+from host_tools.golden.rate import ESTIMATORS, RateConfig, parse_rate_range
+from host_tools.golden.regressors import AuxConfig, aux_regressor, bias_horner, bias_plain, regressor_matrix
+from host_tools.golden.reversal import ReversalConfig, combine
 
 EST_PARAMS = [("diff", 8, 4), ("diffn", 1, 4), ("diffn", 5, 4), ("lsq", 2, 4), ("lsq", 7, 4),
               ("iir", 8, 0), ("iir", 8, 3)]

@@ -1,4 +1,4 @@
-"""Tests of host_tools.metrics: every statistic against an independent numpy computation."""
+"""Tests of host_tools.fitting.metrics: every statistic against an independent numpy computation."""
 from __future__ import annotations
 
 import json
@@ -9,9 +9,9 @@ import numpy as np
 from pathlib import Path
 import pytest
 
-from host_tools import metrics
+from host_tools.fitting import metrics
 from host_tools.cli import main
-from host_tools.runlog import RunLog, RunLogError, RunLogWarning, write
+from host_tools.golden.runlog import RunLog, RunLogError, RunLogWarning, write
 
 MEASURED = str(Path(__file__).parent / "data" / "psim-tvac-lsm6dsm")
 MEASURED_X = os.path.join(MEASURED, "psim-tvac-x.csv")
@@ -162,7 +162,7 @@ def _pair_by_hand(mode, rate):
 
 def test_default_combiner_is_the_fit_default():
     """issue 13 item 9: metrics' default combiner is the one hdrg fit uses (reversal.DEFAULT_COMBINER)."""
-    from host_tools import reversal
+    from host_tools.golden import reversal
     from host_tools.cli import build_parser
 
     log = _mr_log(0.0)[0]
@@ -173,7 +173,7 @@ def test_default_combiner_is_the_fit_default():
     met_args = parser.parse_args(["metrics", "a.csv"])
     assert fit_args.combiner is None  # resolved by fit_config_from_logs to the default below
     assert met_args.combiner is None  # resolved to reversal.DEFAULT_COMBINER in run_metrics
-    from host_tools.compensate import fit_config_from_logs
+    from host_tools.golden.compensate import fit_config_from_logs
     cfg = fit_config_from_logs([log], reversal={"combiner": fit_args.combiner}, proxy_range=(0.0, 50.0), rate_range=1.0)
     assert cfg.reversal.combiner == reversal.DEFAULT_COMBINER
     same = metrics.run_metrics(log, taus=(1, 10), combiner=cfg.reversal.combiner)
@@ -181,8 +181,8 @@ def test_default_combiner_is_the_fit_default():
 
 
 def test_reversal_log_uses_pair_combiner():
-    pytest.importorskip("host_tools.reversal")
-    from host_tools import reversal
+    pytest.importorskip("host_tools.golden.reversal")
+    from host_tools.golden import reversal
 
     log, mode, rate = _mr_log(1e9)
     exp_out, exp_valid = _pair_by_hand(mode, rate)
@@ -202,7 +202,7 @@ def test_reversal_log_uses_pair_combiner():
 
 
 def test_exchange_garbage_moves_nothing():
-    pytest.importorskip("host_tools.reversal")
+    pytest.importorskip("host_tools.golden.reversal")
     a = metrics.run_metrics(_mr_log(1e9)[0])
     b = metrics.run_metrics(_mr_log(-7.0)[0])
     c = metrics.run_metrics(_mr_log(-3e12)[0])
@@ -213,7 +213,7 @@ def test_exchange_garbage_moves_nothing():
 
 
 def test_trend_combiner_passed_through():
-    pytest.importorskip("host_tools.reversal")
+    pytest.importorskip("host_tools.golden.reversal")
     log = _mr_log(0.0)[0]
     p = metrics.run_metrics(log, combiner="pair")
     tr = metrics.run_metrics(log, combiner="trend")

@@ -6,12 +6,13 @@ import warnings
 import numpy as np
 import pytest
 
-from host_tools import runlog, sim
+from host_tools.golden import runlog
+from host_tools.simulation import sim
 from host_tools.cli import main
-from host_tools.compensate import compensate, fit_config_from_logs, prepare
-from host_tools.fit import fit_logs
-from host_tools.metrics import at_tau, bias_metrics
-from host_tools.model import BiasModel
+from host_tools.golden.compensate import compensate, fit_config_from_logs, prepare
+from host_tools.fitting.fit import fit_logs
+from host_tools.fitting.metrics import at_tau, bias_metrics
+from host_tools.golden.model import BiasModel
 
 
 def std100(y, t, valid):
@@ -131,7 +132,7 @@ def test_measured_data_is_honest_about_what_it_cannot_identify(tmp_path, measure
 
 
 def test_report_writes_tables_figures_and_baseline(tmp_path, runs):
-    from host_tools.report import report
+    from host_tools.fitting.report import report
     cfg = fit_config_from_logs([runs["ftr2"]])
     model, _ = fit_logs([runs["ftr2"]], cfg)
     doc = report([runs["ftr4"]], model, tmp_path / "rep", train_logs=[runs["ftr2"]])
@@ -148,7 +149,7 @@ def test_paper_reproduction(capsys):
     text = capsys.readouterr().out
     for key in ("Table 1", "Table 2", "Table 3", "Section 4.4", "Table 4", "27.800", "0.453"):
         assert key in text
-    from host_tools import paper
+    from host_tools.simulation import paper
     t2, t3, rep = paper.tables23()
     for r in t2:
         assert r["after"]["std"] < r["before"]["std"] / 10

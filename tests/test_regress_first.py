@@ -5,11 +5,11 @@ import json
 import numpy as np
 import pytest
 
-from host_tools import compensate as comp
-from host_tools import runlog as rl
-from host_tools.fit import fit_logs
-from host_tools.model import BiasModel, ModelError
-from host_tools.reversal import ReversalConfig, combine, combine_values
+from host_tools.golden import compensate as comp
+from host_tools.golden import runlog as rl
+from host_tools.fitting.fit import fit_logs
+from host_tools.golden.model import BiasModel, ModelError
+from host_tools.golden.reversal import ReversalConfig, combine, combine_values
 
 PERIOD = (30, 120, 30, 120)  # exchange, mode 1, exchange, mode 2 [samples at 1 Hz]
 
@@ -320,7 +320,7 @@ def test_cli_fit_regress_first_and_compensate(tmp_path):
 
 
 def test_rate_estimator_auto_keeps_least_cv_and_reports_it(tmp_path):
-    from host_tools.fit import RATE_CANDIDATES, fit_auto_rate
+    from host_tools.fitting.fit import RATE_CANDIDATES, fit_auto_rate
 
     log = mr_log(n_periods=3)  # 900 samples: shorter than the iir shift-9 warm-up (1024)
     log = with_bias(log, config(log, rate_estimator="diff"), common, damping)

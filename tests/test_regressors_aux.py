@@ -1,4 +1,4 @@
-"""The k7 generators of host_tools.regressors (AuxConfig 'sum'): each recursion against an
+"""The k7 generators of host_tools.golden.regressors (AuxConfig 'sum'): each recursion against an
 independent closed form, causality, segment resets, validation and the model-file round trip."""
 from __future__ import annotations
 
@@ -11,11 +11,11 @@ from hypothesis import strategies as st
 from scipy.signal import lfilter
 
 from firmware_ref.terms import PAPER_TERMS
-from host_tools import runlog as rl
-from host_tools.model import BiasModel, ModelConfig
-from host_tools.proxy import ProxyConfig
-from host_tools.rate import RateConfig
-from host_tools.regressors import AuxConfig, aux_regressor, generator_values, normalize_term
+from host_tools.golden import runlog as rl
+from host_tools.golden.model import BiasModel, ModelConfig
+from host_tools.golden.proxy import ProxyConfig
+from host_tools.golden.rate import RateConfig
+from host_tools.golden.regressors import AuxConfig, aux_regressor, generator_values, normalize_term
 
 FS = 2.0
 

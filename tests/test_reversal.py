@@ -1,10 +1,10 @@
-"""Mode-reversal combination (host_tools.reversal): exact semantics on hand-built logs."""
+"""Mode-reversal combination (host_tools.golden.reversal): exact semantics on hand-built logs."""
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from host_tools.reversal import combine, ReversalConfig
-from host_tools.runlog import RunLog
+from host_tools.golden.reversal import combine, ReversalConfig
+from host_tools.golden.runlog import RunLog
 
 
 def mr_log(n_periods=4, exch=3, dwell=12, omega=0.0, b_e=lambda i: 0.0 * i, b_d=lambda i: 0.0 * i, t_gap_at=None):

@@ -14,8 +14,10 @@ import numpy as np
 import pytest
 
 from firmware_ref import formats as F
-from host_tools import cli, flags as hflags, runlog, sim
-from host_tools.runlog import RunLogError, RunLogWarning
+from host_tools import cli
+from host_tools.golden import flags as hflags, runlog
+from host_tools.simulation import sim
+from host_tools.golden.runlog import RunLogError, RunLogWarning
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -62,7 +64,7 @@ def test_extrapolation_flags_counts_warning_and_strict(runs, capsys, tmp_path, i
     assert f"proxy_clamped {n_proxy}" in log.metadata["compensation_flags"]
     assert "warning" in err and "extrapolation" in err and f"{n_proxy} of {len(log)}" in err
     if impl == "float":  # the flag bits are the golden proxy clamping
-        from host_tools.model import BiasModel
+        from host_tools.golden.model import BiasModel
         m = BiasModel.from_json(runs["model"])
         _, u_clamped = m.config.proxy.normalize(runlog.read(runs["wide"])["freq_hz"])
         assert np.array_equal((fl & F.FLAG_PROXY_CLAMPED) != 0, u_clamped)
@@ -376,9 +378,9 @@ def test_readme_cites_the_projects_format_document():
 
 def test_report_allan_bridges_mode_reversal(runs, tmp_path, monkeypatch):
     """The report's Allan figure of a mode-reversal run reaches 100 s (diagnose's bridging)."""
-    from host_tools import diagnose, report
-    from host_tools.compensate import fit_config_from_logs
-    from host_tools.fit import fit_logs
+    from host_tools.fitting import diagnose, report
+    from host_tools.golden.compensate import fit_config_from_logs
+    from host_tools.fitting.fit import fit_logs
 
     log = runlog.read(runs["mr"])
     model, _ = fit_logs([log], fit_config_from_logs([log], reversal={"combiner": "trend"}), "k0,k1")

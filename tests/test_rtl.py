@@ -8,7 +8,7 @@ import subprocess
 
 import pytest
 
-from host_tools import cost_fpga, cost_rtl
+from host_tools.bench import cost_fpga, cost_rtl
 from host_tools import vectors as V
 from host_tools.vectors.build import load_set
 from host_tools.vectors.runner import requests

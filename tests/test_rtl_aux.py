@@ -1,4 +1,4 @@
-"""The aux generators in RTL (vectors/hdl/hdrg_aux.v, driven by tb_aux.v through host_tools.cost_aux):
+"""The aux generators in RTL (vectors/hdl/hdrg_aux.v, driven by tb_aux.v through host_tools.bench.cost_aux):
 bit-exact z and flag 32 against the aux vector set and against the Python reference on directed
 worst-case tables (every term the longest kind), the schedule's cycle count, a deliberately broken
 build that fails, lint and synthesis figures.
@@ -17,7 +17,7 @@ import pytest
 from firmware_ref import formats as F
 from firmware_ref.table import AuxTerm, Table, encode_aux
 from host_tools import vectors as V
-from host_tools import cost_aux as CA
+from host_tools.bench import cost_aux as CA
 
 needs_iverilog = pytest.mark.skipif(shutil.which("iverilog") is None, reason="iverilog not installed")
 needs_verilator = pytest.mark.skipif(shutil.which("verilator") is None, reason="verilator not installed")

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from host_tools import runlog
-from host_tools.runlog import RunLog, RunLogError, RunLogWarning
+from host_tools.golden import runlog
+from host_tools.golden.runlog import RunLog, RunLogError, RunLogWarning
 
 GOOD = """# device: hdrg-01
 # sample_rate_hz: 1

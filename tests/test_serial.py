@@ -27,15 +27,15 @@ from hypothesis import strategies as st
 from firmware_ref import formats as F
 from firmware_ref import inputs
 from firmware_ref import table as T
-from host_tools.fixed_point import compensate_log
+from host_tools.fixed.fixed_point import compensate_log
 from firmware_ref.kernel import run_words
 from host_tools.link import device as D
-from host_tools import runlog
+from host_tools.golden import runlog
 from host_tools import link as SL
-from host_tools import sim
-from host_tools.compensate import fit_config_from_logs
-from host_tools.model import BiasModel
-from host_tools.quantize import quantize
+from host_tools.simulation import sim
+from host_tools.golden.compensate import fit_config_from_logs
+from host_tools.golden.model import BiasModel
+from host_tools.fixed.quantize import quantize
 
 SCENARIO, SEED, DURATION = "paper-mr-cycle-4dpm", 3, 1200.0
 
@@ -668,7 +668,7 @@ def test_device_refuses_a_table_of_the_other_mode(run, tmp_path, capsys):
         assert SL.upload(link, run["table2"], timeout_s=3.0).crc == run["table2"].crc
     # a device started with a table of the other mode: refused before it runs
     path = tmp_path / "ftr.json"
-    from host_tools.quantize import quantize as q
+    from host_tools.fixed.quantize import quantize as q
     cfg = fit_config_from_logs([ftr_log])
     q(BiasModel(cfg, (), np.zeros(17), source="ftr"), n_random=16).to_json(path)
     rc = cli.main(["device", "--port", "loop://", "--table", str(path), "--scenario", SCENARIO, "--duration", "60"])

@@ -1,4 +1,4 @@
-"""Tests of the virtual gyroscope (host_tools/sim.py) and of `hdrg simulate`."""
+"""Tests of the virtual gyroscope (host_tools/simulation/sim.py) and of `hdrg simulate`."""
 from __future__ import annotations
 
 import math
@@ -7,7 +7,8 @@ import allantools
 import numpy as np
 import pytest
 
-from host_tools import runlog, sim, sim_params, sim_physics
+from host_tools.golden import runlog
+from host_tools.simulation import sim, sim_params, sim_physics
 from host_tools.cli import main
 
 COLUMNS = ["t_s", "freq_hz", "rate_dph", "mode", "temp_c", "aux_vdd"]
@@ -16,7 +17,7 @@ COLUMNS = ["t_s", "freq_hz", "rate_dph", "mode", "temp_c", "aux_vdd"]
 # -- helpers: a private copy of the paper's pair combiner and the 100-s block statistics ----------
 
 def pair_combine(mode, rate):
-    """The paper's pairing combiner (private copy of host_tools.reversal "pair", no settling):
+    """The paper's pairing combiner (private copy of host_tools.golden.reversal "pair", no settling):
     in a window of mode m (1 or 2), out = (c + W_other) / 2 with c = s * rate (s = +1 mode 1,
     -1 mode 2) and W_other the mean of c over the last complete window of the other mode; valid
     only in modes 1/2 once the other mode has a complete window.  FTR logs: out = rate."""
@@ -315,7 +316,7 @@ def test_calibration(seed):
 
 
 def test_pair_combiner_copy_matches_reversal_module():
-    reversal = pytest.importorskip("host_tools.reversal")
+    reversal = pytest.importorskip("host_tools.golden.reversal")
     log = sim.simulate("paper-mr-cycle-4dpm", seed=0, duration_s=3000)
     out, valid = pair_combine(log.mode, log.rate_dph)
     comb = reversal.combine(log, "pair")

@@ -1,4 +1,4 @@
-"""The foreign simulator family (host_tools.sim_foreign): determinism, sign convention, the
+"""The foreign simulator family (host_tools.simulation.sim_foreign): determinism, sign convention, the
 noise-only floor run, every effect kind, CLI and bad arguments."""
 import copy
 import json
@@ -6,8 +6,9 @@ import json
 import numpy as np
 import pytest
 
-from host_tools import cli, runlog
-from host_tools.sim_foreign import (EFFECT_KINDS, EFFECTS, G0, T_REF_C, T_SCALE_C, foreign_device,
+from host_tools import cli
+from host_tools.golden import runlog
+from host_tools.simulation.sim_foreign import (EFFECT_KINDS, EFFECTS, G0, T_REF_C, T_SCALE_C, foreign_device,
                                     node_temperatures, simulate_foreign)
 
 DUR = 3000.0
@@ -86,7 +87,7 @@ def test_mode2_sign_convention():
 
 
 def _profile(dev):
-    from host_tools.sim_foreign import chamber_profile
+    from host_tools.simulation.sim_foreign import chamber_profile
     return chamber_profile(dev, 4.0)
 
 

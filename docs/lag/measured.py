@@ -1,8 +1,8 @@
 # Measurement script of docs/ACCURACY.md "Lag-state block" (not part of the package).
 """Measured FTR data (tests/data): fit on one leg / half, hold out the other; std at 1 s of the
-compensated held-out output [deg/h] of the default fit (host_tools.fit_pipeline.fit_default) with the
-lag-state block off and on (host_tools.compensate.DEFAULT_LAG_BLOCK), and the block chosen.
-Usage: PYTHONPATH=. python docs/lag/measured.py [NAME=VALUE ...]  (host_tools.fit_lag constants)"""
+compensated held-out output [deg/h] of the default fit (host_tools.fitting.fit_pipeline.fit_default) with the
+lag-state block off and on (host_tools.golden.compensate.DEFAULT_LAG_BLOCK), and the block chosen.
+Usage: PYTHONPATH=. python docs/lag/measured.py [NAME=VALUE ...]  (host_tools.fitting.fit_lag constants)"""
 import os
 import time
 import warnings
@@ -11,11 +11,11 @@ import sys
 
 import numpy as np
 
-import host_tools.compensate as C
-import host_tools.fit_lag as FL
-from host_tools import metrics
-from host_tools import runlog as rl
-from host_tools.fit_pipeline import fit_default
+import host_tools.golden.compensate as C
+import host_tools.fitting.fit_lag as FL
+from host_tools.fitting import metrics
+from host_tools.golden import runlog as rl
+from host_tools.fitting.fit_pipeline import fit_default
 
 warnings.simplefilter("ignore")
 D = os.path.join(os.path.dirname(__file__), "..", "..", "tests", "data")

@@ -3,13 +3,13 @@
 """Per foreign device: base default fit (lag off) and every lag candidate forced; held-out ratios. args: start end out"""
 import time, sys, json
 import numpy as np
-import host_tools.compensate as C
-from host_tools import fit_lag as FL
-from host_tools.sim_foreign import foreign_device, simulate_foreign, damping_bias
-from host_tools.fit import fit_logs
-from host_tools.fit_pipeline import fit_default
-from host_tools.compensate import compensate
-from host_tools.bench_accuracy import floor_of
+import host_tools.golden.compensate as C
+from host_tools.fitting import fit_lag as FL
+from host_tools.simulation.sim_foreign import foreign_device, simulate_foreign, damping_bias
+from host_tools.fitting.fit import fit_logs
+from host_tools.fitting.fit_pipeline import fit_default
+from host_tools.golden.compensate import compensate
+from host_tools.bench.accuracy import floor_of
 a, b, outp = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
 C.DEFAULT_LAG_BLOCK = "off"
 def ratio(m, ho, fl):

@@ -1,7 +1,7 @@
 import os, warnings
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
-from host_tools.runlog import read_csv
+from host_tools.golden.runlog import read_csv
 import os
 D = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tests", "data") + "/"
 def load_tofu(ax):

@@ -3,11 +3,11 @@
 held-out output [deg/h] per (estimator, terms).  Also the raw std and a cubic-in-temp baseline."""
 import sys, warnings
 import numpy as np
-from host_tools import runlog as rl
-from host_tools.bench_accuracy import ESTIMATORS
-from host_tools.compensate import compensate, fit_config_from_logs
-from host_tools.fit import fit_auto_rate, fit_logs
-from host_tools import metrics
+from host_tools.golden import runlog as rl
+from host_tools.bench.accuracy import ESTIMATORS
+from host_tools.golden.compensate import compensate, fit_config_from_logs
+from host_tools.fitting.fit import fit_auto_rate, fit_logs
+from host_tools.fitting import metrics
 
 warnings.simplefilter("ignore")
 D = "/work/shared/data/measured/"
@@ -32,7 +32,7 @@ for name, tr, ho in cases:
     for e in ests:
         for t in terms:
             try:
-                if e == "auto":   # the rate estimator chosen by cross-validation (host_tools.fit.fit_auto_rate)
+                if e == "auto":   # the rate estimator chosen by cross-validation (host_tools.fitting.fit.fit_auto_rate)
                     model, res = fit_auto_rate([tr], t, proxy_margin=0.5, rate_margin=0.5)
                     print(name, "auto chose", model.fit["rate_selection"]["chosen"], file=sys.stderr)
                 else:

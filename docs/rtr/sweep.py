@@ -4,12 +4,12 @@ held-out ratio (std at 1 s / floor), train 4 degC/min p0 n0, hold out 2 degC/min
 usage: sweep.py START END OUT KINDS ESTS TERMSETS"""
 import dataclasses, json, sys, warnings
 import numpy as np
-from host_tools.bench_accuracy import ESTIMATORS, floor_of, _std
-from host_tools.compensate import compensate, fit_config_from_logs
-from host_tools.fit import fit_logs
-from host_tools.model import ModelConfig, BiasModel
-from host_tools.reversal import ReversalConfig
-from host_tools.sim_foreign import damping_bias, foreign_device, simulate_foreign
+from host_tools.bench.accuracy import ESTIMATORS, floor_of, _std
+from host_tools.golden.compensate import compensate, fit_config_from_logs
+from host_tools.fitting.fit import fit_logs
+from host_tools.golden.model import ModelConfig, BiasModel
+from host_tools.golden.reversal import ReversalConfig
+from host_tools.simulation.sim_foreign import damping_bias, foreign_device, simulate_foreign
 
 start, end, out = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
 kinds = sys.argv[4].split(",")

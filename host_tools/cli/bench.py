@@ -3,7 +3,7 @@
 Registry ``BENCHMARKS``: name -> (command module, stage module).  A command module defines
 ``configure(parser)`` and ``run(args) -> int`` like every command; its help is the first paragraph
 of the stage module's docstring.  A benchmark whose stage module is not importable on this branch
-(e.g. ``host_tools.bench_loop`` before its branch is merged) is not offered.
+(e.g. ``host_tools.bench.loop`` before its branch is merged) is not offered.
 """
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import argparse
 import importlib
 import importlib.util
 
-BENCHMARKS = {"accuracy": ("host_tools.cli.bench_accuracy", "host_tools.bench_accuracy"),
-              "loop": ("host_tools.cli.bench_loop", "host_tools.bench_loop")}
+BENCHMARKS = {"accuracy": ("host_tools.cli.bench_accuracy", "host_tools.bench.accuracy"),
+              "loop": ("host_tools.cli.bench_loop", "host_tools.bench.loop")}
 
 
 def available() -> dict:

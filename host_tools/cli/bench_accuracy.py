@@ -1,4 +1,4 @@
-"""`hdrg bench accuracy`: the pipeline's options on random foreign devices (host_tools.bench_accuracy)."""
+"""`hdrg bench accuracy`: the pipeline's options on random foreign devices (host_tools.bench.accuracy)."""
 from __future__ import annotations
 
 import argparse
@@ -33,7 +33,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from host_tools.bench_accuracy import (ablation, effect_sizes, format_pivot, format_table, merge, plausibility,
+    from host_tools.bench.accuracy import (ablation, effect_sizes, format_pivot, format_table, merge, plausibility,
                                           run_benchmark)
 
     if args.ablation:
@@ -70,7 +70,7 @@ def run(args) -> int:
         print(f"{nerr} option runs failed (see the JSON 'errors'); e.g. "
               + "; ".join(f"seed {r['seed']} {k}: {v}" for r in res["records"] for k, v in r["errors"].items())[:300])
     if args.json:
-        from host_tools.model import jsonable
+        from host_tools.golden.model import jsonable
         with open(args.json, "w") as fh:
             json.dump(jsonable(res), fh, indent=1)
     return 0

@@ -1,4 +1,4 @@
-"""`hdrg bench loop`: the closed loop on random foreign runs with undeclared effects (host_tools.bench_loop)."""
+"""`hdrg bench loop`: the closed loop on random foreign runs with undeclared effects (host_tools.bench.loop)."""
 from __future__ import annotations
 
 import argparse
@@ -24,11 +24,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "figures and measured.json into DIR")
     parser.add_argument("--calibrate", action="store_true",
                         help="instead: false discovery and detection on seeds disjoint from the benchmark's "
-                             "(host_tools.bench_loop.calibration_study)")
+                             "(host_tools.bench.loop.calibration_study)")
 
 
 def run(args) -> int:
-    from host_tools.bench_loop import calibration_study, hdrg_clean_study, measured_study, run_benchmark, summarize
+    from host_tools.bench.loop import calibration_study, hdrg_clean_study, measured_study, run_benchmark, summarize
 
     if args.calibrate:
         res = calibration_study(progress=lambda m: print(m, file=sys.stderr, flush=True))

@@ -1,10 +1,10 @@
 """`hdrg compensate`: apply a bias model to a run log, float golden or fixed point
-(host_tools.compensate)."""
+(host_tools.golden.compensate)."""
 from __future__ import annotations
 
 import argparse
 
-from host_tools.compensate import IMPLS, check_impl, compensate
+from host_tools.golden.compensate import IMPLS, check_impl, compensate
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -23,10 +23,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from host_tools import flags
-    from host_tools import runlog as rl
+    from host_tools.golden import flags
+    from host_tools.golden import runlog as rl
     from host_tools.atomic import refuse_overwrite
-    from host_tools.model import BiasModel
+    from host_tools.golden.model import BiasModel
 
     check_impl(args.impl)
     refuse_overwrite(args.output, [args.run, args.model, args.table])
@@ -35,7 +35,7 @@ def run(args) -> int:
     if args.table:
         if args.impl != "fixed":
             raise ValueError("--table needs --impl fixed")
-        from host_tools.quantize import read_table
+        from host_tools.fixed.quantize import read_table
         table = read_table(args.table)
     log = rl.read(args.run)
     out = compensate(log, model, impl=args.impl, table=table)

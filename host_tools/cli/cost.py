@@ -1,4 +1,4 @@
-"""`hdrg cost`: build and run the pipeline on a target, cycles and size (host_tools.cost)."""
+"""`hdrg cost`: build and run the pipeline on a target, cycles and size (host_tools.bench.cost)."""
 from __future__ import annotations
 
 import argparse
@@ -6,7 +6,7 @@ import json
 import tempfile
 from pathlib import Path
 
-from host_tools.cost import TARGETS
+from host_tools.bench.cost import TARGETS
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -16,7 +16,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from host_tools.cost import measure, summary
+    from host_tools.bench.cost import measure, summary
 
     if args.keep:
         r = measure(args.target, Path(args.keep), log=print)

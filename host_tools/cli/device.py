@@ -28,7 +28,7 @@ def run(args) -> int:
     from host_tools.link import frame as FR
     from host_tools.link.device import make_device, serve
     from host_tools.link.transport import PortLink
-    from host_tools.quantize import read_table
+    from host_tools.fixed.quantize import read_table
 
     table = read_table(args.table) if args.table else None
     link = None

@@ -1,4 +1,4 @@
-"""`hdrg diagnose`: trace a model's residual to a missing effect and add it (host_tools.diagnose)."""
+"""`hdrg diagnose`: trace a model's residual to a missing effect and add it (host_tools.fitting.diagnose)."""
 from __future__ import annotations
 
 import argparse
@@ -6,7 +6,7 @@ import os
 import sys
 
 from host_tools.cli.options import add_model_options
-from host_tools.diagnose import CV_BLOCKS, CV_FOLDS, G_MIN, MAX_ITER, N_SURROGATES, _fmt, diagnose
+from host_tools.fitting.diagnose import CV_BLOCKS, CV_FOLDS, G_MIN, MAX_ITER, N_SURROGATES, _fmt, diagnose
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -27,9 +27,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from host_tools import runlog as rl
+    from host_tools.golden import runlog as rl
     from host_tools.atomic import atomic_open, refuse_overwrite
-    from host_tools.checks import check_fit_inputs
+    from host_tools.golden.checks import check_fit_inputs
 
     refuse_overwrite([args.json] + [os.path.join(args.out, f) for f in ("model.json", "diagnose.json", "diagnose.md")],
                      list(args.runs) + list(args.holdout))

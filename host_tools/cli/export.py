@@ -1,10 +1,10 @@
-"""`hdrg export`: a coefficient table as C header, table.json and $readmemh file (host_tools.export)."""
+"""`hdrg export`: a coefficient table as C header, table.json and $readmemh file (host_tools.fixed.export)."""
 from __future__ import annotations
 
 import argparse
 import os
 
-from host_tools.export import DEFAULT_NAME, EXTENSIONS, FORMATS, LAYOUT_VERSION, export, load
+from host_tools.fixed.export import DEFAULT_NAME, EXTENSIONS, FORMATS, LAYOUT_VERSION, export, load
 
 
 def configure(parser: argparse.ArgumentParser) -> None:

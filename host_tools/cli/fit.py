@@ -1,4 +1,4 @@
-"""`hdrg fit`: fit the 17-coefficient bias model to run logs (host_tools.fit)."""
+"""`hdrg fit`: fit the 17-coefficient bias model to run logs (host_tools.fitting.fit)."""
 from __future__ import annotations
 
 import argparse
@@ -7,8 +7,8 @@ import numpy as np
 
 from firmware_ref.terms import TERM_NAMES
 from host_tools.cli.options import add_model_options
-from host_tools.fit import MIN_SAMPLES_PER_TERM, UnidentifiableError, fit_auto_rate, fit_logs
-from host_tools.fit_pipeline import fit_default
+from host_tools.fitting.fit import MIN_SAMPLES_PER_TERM, UnidentifiableError, fit_auto_rate, fit_logs
+from host_tools.fitting.fit_pipeline import fit_default
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -23,10 +23,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from host_tools import runlog
+    from host_tools.golden import runlog
     from host_tools.atomic import refuse_overwrite
-    from host_tools.checks import check_fit_inputs
-    from host_tools.compensate import fit_config_from_logs
+    from host_tools.golden.checks import check_fit_inputs
+    from host_tools.golden.compensate import fit_config_from_logs
 
     refuse_overwrite(args.output, args.runs)
     logs = [runlog.read(p) for p in args.runs]
@@ -37,7 +37,7 @@ def run(args) -> int:
     default = args.rate_estimator is None and args.rate_n is None and args.rate_shift is None
     try:
         if default:
-            # what the benchmark picked (host_tools.fit_pipeline.fit_default): rate auto for mode-reversal logs,
+            # what the benchmark picked (host_tools.fitting.fit_pipeline.fit_default): rate auto for mode-reversal logs,
             # the lag-state block of the proxy when cross-validation supports it
             model, res = fit_default(logs, args.terms, drop_unidentifiable=args.drop_unidentifiable,
                                      cv_blocks=args.cv_blocks, **kw)

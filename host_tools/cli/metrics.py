@@ -1,12 +1,12 @@
-"""`hdrg metrics`: the paper's figures of merit of run logs (host_tools.metrics)."""
+"""`hdrg metrics`: the paper's figures of merit of run logs (host_tools.fitting.metrics)."""
 from __future__ import annotations
 
 import argparse
 import math
 import sys
 
-from host_tools import reversal
-from host_tools.metrics import DEFAULT_TAUS, format_table, load, repeatability, run_metrics, to_json
+from host_tools.golden import reversal
+from host_tools.fitting.metrics import DEFAULT_TAUS, format_table, load, repeatability, run_metrics, to_json
 
 
 def _parse_taus(text: str) -> tuple:

@@ -13,9 +13,9 @@ def add_model_options(parser: argparse.ArgumentParser, what: str = "the model") 
     `hdrg fit` and `hdrg diagnose` (its starting model)."""
     parser.add_argument("--proxy", choices=PROXY_KINDS, default=None,
                         help="temperature proxy: freq (drive frequency, default when present) or temp (temp_c)")
-    from host_tools.compensate import (DEFAULT_COMBINER, DEFAULT_ORDER, DEFAULT_RATE, DEFAULT_RATE_SELECTION_MR,
+    from host_tools.golden.compensate import (DEFAULT_COMBINER, DEFAULT_ORDER, DEFAULT_RATE, DEFAULT_RATE_SELECTION_MR,
                                        DEFAULT_SETTLE_S, DEFAULT_TERMS)
-    from host_tools.reversal import COMBINERS, ORDERS
+    from host_tools.golden.reversal import COMBINERS, ORDERS
 
     parser.add_argument("--rate-estimator", default=None, choices=ESTIMATORS + ("auto",),
                         help=f"proxy-rate estimator of {what} (default: {DEFAULT_RATE['estimator']}"
@@ -52,11 +52,11 @@ def add_port_options(parser: argparse.ArgumentParser) -> None:
 
 def add_random_family_options(parser: argparse.ArgumentParser) -> None:
     """Options of the random (foreign) simulator family, added to `hdrg simulate`."""
-    from host_tools.sim_foreign import EFFECT_KINDS
+    from host_tools.simulation.sim_foreign import EFFECT_KINDS
 
     parser.add_argument("--family", choices=("hdrg", "random"), default="hdrg",
                         help="simulator family: hdrg (the calibrated one, default) or random (the foreign, "
-                             "randomized-physics devices of host_tools.sim_foreign; a device is --seed)")
+                             "randomized-physics devices of host_tools.simulation.sim_foreign; a device is --seed)")
     parser.add_argument("--chamber-rate", type=float, default=None, metavar="CPM",
                         help="random family: chamber ramp rate [degC/min] (default 4)")
     parser.add_argument("--power-on", type=int, default=0, metavar="K",

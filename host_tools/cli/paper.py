@@ -1,4 +1,4 @@
-"""`hdrg paper`: every experiment of Chen et al. 2022 on the simulator (host_tools.paper)."""
+"""`hdrg paper`: every experiment of Chen et al. 2022 on the simulator (host_tools.simulation.paper)."""
 from __future__ import annotations
 
 import argparse
@@ -10,7 +10,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from host_tools.paper import format_results, run_all
+    from host_tools.simulation.paper import format_results, run_all
 
     res = run_all()
     print(format_results(res))

@@ -1,10 +1,10 @@
-"""`hdrg quantize`: a bias model -> the fixed-point coefficient table (host_tools.quantize)."""
+"""`hdrg quantize`: a bias model -> the fixed-point coefficient table (host_tools.fixed.quantize)."""
 from __future__ import annotations
 
 import argparse
 
 from firmware_ref import formats as F
-from host_tools.quantize import quantize
+from host_tools.fixed.quantize import quantize
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -22,7 +22,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from host_tools.atomic import atomic_open, refuse_overwrite
-    from host_tools.model import BiasModel
+    from host_tools.golden.model import BiasModel
 
     refuse_overwrite([args.output, args.memh, args.header, args.bin], args.model)
     model = BiasModel.from_json(args.model)
@@ -34,7 +34,7 @@ def run(args) -> int:
         with atomic_open(args.memh, "w", encoding="utf-8") as fh:
             fh.write(t.to_memh())
     if args.header:
-        from host_tools.export import c_header
+        from host_tools.fixed.export import c_header
         with atomic_open(args.header, "w", encoding="utf-8") as fh:
             fh.write(c_header(t, info=q.to_dict()))
     if args.bin:

@@ -1,10 +1,10 @@
-"""`hdrg report`: before/after tables and figures of a model on run logs (host_tools.report)."""
+"""`hdrg report`: before/after tables and figures of a model on run logs (host_tools.fitting.report)."""
 from __future__ import annotations
 
 import argparse
 import os
 
-from host_tools.report import REPORT_FILES, _table, report
+from host_tools.fitting.report import REPORT_FILES, _table, report
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -17,9 +17,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from host_tools import runlog
+    from host_tools.golden import runlog
     from host_tools.atomic import refuse_overwrite
-    from host_tools.model import BiasModel
+    from host_tools.golden.model import BiasModel
 
     refuse_overwrite([os.path.join(args.out, f) for f in REPORT_FILES], list(args.runs) + [args.model]
                      + list(args.train or []))

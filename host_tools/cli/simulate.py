@@ -1,4 +1,4 @@
-"""`hdrg simulate`: a run log from host_tools.sim (the hdrg family) or host_tools.sim_foreign
+"""`hdrg simulate`: a run log from host_tools.simulation.sim (the hdrg family) or host_tools.simulation.sim_foreign
 (``--family random``)."""
 from __future__ import annotations
 
@@ -54,11 +54,11 @@ def _set_overrides(items) -> dict:
 
 
 def run(args) -> int:
-    from host_tools import runlog
+    from host_tools.golden import runlog
 
     if args.family == "random":
         return _run_random(args)
-    from host_tools.sim import format_list, simulate
+    from host_tools.simulation.sim import format_list, simulate
 
     if args.list:
         print(format_list())
@@ -89,8 +89,8 @@ def run(args) -> int:
 
 def _run_random(args) -> int:
     """`hdrg simulate --family random`."""
-    from host_tools import runlog
-    from host_tools.sim_foreign import foreign_device, format_effects, simulate_foreign
+    from host_tools.golden import runlog
+    from host_tools.simulation.sim_foreign import foreign_device, format_effects, simulate_foreign
 
     if args.list:
         print(format_effects())

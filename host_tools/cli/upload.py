@@ -21,7 +21,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     import serial
 
-    from host_tools.quantize import read_table
+    from host_tools.fixed.quantize import read_table
 
     try:
         table = read_table(args.table)

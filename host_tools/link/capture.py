@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from host_tools.link.codec import ST_RUN_ENDED, DeviceInfo, unpack_sample
 from host_tools.link.frame import T_GET_INFO, T_INFO, T_SAMPLE, ProtocolError, ProtocolVersionError
 from host_tools.link.host import HostLink, open_port
-from host_tools.runlog import CAPTURE_DONE, CAPTURE_KEY, CAPTURE_OPEN
+from host_tools.golden.runlog import CAPTURE_DONE, CAPTURE_KEY, CAPTURE_OPEN
 
 
 class CaptureOutputError(ValueError):

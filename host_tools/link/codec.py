@@ -17,7 +17,7 @@ from firmware_ref import formats as F
 from firmware_ref import table as T
 from host_tools.link.frame import MAX_PAYLOAD, PROTO_MAJOR, PROTO_MINOR, ProtocolError, ProtocolVersionError, \
     version_message
-from host_tools.quantize import quantized_coef
+from host_tools.fixed.quantize import quantized_coef
 
 # -- capabilities (INFO, uint16 bit mask) -------------------------------------------------------------
 CAP_SAMPLES = 1          # streams SAMPLE frames
@@ -170,7 +170,7 @@ def table_problems(table) -> list:
     """Why ``table`` (firmware_ref.table.Table) must not be loaded, or [] (usable): its own checks
     (``Table.validate``: field ranges, Horner interval bounds; run again because a Table object
     can be changed after its construction) and the quantizer's output-word guarantee (the sum of
-    |coefficients| within +-2^31 LSB of OUT, as host_tools.quantize refuses such a model)."""
+    |coefficients| within +-2^31 LSB of OUT, as host_tools.fixed.quantize refuses such a model)."""
     try:
         table.validate()
     except T.TableError as exc:

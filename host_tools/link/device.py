@@ -1,6 +1,6 @@
 """`hdrg device`: a virtual gyroscope controller on a pseudo-terminal (or any pyserial URL).
 
-The simulator (host_tools.sim) plays the sensor: its run log is converted to input words
+The simulator (host_tools.simulation.sim) plays the sensor: its run log is converted to input words
 (firmware_ref.inputs: drive-frequency F, temperature T, raw rate R, the logged mode) and fed to
 the fixed-point firmware reference (firmware_ref.kernel.run_words, bit-identical to the
 per-sample Python reference firmware_ref.compensate.Pipeline), which gives the compensated word
@@ -25,8 +25,8 @@ A table with aux generators (aux_gen 1) runs on the F and T words of the run; th
 has no aux_* channel, so its aux words read 0, and its sample counter K restarts with the table.
 
 Without ``--table`` the device starts with the *identity table*: the data flow of the run
-(host_tools.compensate.fit_config_from_logs; the pair combiner for a mode-reversal run) with all
-17 coefficients 0, quantized by host_tools.quantize, so OUT is the combined raw output.
+(host_tools.golden.compensate.fit_config_from_logs; the pair combiner for a mode-reversal run) with all
+17 coefficients 0, quantized by host_tools.fixed.quantize, so OUT is the combined raw output.
 
 When the simulated run ends the device sends INFO with ST_RUN_ENDED and goes on answering
 requests.  Writes are paced: at ``speed`` > 0 a frame the link cannot take within one sample
@@ -111,9 +111,9 @@ def identity_table(log):
     """The identity table of a run: its data flow (fit_config_from_logs; pair combiner for mode
     reversal; the exchange/dwell times of its metadata) with all coefficients 0."""
     from firmware_ref.terms import N_TERMS
-    from host_tools.compensate import fit_config_from_logs
-    from host_tools.model import BiasModel
-    from host_tools.quantize import quantize
+    from host_tools.golden.compensate import fit_config_from_logs
+    from host_tools.golden.model import BiasModel
+    from host_tools.fixed.quantize import quantize
 
     cfg = fit_config_from_logs([log], reversal={"combiner": "pair", "order": "combine_first"} if log.reversal else None)
     model = BiasModel(cfg, (), np.zeros(N_TERMS), source="identity table (all coefficients 0)")
@@ -341,7 +341,7 @@ def make_device(scenario: str = "paper-mr-cycle-4dpm", seed: int = 0, duration_s
                 sample_rate_hz: float = 1.0, table=None, link=None, **kw):
     """A VirtualDevice on a new pty (``link`` None) or on ``link``: ``(device, port_name, log)``.
     ``table`` None: the identity table of the run."""
-    from host_tools import sim
+    from host_tools.simulation import sim
 
     log = sim.simulate(scenario, seed=seed, duration_s=duration_s, sample_rate_hz=sample_rate_hz)
     if table is None:

@@ -12,8 +12,8 @@ Sets (each a CSV with a header, a ``$readmemh`` file and, where tables are used,
   30/120 s cycles, zero-length exchanges, one-sample dwells, settling >= dwell, long runs) and
   log-driven (corner streams of host_tools.vectors.builders, staleness limit edges, trend slope and
   output-word saturation, long windows, random models and streams);
-* ``e2e``: simulated chamber runs (host_tools.sim, fixed seeds, short) with models fitted by
-  host_tools.fit.fit_logs on host_tools.compensate.fit_config_from_logs and quantized, through
+* ``e2e``: simulated chamber runs (host_tools.simulation.sim, fixed seeds, short) with models fitted by
+  host_tools.fitting.fit.fit_logs on host_tools.golden.compensate.fit_config_from_logs and quantized, through
   the whole pipeline with every intermediate: the input words (proxy F or T, rate R), u, v, z,
   the rate sum, the window sum, the Horner rows, the k7 term, the accumulator t, B, y, the
   output words, valid, flags;

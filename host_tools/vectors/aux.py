@@ -164,7 +164,7 @@ def aux_set(rng) -> VectorSet:
 
 
 def quantize_aux(model) -> Table:
-    from host_tools.quantize import quantize
+    from host_tools.fixed.quantize import quantize
 
     return quantize(model, exchange_s=3.0, dwell_s=7.0, n_random=10).table
 
@@ -173,25 +173,25 @@ AUX_SIM = ("paper-mr-cycle-4dpm", 13, 2400.0, {"turn_on": {"amp_dph": 3.0, "tau_
 
 
 def aux_sim_case() -> tuple:
-    """(the arguments of _Cases.add, configuration) of the simulated aux run: host_tools.sim with an
+    """(the arguments of _Cases.add, configuration) of the simulated aux run: host_tools.simulation.sim with an
     undeclared turn-on transient, a model with a decay_on, a lagged-proxy and a board-temperature
     term (fixed generator parameters), fitted, rounded to 7 significant digits, quantized."""
     import warnings as _warnings
 
-    from host_tools.fixed_point import log_words
-    from host_tools import compensate as hc
-    from host_tools.fit import fit_logs
-    from host_tools.model import BiasModel, ModelConfig
-    from host_tools.proxy import ProxyConfig
-    from host_tools.rate import RateConfig
-    from host_tools.regressors import AuxConfig
-    from host_tools.sim import simulate
+    from host_tools.fixed.fixed_point import log_words
+    from host_tools.golden import compensate as hc
+    from host_tools.fitting.fit import fit_logs
+    from host_tools.golden.model import BiasModel, ModelConfig
+    from host_tools.golden.proxy import ProxyConfig
+    from host_tools.golden.rate import RateConfig
+    from host_tools.golden.regressors import AuxConfig
+    from host_tools.simulation.sim import simulate
 
     scenario, seed, duration, undeclared = AUX_SIM
     with _warnings.catch_warnings():
         _warnings.simplefilter("ignore")
         log = simulate(scenario, seed=seed, duration_s=duration, undeclared=undeclared)
-    from host_tools.reversal import ReversalConfig
+    from host_tools.golden.reversal import ReversalConfig
 
     cfg0 = hc.fit_config_from_logs([log], reversal=ReversalConfig("pair", order="combine_first"))
     tr = (float(np.min(log["temp_c"])), float(np.max(log["temp_c"])))
@@ -210,7 +210,7 @@ def aux_sim_case() -> tuple:
     w = log_words(log, cfg)
     s = {"p": w["p"], "r": w["r"], "mode": w["mode"], "restart": w["restart"], "z": w["z"], "f": w["f"],
          "t": w["t"], "aux": np.zeros((len(log), 0), np.int64), "k": w["k"]}
-    desc = (f"host_tools.sim.simulate({scenario!r}, seed={seed}, duration_s={duration:g}, undeclared={undeclared}); "
+    desc = (f"host_tools.simulation.sim.simulate({scenario!r}, seed={seed}, duration_s={duration:g}, undeclared={undeclared}); "
             f"aux decay_on + lagged proxy + s x lagged board temperature, fitted, quantized; log-driven")
     config = {"scenario": scenario, "seed": seed, "duration_s": repr(duration), "undeclared": undeclared,
               "model": {"config": cfg.to_dict(), "terms": list(model.terms), "coef": list(model.coef)}}

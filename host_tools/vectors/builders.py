@@ -20,10 +20,10 @@ def make_model(kind: str = "freq", ref: float = 6227.0, span: float = 3.0, estim
     a smooth model of a few deg/h).  ``order`` "regress_first" makes a two-bank model with bank 2
     ``coef2`` (default: ``coef`` with the signs of k1, k4, k8 flipped: a damping term that
     reverses with the mode)."""
-    from host_tools.model import BiasModel, ModelConfig
-    from host_tools.proxy import ProxyConfig
-    from host_tools.rate import RateConfig
-    from host_tools.reversal import ReversalConfig
+    from host_tools.golden.model import BiasModel, ModelConfig
+    from host_tools.golden.proxy import ProxyConfig
+    from host_tools.golden.rate import RateConfig
+    from host_tools.golden.reversal import ReversalConfig
 
     if coef is None:
         coef = [1.5, -4.0, 0.3, 1.1, -1.2, -0.2, 0.9, 0.0, 0.05, 1.8, -0.1, 1.9, 0.7, 0.7, -0.02, -1.1, 0.9]
@@ -157,7 +157,7 @@ AUX_COLUMNS = ("aux_a", "aux_b", "aux_c", "aux_d")
 
 def random_aux_terms(rng: np.random.Generator, config, n_terms: int | None = None, kinds=None,
                      long_taus: bool = True) -> list:
-    """Random generator terms (host_tools.regressors) for a ModelConfig: every kind of
+    """Random generator terms (host_tools.golden.regressors) for a ModelConfig: every kind of
     formats.AUX_KINDS (or ``kinds``), input terms on freq_hz / temp_c / aux_a..aux_d with random
     ranges, filters (tau 0, short or up to ~10^6 samples), powers 1..5; rate terms on the model's
     own estimator with another span; random signs; weights normalized to sum |w| in (0.3, 1]."""
@@ -203,8 +203,8 @@ def with_aux(model, terms):
     """The model with an aux 'sum' generator of ``terms`` (k7 kept; 1 deg/h if it was 0)."""
     import dataclasses
 
-    from host_tools.model import BiasModel
-    from host_tools.regressors import AuxConfig
+    from host_tools.golden.model import BiasModel
+    from host_tools.golden.regressors import AuxConfig
 
     coef = np.array(model.coef, np.float64)
     if coef[7] == 0.0:

@@ -45,14 +45,14 @@ def e2e_model(log, reversal=None):
     """The model of a run: fit_config_from_logs (rounded to 7 significant digits; ``reversal`` an
     (order, combiner) pair for a mode-reversal log), fit_logs with it, coefficients (both banks)
     rounded to 7 significant digits; returns (model, table)."""
-    from host_tools import compensate as hc
-    from host_tools.fit import fit_logs
-    from host_tools.model import BiasModel, ModelConfig
-    from host_tools.proxy import ProxyConfig
-    from host_tools.quantize import quantize
-    from host_tools.rate import RateConfig
+    from host_tools.golden import compensate as hc
+    from host_tools.fitting.fit import fit_logs
+    from host_tools.golden.model import BiasModel, ModelConfig
+    from host_tools.golden.proxy import ProxyConfig
+    from host_tools.fixed.quantize import quantize
+    from host_tools.golden.rate import RateConfig
 
-    from host_tools.reversal import ReversalConfig
+    from host_tools.golden.reversal import ReversalConfig
 
     rev = None if reversal is None else ReversalConfig(reversal[1], order=reversal[0])
     cfg0 = hc.fit_config_from_logs([log], reversal=rev)
@@ -69,8 +69,8 @@ def e2e_model(log, reversal=None):
 def e2e_set() -> tuple:
     """(VectorSet, configuration dict)."""
     from firmware_ref import inputs
-    from host_tools.fixed_point import log_words
-    from host_tools.sim import simulate
+    from host_tools.fixed.fixed_point import log_words
+    from host_tools.simulation.sim import simulate
 
     cs = _Cases()
     config = {}
@@ -79,7 +79,7 @@ def e2e_set() -> tuple:
         model, table = e2e_model(log, reversal)
         w = log_words(log, model.config)
         other = (inputs.temp_words(log["temp_c"]) if table.proxy_kind == 0 else inputs.freq_words(log["freq_hz"]))[0]
-        cs.add(name, f"{desc}: host_tools.sim.simulate({scenario!r}, seed={seed}, duration_s={duration:g}), "
+        cs.add(name, f"{desc}: host_tools.simulation.sim.simulate({scenario!r}, seed={seed}, duration_s={duration:g}), "
                f"fitted, quantized; log-driven", table, w, t_words=other)
         config[name] = {"scenario": scenario, "seed": seed, "duration_s": repr(duration),
                         "model": {"config": model.config.to_dict(), "terms": list(model.terms),

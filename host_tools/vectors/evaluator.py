@@ -47,7 +47,7 @@ def _qtable(est="diff", combiner="pair", n=5, shift=2, settle_s=2.0, max_stale_s
     """A quantized table of host_tools.vectors.builders.make_model (as tests/test_c_twin.py's table_of);
     ``order`` "regress_first": two banks (``coef2``: make_model's default)."""
     from host_tools.vectors.builders import make_model
-    from host_tools.quantize import quantize
+    from host_tools.fixed.quantize import quantize
 
     if coef is None:
         coef = [3e3, -2e3, 1e3, -5e2, 7e2, -3e2, 1e2, 5e2, -4e2, 3e2, -2e2, 1e2, -9e1, 8e1, -7e1, 6e1, -5e1]
@@ -91,7 +91,7 @@ def _random_eval_table(rng, base: Table) -> Table:
 
 def evaluator_set(rng) -> VectorSet:
     from host_tools.vectors.builders import random_model
-    from host_tools.quantize import quantize
+    from host_tools.fixed.quantize import quantize
 
     base = _qtable()
     tables, cases, parts = [], [], []
@@ -165,7 +165,7 @@ def evaluator_set(rng) -> VectorSet:
     for k in range(8):
         t = quantize(random_model(rng), exchange_s=3.0, dwell_s=7.0, n_random=10).table
         u, v, z = random_points(100)
-        add(f"quantized_{k}", "host_tools.vectors.builders.random_model quantized by host_tools.quantize", t, u, v, z)
+        add(f"quantized_{k}", "host_tools.vectors.builders.random_model quantized by host_tools.fixed.quantize", t, u, v, z)
     # two banks (regress_first, order 1): the bank input selects the coefficients and exponents
     two = [("two_bank_extremes", "bank 1 = e_acc_0 (E = 0, B = t << 21), bank 2 = e_acc_52 (B = RHU(t, 31))",
             _two_banks(extremes["e_acc_0"][1], extremes["e_acc_52"][1])),

@@ -35,7 +35,7 @@ def _extreme_stream(t) -> dict:
 
 def sequencer_set(rng) -> VectorSet:
     from host_tools.vectors.builders import corner_stream, random_model, random_stream
-    from host_tools.quantize import quantize
+    from host_tools.fixed.quantize import quantize
 
     cs = _Cases()
     t = _qtable("diff", "pair", power_on_s=7.0, exchange_s=3.0, dwell_s=9.0)

@@ -15,7 +15,7 @@ STALE_MESSAGE = ("vectors are stale: regenerate with `hdrg vectors generate -o v
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_DIR = ROOT / "vectors"
 SOURCE_GLOBS = ("firmware_ref/*.py", "firmware_ref/c/*.c", "firmware_ref/c/*.h",
-                "host_tools/fixed_point.py", "host_tools/vectors/builders.py")   # what the vectors compute with
+                "host_tools/fixed/fixed_point.py", "host_tools/vectors/builders.py")   # what the vectors compute with
 SETS = ("primitives", "evaluator", "sequencer", "e2e", "aux")
 PY_CHECK = 300              # the manifest's py_check_samples_per_case: at least this many samples per case are
                             # checked against the Python reference (since the package split: every sample)

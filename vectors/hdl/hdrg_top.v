@@ -3,7 +3,7 @@
 // modes), proxy, rate estimator, aux word, evaluator, combiner / residual tracker (combine_first:
 // ftr, pair, trend; regress_first: pair, trend, none), output words and flags.  Bit-exact with
 // firmware_ref/compensate.py (Pipeline.step) and the C twin; checked by tb_top.v through the
-// check-impl protocol (host_tools/cost_rtl.py).
+// check-impl protocol (host_tools/bench/cost_rtl.py).
 //
 // Table load: write word k of the table layout (FORMATS.md) through (we, waddr, wdata), then pulse
 // `load` (power-on state: timer, rate ring and counters, combiner, holds).  Used words: 3..14 proxy

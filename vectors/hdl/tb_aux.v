@@ -1,7 +1,7 @@
 // tb_aux.v - checks hdrg_aux (the aux generators) against the aux vector set: the O field z and flag
 // bit 32 (z clamped) of every sample.
 //
-// The record layout is given by parameters (LSB positions; host_tools/cost_aux.py computes them from
+// The record layout is given by parameters (LSB positions; host_tools/bench/cost_aux.py computes them from
 // manifest.json "mem_record").  The inputs driven per sample are the record's F, T, A0..A3, K,
 // RESTART and Z, and from the pipeline's own outputs in the record: the sample's mode (O field
 // `mode`: the logged or the timer's mode), the rate sum S (O field `s`) and the warm-up flag (flag

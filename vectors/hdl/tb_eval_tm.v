@@ -2,7 +2,7 @@
 //
 // Same files and plusargs as tb_evaluator.v (+vectors=, +tables=, +n_vec=, +n_tab=), and optionally
 // +offsets= (a file with each table's first word; default table k at word TAB_WORDS k).  The record
-// layout is given by parameters (LSB positions; host_tools/cost.py computes them from manifest.json
+// layout is given by parameters (LSB positions; host_tools/bench/cost.py computes them from manifest.json
 // "mem_record"; HAS_BANK: the record has the bank column of layout v2, 1 or 2).  For each vector
 // whose table differs from the loaded one, writes the table's words 22..44 (and 49..71 when the
 // table is 72 words or longer: bank 2) through the write port, then pulses start and waits for

@@ -1,0 +1,1 @@
+"""Measurement benchmarks (`hdrg bench accuracy|loop`) and target costs (`hdrg cost`)."""

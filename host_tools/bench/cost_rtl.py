@@ -1,0 +1,73 @@
+"""The full-pipeline RTL (vectors/hdl/hdrg_top.v) under Icarus and Verilator through the check-impl
+protocol: tb_top.v answers TABLE / S / EVAL requests on stdin like the C driver, so
+``hdrg vectors check-impl --cmd "vvp -n tb_top.vvp"`` (or the Verilator binary) runs the committed
+vector sets on the RTL (docs/COST.md, "The whole pipeline in RTL").
+
+``check_top`` builds the testbench (``iverilog -g2001`` or ``verilator --binary``), runs
+check-impl set by set and reads the testbench's cycle file (``+cycles=``: clock cycles from
+``start`` to ``done`` of every sample request; worst case and mean per set).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from host_tools import vectors as V
+from host_tools.bench.cost_tools import CostError, run_tool, need
+from host_tools.vectors.runner import check_impl
+
+HDL = V.DEFAULT_DIR / "hdl"
+TB_TOP = HDL / "tb_top.v"
+CORE = ("hdrg_top.v", "hdrg_alu.v", "hdrg_div.v", "hdrg_eval_tm.v")
+AUX = "hdrg_aux.v"                     # the aux generators (branch aux-rtl); used when hdrg_top instantiates it
+SETS = ("evaluator", "sequencer", "e2e", "aux")
+BREAK = "HDRG_BREAK_ROUNDING"
+
+
+def top_sources() -> list:
+    """The RTL files of hdrg_top (hdrg_aux.v when the top instantiates it)."""
+    files = [HDL / f for f in CORE]
+    if "hdrg_aux " in (HDL / "hdrg_top.v").read_text():
+        files.append(HDL / AUX)
+    return files
+
+
+def build_top(sim: str, work: Path, defines=()) -> list:
+    """Build tb_top + hdrg_top with ``sim`` ("icarus" or "verilator"); returns the command line
+    (argv) that speaks the protocol."""
+    work.mkdir(parents=True, exist_ok=True)
+    tag = sim + "".join("_" + d for d in defines)
+    src = [TB_TOP, *top_sources()]
+    if sim == "icarus":
+        exe = work / f"tb_top_{tag}.vvp"
+        run_tool([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines), "-o", exe, *src], what="iverilog")
+        return [need("vvp"), "-n", str(exe)]
+    if sim == "verilator":
+        obj = work / f"vl_top_{tag}"
+        run_tool([need("verilator"), "--binary", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_top",
+              *(f"-D{d}" for d in defines), "-Mdir", obj, *src], what="verilator", timeout=1800)
+        return [str(obj / "Vtb_top")]
+    raise CostError(f"unknown simulator {sim!r} (icarus, verilator)")
+
+
+def _cycles(path: Path) -> dict:
+    words = path.read_text().split() if path.is_file() else []
+    if len(words) != 6 or words[0::2] != ["samples", "max", "sum"]:
+        raise CostError(f"{path}: no cycle count from the testbench")
+    n, mx, total = int(words[1]), int(words[3]), int(words[5])
+    return {"samples": n, "cycles_max": mx, "cycles_mean": round(total / n, 1) if n else None}
+
+
+def check_top(sim: str, work: Path, sets=SETS, defines=(), log=print) -> dict:
+    """check-impl of hdrg_top under ``sim`` on each of ``sets``: ``{set: {"vectors", "mismatches",
+    "first", "samples", "cycles_max", "cycles_mean"}}`` (cycles: sample requests only)."""
+    argv = build_top(sim, work, defines)
+    out = {}
+    for name in sets:
+        cyc = work / f"cycles_{sim}_{name}{''.join('_' + d for d in defines)}.txt"
+        cyc.unlink(missing_ok=True)
+        rep = check_impl([*argv, f"+cycles={cyc}"], names=[name], timeout=1800, log=lambda s: None)
+        r = rep["sets"][name]
+        out[name] = {"vectors": r["rows"], "mismatches": r["mismatches"], "first": r["first"], **_cycles(cyc)}
+        log(f"  {sim}{' ' + ' '.join(defines) if defines else ''} {name}: {r['rows']} vectors, "
+            f"{r['mismatches']} mismatches, max {out[name]['cycles_max']} cycles/sample")
+    return out

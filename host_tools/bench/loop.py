@@ -1,0 +1,375 @@
+"""`hdrg bench loop`: the closed loop (host_tools.fitting.diagnose) on random FOREIGN devices
+(host_tools.simulation.sim_foreign) with undeclared effects: detection, false discovery, never worse.
+
+Runs ``i = 0 .. N-1`` (``--runs``, default 120), device seed ``S * 100000 + i`` (``--seed`` S):
+
+* every third run (i % 3 == 0) is **clean** (no effect); the others carry ONE undeclared effect,
+  the kinds of host_tools.simulation.sim_foreign.EFFECT_KINDS in turn (9 kinds), at a random strength
+  log-uniform in [STRENGTH_LO, STRENGTH_HI] (x the kind's nominal amplitude);
+* run type: mode reversal for i % 2 == 1 or for the MR-only kinds (exchange_transient,
+  imperfect_reversal), else FTR;
+* **train** on one run (4 degC/min, power-on 0, noise seed 0), **hold out** another (2 degC/min,
+  power-on 1: another damping change, noise seed 1): ``diagnose([train], [holdout])`` with its
+  defaults (single training run: CV over time blocks; every step confirmed on the held-out run).
+
+Per run the record holds the verdict, every step (effect, parameters, held-out before/after,
+confirmed), and ``effect_ratio``: the held-out error of the base model (the loop's starting
+model = the product default of ``hdrg fit``, fitted on the training run) on the run WITH the effect over that on the same run without it (same device,
+power-ons and noise: the foreign simulator draws the noise independently of the effects).
+``effect_ratio >= 2`` means that modelling the true effect perfectly would halve the held-out
+error: the runs where the loop must find it.  Error = std of 100-s averages of the compensated
+output (diagnose.error_stats).
+
+Summary (the targets of issue #11):
+
+* ``detection``: among effect runs with effect_ratio >= 2, the fraction whose CONFIRMED EFFECT
+  steps name the true family (aux: any aux_* column); ``detection_or_structure`` also counts a
+  confirmed STRUCTURE step of the same family (the lag-state block of the proxy for thermal_lag,
+  the second thermometer for board_temp: the structure phase of diagnose runs first and may
+  take the injected effect as the device's structure);
+* ``false_discovery``: among clean runs, the fraction with verdict "effect found"; also split by
+  run type (``mr_control``: clean MR runs) and ``structural_only`` (clean runs whose confirmed
+  steps are all structural, verdict "model structure improved": another rate estimator or
+  the lag-state block, the second thermometer or the combiner, not an effect);
+* ``clean_found_not_generalizing``: clean runs with "effect found" whose final model is not
+  better than the base model on an independent THIRD run (3 degC/min, power-on 2, noise 2):
+  a found "effect" that does not generalize is a false discovery in the strict sense; one that
+  does is physics of the device the 16 terms lack (the foreign devices' lagged thermal nodes);
+* ``worse_confirmed``: confirmed steps whose held-out error went UP (target 0); a step's held-out
+  error is the one the loop confirms it by (diagnose.step_errors, diagnose.HELDOUT_METRIC: std of
+  100-s averages on the samples valid under both models), recorded in ``iterations[].heldout_error``;
+* ``found_without_drop``: "effect found" runs whose final held-out error is not below the base
+  model's (target 0).
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+import warnings
+
+import numpy as np
+from pathlib import Path
+
+from host_tools.fitting.diagnose import _score, base_model, base_options, diagnose, error_stats
+from host_tools.simulation.sim_foreign import EFFECTS, EFFECT_KINDS, foreign_device, simulate_foreign
+
+SEED_STRIDE = 100000
+STRENGTH_LO, STRENGTH_HI = 1.0, 10.0
+MATTERS_RATIO = 2.0
+
+
+def plan(n_runs: int, seed: int = 0) -> list:
+    """The runs of the benchmark: dicts {i, device, effect (None: clean), strength, reversal}."""
+    rng = np.random.default_rng([seed, 7])
+    out = []
+    k = 0
+    for i in range(n_runs):
+        strength = float(math.exp(rng.uniform(math.log(STRENGTH_LO), math.log(STRENGTH_HI))))
+        if i % 3 == 0:
+            effect = None
+        else:
+            effect = EFFECT_KINDS[k % len(EFFECT_KINDS)]
+            k += 1
+        reversal = bool(i % 2 == 1 or (effect is not None and EFFECTS[effect].runs == "mr"))
+        out.append({"i": i, "device": seed * SEED_STRIDE + i, "effect": effect,
+                    "strength": strength if effect else 0.0, "reversal": reversal})
+    return out
+
+
+def _named(kind: str, family: str) -> bool:
+    return family == kind or (kind == "aux" and family.startswith("aux_"))
+
+
+def _base_model(train):
+    """The loop's starting model: the product default of ``hdrg fit`` (diagnose.base_model)."""
+    return base_model([train], base_options(reversal=train.reversal))[0]
+
+
+def _base_error(train, hold) -> float:
+    return _score(error_stats([hold], _base_model(train)))[0]
+
+
+def run_one(spec: dict, duration_s=None, n_surrogates=None) -> dict:
+    """One benchmark run (module doc): the record."""
+    dev = foreign_device(spec["device"])
+    eff, rev, st = spec["effect"], spec["reversal"], spec["strength"]
+    t0 = time.time()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        train = simulate_foreign(dev, 4.0, rev, 0, 0, duration_s=duration_s, effect=eff, strength=st or 1.0)
+        hold = simulate_foreign(dev, 2.0, rev, 1, 1, duration_s=duration_s, effect=eff, strength=st or 1.0)
+        kw = {} if n_surrogates is None else {"n_surrogates": n_surrogates}
+        rep, model = diagnose([train], [hold], plots=False, **kw)
+        third = simulate_foreign(dev, 3.0, rev, 2, 2, duration_s=duration_s, effect=eff, strength=st or 1.0)
+        base3 = _score(error_stats([third], _base_model(train)))[0]
+        final3 = _score(error_stats([third], model))[0]
+        ratio = None
+        if eff is not None:
+            ctrain = simulate_foreign(dev, 4.0, rev, 0, 0, duration_s=duration_s)
+            chold = simulate_foreign(dev, 2.0, rev, 1, 1, duration_s=duration_s)
+            ratio = _score(rep["baseline"]["holdout"])[0] / _base_error(ctrain, chold)
+    steps = [{"effect": it["effect"], "params": it["params"], "kind": it["kind"], "confirmed": it["confirmed"],
+              "before": it["heldout_error"]["before"], "after": it["heldout_error"]["after"]}
+             for it in rep["iterations"]]
+    return {**spec, "verdict": rep["verdict"], "steps": steps,
+            "base": _score(rep["baseline"]["holdout"])[0], "final": _score(rep["final"])[0],
+            "third_base": base3, "third_final": final3,
+            "effect_ratio": ratio,
+            "named": bool(eff and any(s["confirmed"] and s["kind"] == "effect" and _named(eff, s["effect"])
+                                      for s in steps)),
+            "named_or_structure": bool(eff and any(s["confirmed"] and _named(eff, s["effect"]) for s in steps)),
+            "artifacts": [a["period_s"] for a in (rep["artifacts"] or {}).get("lines", [])],
+            "seconds": round(time.time() - t0, 2)}
+
+
+def _frac(num, den):
+    return {"n": den, "k": num, "rate": (num / den) if den else None}
+
+
+def summarize(records: list) -> dict:
+    """The summary of module doc from the records."""
+    matters = [r for r in records if r["effect"] and r["effect_ratio"] is not None and r["effect_ratio"] >= MATTERS_RATIO]
+    clean = [r for r in records if not r["effect"]]
+    found = [r for r in records if r["verdict"] == "effect found"]
+    structural = [r for r in records if r["verdict"] == "model structure improved"]
+    confirmed = [s for r in records for s in r["steps"] if s["confirmed"]]
+    struct = [r for r in clean if r["verdict"] == "model structure improved"]
+    per_kind, per_kind_s = {}, {}
+    for kind in EFFECT_KINDS:
+        rs = [r for r in matters if r["effect"] == kind]
+        per_kind[kind] = _frac(sum(r["named"] for r in rs), len(rs))
+        per_kind_s[kind] = _frac(sum(r.get("named_or_structure", r["named"]) for r in rs), len(rs))
+    return {"runs": len(records), "effect_runs": sum(1 for r in records if r["effect"]),
+            "detection": _frac(sum(r["named"] for r in matters), len(matters)), "detection_per_kind": per_kind,
+            "detection_or_structure": _frac(sum(r.get("named_or_structure", r["named"]) for r in matters), len(matters)),
+            "detection_or_structure_per_kind": per_kind_s,
+            "false_discovery": _frac(sum(r["verdict"] == "effect found" for r in clean), len(clean)),
+            "false_discovery_ftr": _frac(sum(r["verdict"] == "effect found" for r in clean if not r["reversal"]),
+                                         sum(1 for r in clean if not r["reversal"])),
+            "mr_control": _frac(sum(r["verdict"] == "effect found" for r in clean if r["reversal"]),
+                                sum(1 for r in clean if r["reversal"])),
+            "structural_only": len(struct),
+            "clean_found_not_generalizing": sum(1 for r in clean if r["verdict"] == "effect found"
+                                                and not r["third_final"] < r["third_base"]),
+            "clean_found_third_run_gain": [round(r["third_base"] / r["third_final"], 3) for r in clean
+                                           if r["verdict"] == "effect found"],
+            "found_third_run_worse": sum(1 for r in found if not r["third_final"] < r["third_base"]),
+            "confirmed_steps": len(confirmed),
+            "worse_confirmed": sum(1 for s in confirmed if not s["after"] < s["before"]),
+            "found_without_drop": sum(1 for r in found + structural if not r["final"] < r["base"]),
+            "never_worse": sum(1 for r in records if r["final"] > r["base"] * (1 + 1e-12)) == 0}
+
+
+def run_benchmark(n_runs: int, seed: int = 0, duration_s=None, n_surrogates=None, progress=None,
+                  shard=(0, 1), json_path=None) -> dict:
+    """The benchmark (module doc); ``shard`` (k, m): only the runs with i % m == k; with
+    ``json_path`` the result so far is written after every run."""
+    records = []
+    specs = [sp for sp in plan(n_runs, seed) if sp["i"] % shard[1] == shard[0]]
+    for spec in specs:
+        rec = run_one(spec, duration_s, n_surrogates)
+        records.append(rec)
+        if json_path:
+            with open(json_path, "w", encoding="utf-8") as fh:
+                json.dump({"summary": summarize(records), "records": records}, fh, indent=1)
+        if progress:
+            progress(f"[{len(records)}/{len(specs)}] device {rec['device']} {rec['effect'] or 'clean'} "
+                     f"{'MR' if rec['reversal'] else 'FTR'} x{rec['strength']:.2f}: {rec['verdict']} "
+                     f"{[(s['effect'], s['confirmed']) for s in rec['steps']]} {rec['base']:.3g} -> {rec['final']:.3g}"
+                     f" (ratio {rec['effect_ratio'] if rec['effect_ratio'] is None else round(rec['effect_ratio'], 2)},"
+                     f" {rec['seconds']} s)")
+    return {"config": {"runs": n_runs, "seed": seed, "duration_s": duration_s, "n_surrogates": n_surrogates,
+                       "train": "4 degC/min, power-on 0, noise 0", "holdout": "2 degC/min, power-on 1, noise 1",
+                       "strength": [STRENGTH_LO, STRENGTH_HI], "matters_ratio": MATTERS_RATIO},
+            "summary": summarize(records), "records": records}
+
+
+# ---------------------------------------------------------------------------------------------
+# calibration on seeds disjoint from the benchmark's
+# ---------------------------------------------------------------------------------------------
+
+CALIBRATION_SEED = 1                  # plan(seed=1): devices 100000 + i, disjoint from the bench's seed 0
+CALIBRATION_SHORT_S = 5000.0          # every other clean run cut to this many seconds
+CALIBRATION_HDRG_SEEDS = (200, 210)   # hdrg-sim seed triples b+1, b+3 (train), b+2 (held out)
+
+
+def calibration_study(n_clean: int = 16, n_effect: int = 18, seed: int = CALIBRATION_SEED, progress=None) -> dict:
+    """Calibration runs on seeds disjoint from the benchmark's (``seed`` != the bench's 0):
+    the first ``n_clean`` clean runs of ``plan(3 n, seed)`` (every other one cut to
+    CALIBRATION_SHORT_S; run type as in the plan: i odd = mode reversal), clean hdrg-sim runs
+    (FTR/MR, 1 and 2 cycles, CALIBRATION_HDRG_SEEDS) and the first ``n_effect`` effect runs.
+    Returns {"clean": summary + records, "hdrg_clean": rows, "effect": summary + records}."""
+    from host_tools.simulation import sim
+    say = progress or (lambda msg: None)
+    clean = []
+    for k, sp in enumerate([s for s in plan(3 * n_clean, seed) if s["effect"] is None][:n_clean]):
+        rec = run_one(sp, duration_s=None if k % 2 == 0 else CALIBRATION_SHORT_S)
+        clean.append(rec)
+        say(f"clean {sp['i']}: {rec['verdict']}")
+    hdrg = []
+    for scen in ("paper-ftr-cycle-4dpm", "paper-mr-cycle-4dpm"):
+        for n_cyc in (1, 2):
+            prof = sim.cycle_profile(2.0, hold_s=1200, n_cycles=n_cyc)
+            for base in CALIBRATION_HDRG_SEEDS:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    logs = [sim.simulate(scen, seed=base + k, off=list(HDRG_OFF), profile=prof) for k in (1, 3, 2)]
+                    rep, _ = diagnose(logs[:2], logs[2:], plots=False)
+                hdrg.append({"scenario": scen, "cycles": n_cyc, "seed": base, "verdict": rep["verdict"],
+                             "steps": [(i["effect"], i["confirmed"]) for i in rep["iterations"]]})
+                say(str(hdrg[-1]))
+    eff = []
+    for sp in [s for s in plan(3 * n_effect, seed) if s["effect"] is not None][:n_effect]:
+        eff.append(run_one(sp))
+        say(f"effect {sp['i']} {sp['effect']}: {eff[-1]['verdict']}")
+    return {"seed": seed, "clean": {"summary": summarize(clean), "records": clean}, "hdrg_clean": hdrg,
+            "effect": {"summary": summarize(eff), "records": eff}}
+
+
+# ---------------------------------------------------------------------------------------------
+# hdrg's own simulator, clean runs (`hdrg bench loop --hdrg-clean`)
+# ---------------------------------------------------------------------------------------------
+
+HDRG_OFF = ("turn_on", "electronics", "damping_asym")      # the clean world of tests/test_diagnose.py
+
+
+def hdrg_clean_study(progress=None) -> list:
+    """False discovery on clean runs of host_tools.simulation.sim: FTR and MR (paper-ftr-cycle-4dpm,
+    paper-mr-cycle-4dpm), short (one 2-degC/min cycle, 4800 s) and long (two, 9600 s), 5 seed
+    triples each (seeds b+1, b+3 train, b+2 held out; b = 100, 110, .., 140)."""
+    from host_tools.simulation import sim
+    rows = []
+    for scen in ("paper-ftr-cycle-4dpm", "paper-mr-cycle-4dpm"):
+        for n_cyc in (1, 2):
+            prof = sim.cycle_profile(2.0, hold_s=1200, n_cycles=n_cyc)
+            for base in range(100, 150, 10):
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    logs = [sim.simulate(scen, seed=base + k, off=list(HDRG_OFF), profile=prof) for k in (1, 3, 2)]
+                    rep, _ = diagnose(logs[:2], logs[2:], plots=False)
+                rows.append({"scenario": scen, "cycles": n_cyc, "seed": base, "verdict": rep["verdict"],
+                             "steps": [(i["effect"], i["confirmed"]) for i in rep["iterations"]]})
+                if progress:
+                    progress(str(rows[-1]))
+    return rows
+
+
+# ---------------------------------------------------------------------------------------------
+# measured data (`hdrg bench loop --measured DIR`)
+# ---------------------------------------------------------------------------------------------
+
+MEASURED = {"tofupilot-x": "tofupilot-imu-thermal/tofupilot-imu-x.csv",
+            "tofupilot-y": "tofupilot-imu-thermal/tofupilot-imu-y.csv",
+            "psim-x": "psim-tvac-lsm6dsm/psim-tvac-x.csv", "psim-y": "psim-tvac-lsm6dsm/psim-tvac-y.csv"}
+# the measured logs the project carries (tests/data, each with its README and LICENSE); the
+# shared folder beside a checkout otherwise
+MEASURED_ROOT = next((str(p) for p in (Path(__file__).resolve().parents[2] / "tests" / "data",
+                                       Path(__file__).resolve().parents[3] / "shared" / "data" / "measured")
+                      if (p / "tofupilot-imu-thermal").is_dir()), "tests/data")
+SPLIT_BLOCKS = 8
+
+
+def splits(log) -> dict:
+    """The held-out splits of one measured log: ``cool->heat`` / ``heat->cool`` (train on the
+    samples where the smoothed temperature falls, hold out those where it rises, and the
+    reverse; only when both legs span >= 20 degC) and ``blocks`` (SPLIT_BLOCKS contiguous time
+    blocks, or the bursts of a bursty log: even ones train, odd ones held out)."""
+    t = np.asarray(log.t_s)
+    temp = np.asarray(log["temp_c"], np.float64)
+    out = {}
+    if len(log.segments) == 1:
+        k = max(1, int(round(60.0 * log.sample_rate_hz)))          # 60-s moving mean
+        sm = np.convolve(temp, np.ones(k) / k, mode="same")
+        rising = np.gradient(sm) > 0
+        legs = {"cool": ~rising, "heat": rising}
+        if all(np.ptp(temp[m]) >= 20.0 for m in legs.values()):
+            out["cool->heat"] = (legs["cool"], legs["heat"])
+            out["heat->cool"] = (legs["heat"], legs["cool"])
+        block = (np.arange(len(t)) * SPLIT_BLOCKS) // len(t)
+    else:
+        block = np.searchsorted(log.segments, np.arange(len(t)), side="right") - 1
+    out["blocks"] = (block % 2 == 0, block % 2 == 1)
+    return out
+
+
+def measured_study(out_dir: str, root: str = MEASURED_ROOT, progress=None) -> dict:
+    """Run the loop on every measured log and split (module doc of diagnose; default options):
+    per case the verdict, the steps and the held-out error (std of 1-s and 100-s averages, deg/h)
+    of the base and final models; figures (held-out Allan deviation and residual vs time, base
+    and final) in ``out_dir``."""
+    import os
+
+    from host_tools.golden import runlog
+    os.makedirs(out_dir, exist_ok=True)
+    results = {}
+    for name, rel in MEASURED.items():
+        path = os.path.join(root, rel)
+        if not os.path.exists(path):
+            continue
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            log = runlog.read(path)
+        for split, (tr, ho) in splits(log).items():
+            key = f"{name} {split}"
+            if progress:
+                progress(f"measured: {key}")
+            train, hold = log.select(tr), log.select(ho)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                rep, model = diagnose([train], [hold], plots=False)
+            base_model = _measured_base(train)
+            fig = _measured_figure(key, hold, base_model, model, out_dir)
+            results[key] = {"verdict": rep["verdict"], "detail": rep["verdict_detail"],
+                            "base": rep["baseline"]["holdout"], "final": rep["final"],
+                            "noise_floor": rep["noise_floor"],
+                            "steps": [{"effect": it["effect"], "params": it["params"], "confirmed": it["confirmed"],
+                                       "cv_gain": it["cv_gain"], "threshold": it["threshold"],
+                                       "before": it["before"], "after": it["after"]} for it in rep["iterations"]],
+                            "stopped": (rep["stopped"] or {}).get("reason"),
+                            "ranking": (rep["stopped"] or {}).get("ranking", [])[:5],
+                            "noise_model": rep["characterization"]["noise_models"][0],
+                            "figure": fig}
+    return results
+
+
+def _measured_base(train):
+    return _base_model(train)
+
+
+def _measured_figure(key, hold, base_model, final_model, out_dir) -> str:
+    import os
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from host_tools.fitting import metrics
+    from host_tools.golden.compensate import compensate
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for label, m, style in (("base model (hdrg fit default)", base_model, "--"), ("after the loop", final_model, "-")):
+        out = compensate(hold, m)
+        v = np.asarray(out["valid"]) == 1
+        a = metrics.allan(out.rate_dph, hold.t_s, v)
+        if a["tau_s"]:
+            a1.loglog(a["tau_s"], a["adev_dph"], style, label=label)
+        tt, yy = hold.t_s[v] / 60.0, np.asarray(out.rate_dph)[v]
+        brk = np.flatnonzero(np.diff(tt) > 5.0 / 60.0) + 1         # no line across gaps (> 5 s)
+        a2.plot(np.insert(tt, brk, np.nan), np.insert(yy, brk, np.nan), style, lw=0.6, label=label)
+    a1.axvline(1.0, color="0.6", lw=0.8)
+    a1.axvline(100.0, color="0.6", lw=0.8)
+    a1.set_xlabel("averaging time tau [s]")
+    a1.set_ylabel("Allan deviation of the held-out output [deg/h]")
+    a1.grid(True, which="both", alpha=0.3)
+    a1.legend(fontsize=8)
+    a2.set_xlabel("time since start [min]")
+    a2.set_ylabel("compensated held-out output [deg/h]")
+    a2.grid(True, alpha=0.3)
+    a2.legend(fontsize=8)
+    fig.suptitle(f"{key}: held-out samples", fontsize=10)
+    fig.tight_layout()
+    name = key.replace(" ", "_").replace(">", "").replace("-", "_") + ".png"
+    fig.savefig(os.path.join(out_dir, name), dpi=90)
+    plt.close(fig)
+    return name

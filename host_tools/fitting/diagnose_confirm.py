@@ -1,0 +1,171 @@
+"""Error statistics and the confirmation rule of the closed loop (host_tools.fitting.diagnose, steps 5-6 of
+its module doc): :func:`error_stats` (std / peak-to-peak of 1-s and 100-s averages of the
+compensated output, rms with the mean, per leg; deg/h), THE held-out error of a step
+(:func:`step_errors`, :data:`HELDOUT_METRIC`: the one function the loop confirms a step by and
+host_tools.bench.loop scores it by), :func:`confirmed_on_holdout` (:data:`CONFIRM_RULE`) and
+:func:`noise_floor`."""
+from __future__ import annotations
+
+import numpy as np
+
+from host_tools.fitting import metrics
+from host_tools.golden.compensate import compensate, prepare, residual
+from host_tools.golden.model import BiasModel
+
+
+REPORT_TAUS = (1.0, 100.0)
+CONFIRM_MIN_DROP = 0.05      # a confirmed step lowers the held-out error by >= 5 % ...
+CONFIRM_TOL_1S = 0.01        # ... and raises the held-out 1-s std by at most 1 %
+CONFIRM_TOL_RMS = 0.05      # ... and raises no held-out run's leg rms (mean offsets included) by more than 5 %
+RMS_MIN_SAMPLES = 10         # a leg (gap-free segment) needs this many valid samples to count
+CONFIRM_RULE = ("a step is confirmed iff, on the held-out runs, the std of 100-s averages (1-s where "
+                "100 s is undefined) drops by >= 5 %, the std of 1-s averages rises by at most 1 % and, per "
+                "held-out run, the leg rms (quadratic mean over its gap-free segments of each segment's rms, "
+                "mean offset included) rises by at most 5 %; an unconfirmed step is reverted and its family "
+                "not offered again")
+
+
+# ---------------------------------------------------------------------------------------------
+# error statistics
+# ---------------------------------------------------------------------------------------------
+
+STAT_KEYS = ("std_dph", "pp_dph", "std100_dph", "pp100_dph", "rms_dph")
+
+
+def leg_rms(y, valid, segments) -> list:
+    """rms [deg/h] of the valid samples of ``y`` per gap-free segment (a held-out leg), the MEAN
+    OFFSET INCLUDED (a static record's compensated output should be 0 after the fit's k0); None
+    for a segment with fewer than RMS_MIN_SAMPLES valid samples."""
+    y = np.asarray(y, np.float64)
+    ok = np.asarray(valid, bool) & np.isfinite(y)
+    bounds = list(np.asarray(segments, np.int64)) + [len(y)]
+    out = []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        v = y[a:b][ok[a:b]]
+        out.append(float(np.sqrt(np.mean(v ** 2))) if len(v) >= RMS_MIN_SAMPLES else None)
+    return out
+
+
+def _stats_one(y, t, valid) -> dict:
+    """STAT_KEYS of one output: std / pp of 1-s and 100-s averages, rms with the mean [deg/h]."""
+    m = metrics.bias_metrics(y, t, valid, taus=REPORT_TAUS)
+    r1, r100 = metrics.at_tau(m, 1.0), metrics.at_tau(m, 100.0)
+    ok = np.asarray(valid, bool) & np.isfinite(y)
+    return {"std_dph": r1["stability_dph"], "pp_dph": r1["variation_dph"],
+            "std100_dph": r100["stability_dph"], "pp100_dph": r100["variation_dph"],
+            "rms_dph": float(np.sqrt(np.mean(np.asarray(y)[ok] ** 2))) if ok.any() else None}
+
+
+def _mean_stats(rows) -> dict:
+    out = {}
+    for key in STAT_KEYS:
+        vals = [r[key] for r in rows if r[key] is not None]
+        out[key] = float(np.mean(vals)) if vals else None
+    return out
+
+
+def error_stats(logs, model: BiasModel, other: BiasModel | None = None) -> dict:
+    """The error of ``model`` on ``logs``: the compensated output (host_tools.golden.compensate) judged
+    by host_tools.fitting.metrics: ``std_dph``/``pp_dph`` (1 sigma / peak-to-peak of 1-s averages) and
+    ``std100_dph``/``pp100_dph`` (100-s averages), deg/h, mean over the logs (None where no log
+    supports that tau); ``runs`` holds the per-run values.  With ``other``, only the samples
+    valid under both models count (a longer rate warm-up must not win by hiding samples)."""
+    rows = []
+    for log in logs:
+        out = compensate(log, model)
+        valid = np.asarray(out["valid"]) == 1
+        if other is not None:
+            valid &= np.asarray(compensate(log, other)["valid"]) == 1
+        rows.append({"run": log.source, **_stats_one(out.rate_dph, log.t_s, valid),
+                     "rms_legs_dph": leg_rms(out.rate_dph, valid, log.segments)})
+    return {**_mean_stats(rows), "runs": rows}
+
+
+def _residuals(logs, model):
+    res = []
+    for log in logs:
+        pr = prepare(log, model)
+        res.append((pr, residual(pr, model)[0]))
+    return res
+
+
+def noise_floor(logs, model) -> dict:
+    """White-noise floor of the model's residual on ``logs`` (mean over logs): the Allan deviation
+    at 1 s (the 1-s std of white noise) and that / 10 (its 100-s std); None if 1 s is not an
+    Allan tau."""
+    vals = []
+    for log, (pr, r) in zip(logs, _residuals(logs, model)):
+        a = metrics.allan(r, log.t_s, pr.valid)
+        if a["adev_1s_dph"] is not None:
+            vals.append(a["adev_1s_dph"])
+    if not vals:
+        return {"std_dph": None, "std100_dph": None, "method": "no 1-s Allan tau"}
+    w = float(np.mean(vals))
+    return {"std_dph": w, "std100_dph": w / 10.0,
+            "method": "white noise: Allan deviation of the residual at 1 s; / sqrt(100) at 100 s"}
+
+
+def _score(stats):
+    """(primary, 1-s) error of error_stats: the std of 100-s averages where defined, else of 1-s."""
+    return (stats["std100_dph"] if stats["std100_dph"] is not None else stats["std_dph"]), stats["std_dph"]
+
+
+HELDOUT_METRIC = ("held-out error: std of 100-s averages of the compensated output (1-s where 100 s is "
+                  "undefined) [deg/h], mean over the held-out runs; two models are compared on the samples "
+                  "valid under both")
+
+
+def step_errors(logs, before: BiasModel, after: BiasModel) -> tuple:
+    """THE held-out error of a step (:data:`HELDOUT_METRIC`), used both to confirm a step here and
+    by host_tools.bench.loop to score it: ``(stats_before, stats_after)`` of :func:`error_stats` on
+    ``logs``, each restricted to the samples valid under BOTH models (a longer rate warm-up or
+    settle window must not win or lose by hiding samples); ``_score(stats)[0]`` is the number."""
+    return error_stats(logs, before, after), error_stats(logs, after, before)
+
+
+def confirmed_on_holdout(before, after) -> bool:
+    """CONFIRM_RULE: the held-out std of 100-s averages (1-s where 100 s is undefined) drops by at
+    least CONFIRM_MIN_DROP, the held-out std of 1-s averages does not rise by more than
+    CONFIRM_TOL_1S (relative) and no held-out run or leg has its rms, mean offset included, raised
+    by more than CONFIRM_TOL_RMS (:func:`offsets_hold`)."""
+    p0, s0 = _score(before)
+    p1, s1 = _score(after)
+    if p0 is None or p1 is None:
+        return False
+    return bool(p1 <= p0 * (1.0 - CONFIRM_MIN_DROP)
+                and (s0 is None or s1 is None or s1 <= s0 * (1.0 + CONFIRM_TOL_1S))
+                and offsets_hold(before, after))
+
+
+def _leg_rms(run) -> float | None:
+    """Quadratic mean over a run's legs of their rms (mean offsets included), each leg weighted
+    equally (a short leg moved by tens of deg/h counts as much as a long one)."""
+    legs = [x for x in (run.get("rms_legs_dph") or []) if x is not None]
+    return float(np.sqrt(np.mean(np.square(legs)))) if legs else run.get("rms_dph")
+
+
+def offsets_hold(before, after) -> bool:
+    """The mean-offset part of CONFIRM_RULE: per held-out run (``runs`` of error_stats, same order)
+    the leg rms (:func:`_leg_rms`: each gap-free segment's rms with its mean offset, quadratic mean
+    over the segments; one segment: the run's rms) rises by at most CONFIRM_TOL_RMS: a step that
+    moves a held-out leg by tens of deg/h while the std drops is not an improvement.  (Each leg
+    on its own is not required to improve: on a blocks split a step that halves the run's rms
+    may still move one quiet block by a few deg/h.)  True when no run carries the rms."""
+    for b, a in zip(before.get("runs", []), after.get("runs", [])):
+        r0, r1 = _leg_rms(b), _leg_rms(a)
+        if r0 is not None and r1 is not None and r1 > r0 * (1.0 + CONFIRM_TOL_RMS):
+            return False
+    return True
+
+
+def _clean(stats) -> dict:
+    return {k: stats[k] for k in STAT_KEYS}
+
+
+def _step_metric(cb, ca) -> dict:
+    """The step's held-out error (:data:`HELDOUT_METRIC`, :func:`step_errors`) before / after [deg/h]."""
+    return {"before": _score(cb)[0], "after": _score(ca)[0], "metric": HELDOUT_METRIC}
+
+
+def _fmt(x, prec=4):
+    return "n/a" if x is None else f"{x:.{prec}g}"

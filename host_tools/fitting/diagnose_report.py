@@ -1,0 +1,179 @@
+"""Report files of the closed loop (host_tools.fitting.diagnose, step 6 of its module doc): DIR/diagnose.json,
+DIR/diagnose.md, DIR/model.json and the figures (residual vs the candidate, Allan deviation and
+spectrum before/after; matplotlib), and the one-line verdict detail.  Errors in deg/h."""
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+
+from firmware_ref.terms import K_AUX, TERM_NAMES
+from host_tools.atomic import atomic_open, atomic_path
+from host_tools.golden.compensate import prepare, residual
+from host_tools.fitting.diagnose_confirm import STAT_KEYS, _fmt, _residuals
+from host_tools.fitting.diagnose_noise import _allan_bridged, _filled
+from host_tools.golden.model import jsonable
+from host_tools.golden.regressors import generator_values
+
+
+def _verdict_detail(iterations, hold) -> str:
+    if not iterations:
+        return "no candidate passed the selection rule on the training runs"
+    parts = []
+    for k, e in enumerate(iterations, 1):
+        tag = {True: "confirmed on held-out", False: "not confirmed on held-out (reverted)",
+               None: "not confirmed (no held-out runs)"}[e["confirmed"]]
+        parts.append(f"step {k} {e['effect']}: {tag}")
+    kept = [k for k, e in enumerate(iterations, 1) if e["confirmed"] is not False]
+    final = f"final model: after step {kept[-1]}" if kept else "final model: the base model"
+    return "; ".join(parts) + "; " + final
+
+
+def _stats_line(s):
+    return " | ".join(_fmt(s.get(k)) for k in STAT_KEYS)
+
+
+def write_report(report, model, out_dir, train, hold, plots=True) -> None:
+    """DIR/diagnose.json, DIR/diagnose.md, DIR/model.json and (plots) DIR/iter<k>_*.png."""
+    os.makedirs(out_dir, exist_ok=True)
+    evals = hold if hold else train
+    for k, entry in enumerate(report["iterations"], 1):
+        figs = []
+        if plots and "_plot" in entry:
+            figs = _plots(k, entry["_plot"], train, evals, out_dir)
+        entry["figures"] = figs
+    model.to_json(os.path.join(out_dir, "model.json"))
+    report["model"] = "model.json"
+    doc = jsonable(report, skip_private=True)
+    with atomic_open(os.path.join(out_dir, "diagnose.json"), "w", encoding="utf-8") as fh:
+        json.dump(doc, fh, indent=1, allow_nan=False)
+        fh.write("\n")
+    with atomic_open(os.path.join(out_dir, "diagnose.md"), "w", encoding="utf-8") as fh:
+        fh.write(markdown(doc, model))
+
+
+def markdown(doc, model) -> str:
+    """The human report (diagnose.md) of a report dict."""
+    on = doc["evaluated_on"]
+    lines = ["# hdrg diagnose", "",
+             f"Training runs: {', '.join(os.path.basename(s) for s in doc['train'])}  ",
+             "Held-out runs: " + (", ".join(os.path.basename(s) for s in doc["holdout"])
+                                  or "(none: figures on the training runs)"),
+             "", f"**Verdict: {doc['verdict']}**", "",
+             "Errors in deg/h on the " + ("held-out" if on == "holdout" else "training") + " runs: stability "
+             "(1 sigma) and variation (p-p) of 1-s and 100-s averages of the compensated output.", "",
+             "| step | effect | params | std 1 s | p-p 1 s | std 100 s | p-p 100 s | CV gain | threshold | held-out |",
+             "|---|---|---|---:|---:|---:|---:|---:|---:|---|"]
+    first = doc["baseline"][on]
+    lines.append(f"| 0 | (base model) | terms {doc['settings']['terms']} | {_stats_line(first)} | | | |")
+    for k, it in enumerate(doc["iterations"], 1):
+        params = ", ".join(f"{a}={_fmt(b) if isinstance(b, float) else b}" for a, b in it["params"].items())
+        lines.append(f"| {k} | {it['effect']} | {params} | {_stats_line(it['after'])} | "
+                     f"{_fmt(it['cv_gain'])} | {_fmt(it['threshold'])} | {it['status']} |")
+    lines += ["", f"{doc['verdict_detail']}.  Confirmation: {doc['confirm_rule']}."]
+    for a in (doc.get("artifacts") or {}).get("lines", []):
+        lines += ["", f"Line at {a['period_s']:.4g} s ({a['at']}, {a['amp_dph']:.3g} deg/h): {a['cause']}.  "
+                      f"Structural fix: {a['structural_fix']}."]
+    nf = doc["noise_floor"]
+    lines += ["", f"Noise floor (white noise of the residual): {_fmt(nf['std_dph'])} deg/h at 1 s, "
+                  f"{_fmt(nf['std100_dph'])} deg/h at 100 s.", "",
+              f"Selection rule: {doc['rule']}.", ""]
+    if doc.get("stopped"):
+        st = doc["stopped"]
+        lines += [f"Stopped: {st['reason']}.", ""]
+        if st.get("ranking"):
+            lines += ["Best remaining candidates (CV gain, folds improved):", ""]
+            lines += [f"* {r['label']}: {r['gain']:.4f} ({r['folds_improved']}/{r['folds']})"
+                      for r in st["ranking"][:6]]
+            lines.append("")
+    for k, it in enumerate(doc["iterations"], 1):
+        lines += [f"## Iteration {k}: {it['effect']}", "",
+                  f"CV gain {it['cv_gain']:.4f} (threshold {it['threshold']:.4f}), improves "
+                  f"{it['folds_improved']} of {it['folds']} folds.  Training: "
+                  f"std 100 s {_fmt(it['train_before']['std100_dph'])} -> {_fmt(it['train_after']['std100_dph'])}; "
+                  f"{'held-out' if on == 'holdout' else 'training'}: {_fmt(it['before']['std100_dph'])} -> "
+                  f"{_fmt(it['after']['std100_dph'])} deg/h.", "", "Ranking:", ""]
+        lines += [f"* {r['label']}: {r['gain']:.4f} ({r['folds_improved']}/{r['folds']})" for r in it["ranking"][:8]]
+        lines.append("")
+        for f in it.get("figures", []):
+            lines.append(f"![{f}]({f})")
+        lines.append("")
+    ch = doc.get("characterization") or {}
+    for which in ("train", "holdout"):
+        for c in ch.get(which, []) or []:
+            lines += [f"### Residual of the base model: {os.path.basename(c['source'])} ({which})", "",
+                      f"rms {_fmt(c['rms_dph'])} deg/h; Allan deviation above 2x the white-noise line at "
+                      f"tau = {', '.join(_fmt(t) for t in c['allan']['structure_taus_s']) or 'none'} s; "
+                      f"spectrum lines: {', '.join(_fmt(ln['period_s']) + ' s' for ln in c['lines']) or 'none'}.", ""]
+            dep = sorted(c["dependence"].items(), key=lambda kv: -abs(kv[1]["corr"]))
+            lines.append("Dependence (correlation, range of binned means in deg/h): " + "; ".join(
+                f"{name} {d['corr']:+.2f} / {d['range_dph']:.3g}" for name, d in dep))
+            lines.append("")
+    lines += ["Final model: model.json (terms " + ", ".join(f"k{k} ({TERM_NAMES[k]})" for k in model.terms) + ").", ""]
+    return "\n".join(lines)
+
+
+def _plots(k, plot_info, train, evals, out_dir) -> list:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from scipy.signal import welch
+
+    before_model, after_model, best = plot_info
+    files = []
+    # residual vs the candidate's fitted contribution (training runs)
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    after_aux = after_model.config.aux
+    for log, (pr, r) in zip(train, _residuals(train, before_model)):
+        if best["terms"]:
+            cols = np.column_stack([generator_values(log, t, after_model.config.rate.fs) for t in best["terms"]])
+            weights = [t2["weight"] for t2 in after_aux.terms[-len(best["terms"]):]]
+            k7 = after_model.coef[K_AUX]
+            if after_model.coef_mode2 is not None:      # two banks: the k7 of the sample's mode
+                k7 = np.where(np.asarray(log.mode) == 2, after_model.coef_mode2[K_AUX], k7)
+            x = cols @ np.asarray(weights) * k7
+            xlabel = f"fitted {best['label']} [deg/h]"
+        else:
+            x = residual(prepare(log, after_model), after_model)[0] - r
+            xlabel = f"{best['label']}: change of the residual [deg/h]"
+        v = pr.valid
+        ax.plot(x[v], r[v], ",", alpha=0.4, label=os.path.basename(log.source))
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("residual before [deg/h]")
+    ax.set_title(f"iteration {k}: residual vs {best['label']}", fontsize=9)
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    files.append(f"iter{k}_candidate.png")
+    with atomic_path(os.path.join(out_dir, files[-1])) as tmp:
+        fig.savefig(tmp, dpi=90, format="png")
+    plt.close(fig)
+    # Allan and spectrum before/after (evaluation runs)
+    fig1, ax1 = plt.subplots(figsize=(6, 4.5))
+    fig2, ax2 = plt.subplots(figsize=(6, 4.5))
+    for name, m, style in (("before", before_model, "--"), ("after", after_model, "-")):
+        for log, (pr, r) in zip(evals, _residuals(evals, m)):
+            a = _allan_bridged(r, log.t_s, pr.valid)
+            label = f"{os.path.basename(log.source)} {name}"
+            if a["tau_s"]:
+                ax1.loglog(a["tau_s"], a["adev_dph"], style, label=label)
+            g = _filled(r, pr.valid)
+            nper = min(len(g), max(256, len(g) // 4))
+            if nper >= 16:
+                f, p = welch(g, fs=after_model.config.rate.fs, nperseg=nper)
+                ax2.loglog(f[1:], p[1:], style, label=label, lw=0.8)
+    ax1.set_xlabel("averaging time [s]")
+    ax1.set_ylabel("Allan deviation of the residual [deg/h]\n(exchanges bridged)")
+    ax1.grid(True, which="both", alpha=0.3)
+    ax1.legend(fontsize=7)
+    ax2.set_xlabel("frequency [Hz]")
+    ax2.set_ylabel("PSD of the residual [(deg/h)^2/Hz]")
+    ax2.grid(True, which="both", alpha=0.3)
+    ax2.legend(fontsize=7)
+    for fig, name in ((fig1, "allan"), (fig2, "spectrum")):
+        fig.tight_layout()
+        files.append(f"iter{k}_{name}.png")
+        with atomic_path(os.path.join(out_dir, files[-1])) as tmp:
+            fig.savefig(tmp, dpi=90, format="png")
+        plt.close(fig)
+    return files

@@ -1,0 +1,209 @@
+"""The lag-state block of the default fit (issue #10): a thermal node that lags the proxy
+differently from what one proxy u and its rate v can represent, modelled as a low-order polynomial
+of the proxy through first-order filters, carried to the firmware as the k7 auxiliary regressor.
+
+Regressors (host_tools.golden.regressors, generator ``input`` on the model's proxy column with the model's
+proxy normalization, so ``q = u``): ``g_{tau,k} = lag(u, tau)^k``, k = 1..order, the first-order
+low-pass of u with time constant tau [s] restarted at every segment start (exactly the firmware's
+aux kind ``input`` with filter SB and power k, firmware_ref/aux.py).
+
+Choice (:func:`add_lag_block`), on the training runs only:
+
+1. **Screen** every candidate of :func:`candidates` (one tau of LAG_TAUS_S with order 2 or 3; for
+   FTR also two taus with order 3 each) by cross-validated squared error of the least-squares fit
+   of the base model's polynomial terms + the candidate's lag columns, per coefficient bank
+   (regress_first: mode 1 / mode 2), over the same groups as host_tools.fitting.fit.fit_logs (time blocks
+   of one run, or runs).  All candidates share one pass of Gram matrices per (bank, group).
+2. **Pack** the winner into ONE k7 sum: per bank b the lag coefficients a_b (deg/h) of the full
+   training fit; FTR: ``z = sum_k a_k g_k / T``; regress_first: ``z = sum_k (P_k g_k + Q_k s g_k) /
+   T`` with P = (a_1 + a_2) / 2, Q = (a_1 - a_2) / 2 (``sign`` terms: s = +1 on mode 1, -1 on
+   mode 2, so z is a_b . g / T on bank b), T = sum |weights| (so sum |w| = 1 and |z| <= 1; zero
+   weights are left out).  Then the model is refitted with host_tools.fitting.fit.fit_logs (same terms,
+   so 'auto' may keep or drop k7; each bank fits its own k7 ~ T).
+3. **Keep** it only when both the screen and the refit's cross-validated rms beat the base model by
+   LAG_MARGIN (relative); else the base model is returned unchanged.  The model's fit info holds
+   ``lag_block``: {"chosen": label or None, "base_cv_rms", "cv_rms", "candidates": [{label,
+   screen_cv_rms}]} (model.json).
+
+Firmware limit: at most 6 terms in the k7 sum (firmware_ref.formats.AUX_MAX_TERMS), hence one tau
+for mode reversal (3 powers x (P, Q)) and at most two taus of order 3 for FTR.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from firmware_ref.formats import AUX_MAX_TERMS
+from firmware_ref.terms import K_AUX
+from host_tools.golden.regressors import AuxConfig, generator_values, regressor_matrix
+
+LAG_TAUS_S = (60.0, 120.0, 240.0, 480.0, 960.0, 1920.0)   # screened time constants [s]
+LAG_ORDERS = (2, 3)           # polynomial orders of a single-tau block
+LAG_MARGIN = 0.2              # required relative reduction of the cross-validated rms (screen and refit)
+MAX_TAU_FRACTION = 0.5        # tau <= this x the longest training run (as host_tools.fitting.effects)
+LAG_PAIRS_FTR = True          # FTR: also two-tau blocks (order 3 each)
+_RIDGE = 1e-10                # relative diagonal load of the scaled screen solves (collinear lags)
+
+
+def lag_term(config, tau_s: float, power: int, weight: float = 1.0, sign: bool = False) -> dict:
+    """Generator term lag(u, tau_s)^power of the model's proxy (host_tools.golden.regressors 'input')."""
+    p = config.proxy
+    return {"gen": "input", "column": p.column, "ref": float(p.ref), "span": float(p.span),
+            "tau_s": float(tau_s), "power": int(power), "weight": float(weight), "sign": bool(sign),
+            "effect": "thermal_lag"}
+
+
+def candidates(duration_s: float, reversal: bool, taus=LAG_TAUS_S, orders=LAG_ORDERS, pairs=None) -> list:
+    """Candidate blocks: tuples of (tau_s, order); taus longer than MAX_TAU_FRACTION x the run dropped."""
+    taus = [t for t in taus if t <= MAX_TAU_FRACTION * duration_s]
+    out = [((t, k),) for t in taus for k in orders]
+    if not reversal and (LAG_PAIRS_FTR if pairs is None else pairs):
+        out += [((t1, 3), (t2, 3)) for i, t1 in enumerate(taus) for t2 in taus[i + 1:]]
+    return out
+
+
+def _label(cand) -> str:
+    return " + ".join(f"lag(u, {t:g} s)^1..{k}" for t, k in cand)
+
+
+def _groups(pr, n_logs, cv_blocks, log_index):
+    from host_tools.fitting.fit import block_groups
+    if n_logs == 1:
+        return block_groups(len(pr.y), cv_blocks)
+    return np.full(len(pr.y), log_index, np.int64)
+
+
+def _screen_grams(logs, config, poly, taus, cv_blocks):
+    """Per bank: {group: Gram of [poly columns | lag(u, tau)^1..3 for tau in taus | y]} over the
+    samples the fit uses."""
+    from host_tools.golden.compensate import prepare
+    two = config.reversal is not None and config.reversal.order == "regress_first"
+    fs = config.rate.fs
+    banks = ({}, {}) if two else ({},)
+    for i, log in enumerate(logs):
+        pr = prepare(log, config)
+        cols = [regressor_matrix(pr.u, pr.v)[:, list(poly)]]
+        for t in taus:
+            y1 = generator_values(log, lag_term(config, t, 1), fs)
+            cols.append(np.column_stack([y1, y1 * y1, y1 * y1 * y1]))
+        A = np.column_stack(cols + [pr.y])
+        g = _groups(pr, len(logs), cv_blocks, i)
+        masks = [pr.used & (pr.mode == 1), pr.used & (pr.mode == 2)] if two else [pr.used]
+        for bank, m in zip(banks, masks):
+            for key in np.unique(g[m]):
+                sel = m & (g == key)
+                Am = A[sel]
+                bank[(i, int(key))] = bank.get((i, int(key)), 0) + Am.T @ Am
+    return banks
+
+
+def _solve(G, idx):
+    """Least-squares coefficients of the columns ``idx`` from Gram G (last column = y), scaled,
+    with a tiny ridge against exact collinearity."""
+    Gs = G[np.ix_(idx, idx)]
+    b = G[idx, -1]
+    d = np.sqrt(np.maximum(np.diag(Gs), 1e-300))
+    S = Gs / np.outer(d, d)
+    S[np.diag_indices_from(S)] += _RIDGE
+    return np.linalg.solve(S, b / d) / d
+
+
+def _sse(G, idx, c):
+    return float(G[-1, -1] - 2.0 * c @ G[idx, -1] + c @ G[np.ix_(idx, idx)] @ c)
+
+
+def _cv_sse(banks, idx) -> float:
+    """Held-out squared error summed over the groups (each fitted on the other groups) and banks."""
+    sse = 0.0
+    for bank in banks:
+        total = sum(bank.values())
+        for Gf in bank.values():
+            sse += max(_sse(Gf, idx, _solve(total - Gf, idx)), 0.0)
+    return sse
+
+
+def screen(logs, model, *, cv_blocks=8, taus=LAG_TAUS_S, orders=LAG_ORDERS) -> dict:
+    """Step 1 of the module doc for the base ``model`` of ``logs``: {"base": screen cv rms of the
+    base polynomial terms, "rows": [{"block", "screen_cv_rms", "cand"}], "coefs": f(cand) -> the
+    per-bank lag coefficients of the full training fit}.  No candidate (runs too short): rows []."""
+    cfg = model.config
+    poly = (0,) + tuple(sorted(k for k in model.terms if k not in (0, K_AUX)))
+    duration = max(float(log.t_s[-1] - log.t_s[0]) for log in logs)
+    cands = candidates(duration, cfg.reversal is not None, taus, orders)
+    if not cands:
+        return {"base": None, "rows": [], "coefs": None}
+    used_taus = sorted({t for c in cands for t, _ in c})
+    banks = _screen_grams(logs, cfg, poly, used_taus, cv_blocks)
+    npoly = len(poly)
+
+    def idx_of(cand):
+        idx = list(range(npoly))
+        for t, k in cand:
+            j = npoly + 3 * used_taus.index(t)
+            idx += list(range(j, j + k))
+        return idx
+
+    nsamp = sum(G[0, 0] for bank in banks for G in bank.values())   # column 0 is k0 = 1: the sample count
+    rms = lambda idx: float(np.sqrt(_cv_sse(banks, idx) / nsamp))   # noqa: E731
+    rows = [{"block": _label(c), "screen_cv_rms": rms(idx_of(c)), "cand": c} for c in cands]
+    return {"base": rms(list(range(npoly))), "rows": rows,
+            "coefs": lambda c: [_solve(sum(bank.values()), idx_of(c))[npoly:] for bank in banks]}
+
+
+def lag_config(config, cand, coefs):
+    """The model config with the block ``cand`` packed into one k7 sum (module doc, step 2), or
+    None when it does not fit the firmware (more than AUX_MAX_TERMS non-zero terms)."""
+    powers = [(t, p) for t, k in cand for p in range(1, k + 1)]
+    if len(coefs) == 2:
+        P, Q = (coefs[0] + coefs[1]) / 2.0, (coefs[0] - coefs[1]) / 2.0
+        raw = [(t, p, w, False) for (t, p), w in zip(powers, P)] + [(t, p, w, True) for (t, p), w in zip(powers, Q)]
+    else:
+        raw = [(t, p, w, False) for (t, p), w in zip(powers, coefs[0])]
+    raw = [r for r in raw if r[2] != 0.0]
+    total = sum(abs(r[2]) for r in raw)
+    if not (raw and total > 0 and len(raw) <= AUX_MAX_TERMS):
+        return None
+    return replace(config, aux=AuxConfig("sum", {"fs": config.rate.fs,
+                                                 "terms": [lag_term(config, t, p, w / total, s) for t, p, w, s in raw]}))
+
+
+def add_lag_block(logs, model, res, terms=None, *, cv_blocks=8, taus=LAG_TAUS_S, orders=LAG_ORDERS,
+                  margin=None, drop_unidentifiable=True, significance=None, min_gain=0.02):
+    """The base ``model`` (and its FitResult ``res``, with a cross-validated rms) of ``logs``,
+    extended by the lag-state block when it lowers the cross-validated rms by ``margin`` (None:
+    LAG_MARGIN; module doc).  Returns (model, FitResult).  A model that already has an aux regressor is returned as is."""
+    from host_tools.fitting.fit import fit_logs
+
+    logs = list(logs)
+    margin = LAG_MARGIN if margin is None else margin
+    if model.config.aux.generator != "none":
+        return model, res
+    sc = screen(logs, model, cv_blocks=cv_blocks, taus=taus, orders=orders)
+    base_cv = (res.cv or {}).get("cv_rms")
+    info = {"method": "lag-state block of the proxy, chosen by cross-validated rms (host_tools.fitting.fit_lag)",
+            "margin": margin, "screen_base_cv_rms": sc["base"], "base_cv_rms": base_cv, "chosen": None,
+            "candidates": [{k: v for k, v in r.items() if k != "cand"} for r in sc["rows"]]}
+    model.fit["lag_block"] = info
+    if not sc["rows"] or base_cv is None:
+        return model, res
+    best = min(sc["rows"], key=lambda r: r["screen_cv_rms"])
+    if not best["screen_cv_rms"] < (1.0 - margin) * sc["base"]:
+        return model, res
+    cfg2 = lag_config(model.config, best["cand"], sc["coefs"](best["cand"]))
+    if cfg2 is None:
+        return model, res
+    try:
+        model2, res2 = fit_logs(logs, cfg2, terms, cv_blocks=cv_blocks, blocks=True,
+                                drop_unidentifiable=drop_unidentifiable, significance=significance, min_gain=min_gain)
+    except ValueError as exc:
+        info["error"] = str(exc)
+        return model, res
+    info["cv_rms"] = res2.cv["cv_rms"]
+    if not res2.cv["cv_rms"] < (1.0 - margin) * base_cv:
+        return model, res
+    info["chosen"] = best["block"]
+    if "rate_selection" in model.fit:
+        model2.fit["rate_selection"] = model.fit["rate_selection"]
+    model2.fit["lag_block"] = info
+    return model2, res2

@@ -1,0 +1,108 @@
+"""Status flags of a compensated run log: the ``flags`` column, its counts and the warnings.
+
+The bits are those of the fixed-point pipeline (firmware_ref/formats.py ``FLAGS``; the golden
+model host_tools.golden.compensate sets the same bits 1..16 with the same rules; docs/RUN_LOG.md):
+
+====  ===============  ======================================================================
+bit   name             meaning
+====  ===============  ======================================================================
+1     proxy_clamped    u outside [-1, 1] was clamped: the proxy is outside the model's range
+2     rate_clamped     v outside [-1, 1] was clamped: the proxy rate is outside the model's range
+4     warmup           rate estimator in warm-up (not valid)
+8     exchange         mode 3 (not valid)
+16    stale            mode-reversal output not valid (settling, no window, too old)
+32    aux_clamped      the k7 regressor z was clamped (fixed point)
+64    input_saturated  an input value beyond its fixed-point word was saturated (fixed point)
+128   saturated        a saturation inside the fixed-point pipeline (window count, trend, output)
+====  ===============  ======================================================================
+
+Clamping (1, 2, 32) keeps a sample valid but means the model is *extrapolated*: above
+``WARN_FRACTION`` of the samples `hdrg compensate` warns (``--strict``: refuses).  A saturated
+sample (64, 128) is never valid: its output is held like any invalid sample, and any saturation
+is warned about (``--strict``: refused).
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from firmware_ref import vocabulary as VOC
+
+FLAG_NAMES = {bit: name for bit, (name, _) in VOC.FLAGS.items()}
+SATURATION = VOC.FLAG_SAT | VOC.FLAG_INPUT_SAT
+EXTRAPOLATION = {VOC.FLAG_PROXY_CLAMPED: "the proxy is outside the model's proxy range",
+                 VOC.FLAG_RATE_CLAMPED: "the proxy rate is outside the model's rate range",
+                 VOC.FLAG_AUX_CLAMPED: "the k7 regressor is outside its range"}
+WARN_FRACTION = 0.01   # warn when more than 1 % of the samples are clamped (extrapolation)
+
+
+class CompensationWarning(UserWarning):
+    """Extrapolation or saturation in a compensated run log (the text gives the counts)."""
+
+
+def counts(flags) -> dict:
+    """{flag name: number of samples with that bit}, every bit of FLAG_NAMES, in bit order."""
+    flags = np.asarray(flags, np.int64)
+    return {name: int(np.count_nonzero(flags & bit)) for bit, name in sorted(FLAG_NAMES.items())}
+
+
+def format_counts(c: dict) -> str:
+    """'proxy_clamped 12, saturated 3' (non-zero counts only) or 'none'."""
+    return ", ".join(f"{k} {v}" for k, v in c.items() if v) or "none"
+
+
+def _hold(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    idx = np.where(valid, np.arange(len(values)), -1)
+    np.maximum.accumulate(idx, out=idx)
+    return np.where(idx >= 0, values[np.maximum(idx, 0)], 0.0)
+
+
+def add_flags(out, flags):
+    """The compensated RunLog ``out`` with the ``flags`` column (int64), saturated samples made
+    not valid (their ``rate_dph`` / ``bias_dph`` hold the last valid values), and the metadata
+    ``compensation_flags`` (non-zero counts) and ``compensation_valid`` updated."""
+    flags = np.asarray(flags, np.int64)
+    valid = (np.asarray(out["valid"]) != 0) & ((flags & SATURATION) == 0)
+    out = out.with_columns(rate_dph=_hold(out["rate_dph"], valid), bias_dph=_hold(out["bias_dph"], valid),
+                           valid=valid.astype(np.float64), flags=flags)
+    nvalid = int(np.count_nonzero(valid))
+    out.metadata["compensation_valid"] = f"{nvalid} of {len(out)} samples"
+    out.metadata["compensation_flags"] = format_counts(counts(flags))
+    return out
+
+
+def problems(out) -> list:
+    """The warnings a compensated log deserves: extrapolation above WARN_FRACTION, any
+    saturation; each a sentence with the count, the share and the source."""
+    flags = np.asarray(out["flags"], np.int64)
+    n = len(flags)
+    msgs = []
+    for bit, what in EXTRAPOLATION.items():
+        k = int(np.count_nonzero(flags & bit))
+        if k > WARN_FRACTION * n:
+            msgs.append(f"extrapolation: {k} of {n} samples ({100.0 * k / n:.1f} %) {FLAG_NAMES[bit]} "
+                        f"({what}); the model is applied outside its training data there")
+    k = int(np.count_nonzero(flags & SATURATION))
+    if k:
+        msgs.append(f"saturation: {k} of {n} samples saturated in fixed point (flags input_saturated/saturated); "
+                    f"they are marked not valid")
+    return msgs
+
+
+def report(out, strict: bool = False) -> None:
+    """Warn (CompensationWarning) about every :func:`problems` entry; with ``strict`` raise
+    ValueError instead (the `hdrg compensate --strict` contract)."""
+    msgs = problems(out)
+    if strict and msgs:
+        raise ValueError(f"{out.source}: " + "; ".join(msgs) + " (--strict)")
+    for m in msgs:
+        warnings.warn(f"{out.source}: {m}", CompensationWarning, stacklevel=2)
+
+
+def summary(out) -> str:
+    """The console line: samples, valid, flag counts."""
+    n = len(out)
+    nvalid = int(np.count_nonzero(out["valid"]))
+    return (f"{n} samples, {nvalid} valid ({100.0 * nvalid / n:.1f} %); flags: "
+            f"{format_counts(counts(out['flags']))}")

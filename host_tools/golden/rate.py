@@ -1,0 +1,252 @@
+"""Normalized proxy rate (golden model, float64): p -> v in [-1, 1], causal.
+
+v is the time derivative of the temperature proxy p (``freq_hz`` [Hz] or ``temp_c`` [degC], see
+host_tools.golden.proxy), normalized: ``v = (dp/dt) / span`` with ``span`` in proxy units per second
+(Hz/s or degC/s) mapping to ``|v| = 1``.  Every estimator uses the NOMINAL sample period
+``1/fs`` (``fs`` [Hz], stored in the config), never the log's ``t_s``: the firmware has no clock
+but its sample counter and no divider.
+
+Estimators
+----------
+Each estimator forms, at sample i, an integer-weighted sum ``S[i]`` of proxy values (proxy
+units) and has a fixed positive integer divisor ``D`` such that ``S / D`` is the slope in proxy
+units per sample; ``W`` is its warm-up length in samples:
+
+=========  =====================================================================  ==============  =================
+estimator  S[i]                                                                    D               W (warm-up)
+=========  =====================================================================  ==============  =================
+``diff``   ``p[i] - p[i-1]`` (paper section 4.3)                                   1               1
+``diffn``  ``p[i] - p[i-n]``, n >= 1                                               n               n
+``lsq``    ``sum_{j=0}^{n-1} w_j * (p[i-n+1+j] - p[i])``, ``w_j = 2*j - (n-1)``,  ``n(n^2-1)/6``  n - 1
+           n >= 2 (least-squares slope over the last n samples; since
+           ``sum w_j = 0`` this equals ``sum w_j p[i-n+1+j]``; the differences
+           keep the fixed-point numbers small); summed in order j = 0 .. n-1
+``iir``    the filter state y (below), 0 <= shift <= 24                            1               ``2**(shift+1)``
+=========  =====================================================================  ==============  =================
+
+``iir``: first-order recursive low-pass of the consecutive difference ``d[i] = p[i] - p[i-1]``
+with coefficient ``a = 2**-shift``.  At segment index k = 0 the state is ``y = 0``; at k = 1
+``y = d[i]`` (initialized with the first difference, so a ramp is exact at once); at k >= 2
+``y = y + (d[i] - y) * a`` (firmware: ``y += (d - y) >> shift``).  ``S[i] = y`` after the update.
+
+Per-sample semantics (exactly; the fixed-point reference copies them):
+
+* ``k`` counts the samples since the last restart: k = 0 at sample 0 and at every *restart*
+  sample (the start of each gap-free segment, ``RunLog.segments``), where all state is reset
+  exactly as at power-on; k then increases by 1 per sample (firmware may saturate it at W).
+  Past samples are only read within the current segment (``i - m >= segment start``).
+* ``gain = fs / (D * span)`` is computed once (float64, that expression);
+* if ``k < W`` (warm-up): ``v = 0.0``, ``warmup = True``, ``clamped = False`` (the iir state is
+  still updated);
+* else ``v_raw = S[i] * gain``; ``v = +1`` and ``clamped = True`` if ``v_raw > 1``; ``v = -1`` and
+  ``clamped = True`` if ``v_raw < -1``; else ``v = v_raw``.  ``v_raw == +-1`` is not clamped.
+
+Choosing ``span``: :meth:`RateConfig.from_data` takes the ``percentile`` (default 99.9) of
+``|dp/dt|`` from the estimator itself over the training samples past warm-up, times
+``1 + margin`` (default 0.1); or explicit (CLI ``--rate-range S``: ``|dp/dt| <= S`` proxy
+units/s, parsed by :func:`parse_rate_range`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from firmware_ref.vocabulary import ESTIMATORS
+_CODE = {name: i for i, name in enumerate(ESTIMATORS)}
+MAX_SHIFT = 24
+RATE_UNITS = {"freq": "Hz/s", "temp": "degC/s"}
+
+
+@dataclass(frozen=True)
+class RateConfig:
+    """Rate estimator settings: ``estimator`` (one of ESTIMATORS), ``n`` (window for 'diffn'
+    (>= 1) and 'lsq' (>= 2); ignored otherwise), ``shift`` (iir coefficient 2**-shift, 0..24;
+    ignored otherwise), ``span`` [proxy units/s] (> 0; |dp/dt| = span maps to |v| = 1), ``fs``
+    [Hz] nominal sample rate (> 0)."""
+
+    estimator: str = "diff"
+    n: int = 8
+    shift: int = 4
+    span: float = 1.0
+    fs: float = 1.0
+
+    def __post_init__(self):
+        if self.estimator not in ESTIMATORS:
+            raise ValueError(f"rate estimator must be one of {ESTIMATORS}, not {self.estimator!r}")
+        for name in ("n", "shift"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise ValueError(f"rate {name} must be an integer, not {value!r}")
+            object.__setattr__(self, name, int(value))
+        if self.estimator == "diffn" and self.n < 1:
+            raise ValueError(f"rate n must be >= 1 for 'diffn', not {self.n}")
+        if self.estimator == "lsq" and self.n < 2:
+            raise ValueError(f"rate n must be >= 2 for 'lsq', not {self.n}")
+        if not 0 <= self.shift <= MAX_SHIFT:
+            raise ValueError(f"rate shift must be in 0..{MAX_SHIFT}, not {self.shift}")
+        for name in ("span", "fs"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float, np.floating, np.integer)) or not math.isfinite(value) \
+                    or not value > 0:
+                raise ValueError(f"rate {name} must be a finite number > 0, not {value!r}")
+            object.__setattr__(self, name, float(value))
+
+    # -- the estimator's constants ---------------------------------------------------------------
+    @property
+    def divisor(self) -> int:
+        """D: S / D is the slope in proxy units per sample."""
+        if self.estimator == "diffn":
+            return self.n
+        if self.estimator == "lsq":
+            return self.n * (self.n * self.n - 1) // 6
+        return 1
+
+    @property
+    def warmup(self) -> int:
+        """W: samples after each (re)start with ``v = 0`` and ``warmup = True``."""
+        return warmup_length(self.estimator, self.n, self.shift)
+
+    @property
+    def gain(self) -> float:
+        """``fs / (D * span)``: v_raw = S * gain."""
+        return self.fs / (self.divisor * self.span)
+
+    # -- evaluation ------------------------------------------------------------------------------
+    def slope(self, p, restarts=None) -> tuple[np.ndarray, np.ndarray]:
+        """``(dpdt, warmup)``: the estimator's dp/dt [proxy units/s] (0 during warm-up) and the
+        warm-up flag, bool[n].  ``restarts``: segment start indices (default: only sample 0)."""
+        p = np.ascontiguousarray(p, np.float64)
+        s, warm = _rate_kernel(p, restart_mask(len(p), restarts), _CODE[self.estimator], self.n,
+                               2.0 ** -self.shift, self.warmup)
+        return s * (self.fs / self.divisor), warm
+
+    def normalize(self, p, restarts=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(v, clamped, warmup)`` per sample (see the module doc): v float64[n] in [-1, 1]."""
+        p = np.ascontiguousarray(p, np.float64)
+        s, warm = _rate_kernel(p, restart_mask(len(p), restarts), _CODE[self.estimator], self.n,
+                               2.0 ** -self.shift, self.warmup)
+        v_raw = s * self.gain  # s == 0 in warm-up
+        clamped = (v_raw > 1.0) | (v_raw < -1.0)
+        return np.clip(v_raw, -1.0, 1.0), clamped, warm
+
+    # -- construction / serialization ----------------------------------------------------------
+    @classmethod
+    def from_data(cls, p_arrays, fs: float, estimator: str = "diff", n: int = 8, shift: int = 4,
+                  restarts=None, percentile: float = 99.9, margin: float = 0.1,
+                  masks=None) -> "RateConfig":
+        """``span`` from training data: the ``percentile`` of |dp/dt| (this estimator, proxy
+        units/s) over all samples past warm-up, times ``1 + margin``.  ``restarts``: one array of
+        segment starts per array of ``p_arrays`` (None: one segment each); ``masks``: optional
+        bool arrays of samples to use (e.g. excluding mode-exchange samples)."""
+        if not 0 < percentile <= 100 or not margin >= 0:
+            raise ValueError(f"rate span from data: need 0 < percentile <= 100 and margin >= 0, "
+                             f"not {percentile!r}, {margin!r}")
+        probe = cls(estimator, n, shift, 1.0, fs)
+        p_arrays = list(p_arrays)
+        restarts = [None] * len(p_arrays) if restarts is None else list(restarts)
+        masks = [None] * len(p_arrays) if masks is None else list(masks)
+        rates = []
+        for p, r, m in zip(p_arrays, restarts, masks):
+            dpdt, warm = probe.slope(p, r)
+            use = ~warm if m is None else (~warm & np.asarray(m, bool))
+            rates.append(np.abs(dpdt[use]))
+        rates = np.concatenate(rates) if rates else np.zeros(0)
+        if rates.size == 0:
+            raise ValueError(f"rate span from data: no training sample past the '{estimator}' "
+                             f"warm-up ({probe.warmup} samples)")
+        q = float(np.percentile(rates, percentile))
+        if not q > 0:
+            raise ValueError(f"rate span from data: the {percentile} percentile of |dp/dt| is 0 "
+                             f"(proxy constant over the training data); give the range explicitly "
+                             f"(--rate-range S)")
+        return cls(estimator, n, shift, q * (1.0 + margin), fs)
+
+    def to_dict(self) -> dict:
+        return {"estimator": self.estimator, "n": self.n, "shift": self.shift, "span": self.span,
+                "fs": self.fs, "divisor": self.divisor, "warmup": self.warmup}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "RateConfig":
+        """Inverse of :meth:`to_dict`; 'divisor' and 'warmup' are derived and checked if present."""
+        cfg = cls(d["estimator"], d.get("n", 8), d.get("shift", 4), d["span"], d["fs"])
+        for name in ("divisor", "warmup"):
+            if name in d and d[name] != getattr(cfg, name):
+                raise ValueError(f"rate {name} {d[name]!r} does not match the estimator settings "
+                                 f"(expected {getattr(cfg, name)})")
+        return cfg
+
+
+def warmup_length(estimator: str, n: int, shift: int) -> int:
+    """Warm-up length W [samples] of an estimator (see the module table)."""
+    if estimator == "diff":
+        return 1
+    if estimator == "diffn":
+        return n
+    if estimator == "lsq":
+        return n - 1
+    if estimator == "iir":
+        return 2 ** (shift + 1)
+    raise ValueError(f"rate estimator must be one of {ESTIMATORS}, not {estimator!r}")
+
+
+def restart_mask(n: int, restarts=None) -> np.ndarray:
+    """bool[n], True at sample 0 and at every index in ``restarts`` (segment starts)."""
+    mask = np.zeros(n, np.bool_)
+    if n:
+        mask[0] = True
+    if restarts is not None:
+        idx = np.asarray(restarts, np.int64)
+        if idx.size and (idx.min() < 0 or idx.max() >= max(n, 1)):
+            raise ValueError(f"restart index out of range 0..{n - 1}: {idx.min()}..{idx.max()}")
+        mask[idx] = True
+    return mask
+
+
+def parse_rate_range(text: str, what: str = "--rate-range") -> float:
+    """Parse ``'S'`` (a finite number > 0, proxy units per second) for ``--rate-range``."""
+    try:
+        value = float(str(text).strip())
+    except ValueError:
+        raise ValueError(f"{what}: expected S, the largest |dp/dt| in proxy units/s, not {text!r}") from None
+    if not math.isfinite(value) or not value > 0:
+        raise ValueError(f"{what}: expected a finite S > 0, not {text!r}")
+    return value
+
+
+@numba.njit(cache=True)
+def _rate_kernel(p, restart, code, n, a, warm_len):
+    """S[i] (0 during warm-up) and warm-up flags; see the module doc.  code: 0 diff, 1 diffn,
+    2 lsq, 3 iir; a = 2**-shift."""
+    size = p.shape[0]
+    out = np.zeros(size)
+    warm = np.ones(size, np.bool_)
+    if code == 0:
+        n = 1
+    k = 0
+    y = 0.0
+    for i in range(size):
+        if restart[i] or i == 0:
+            k = 0
+            y = 0.0
+        s = 0.0
+        if code <= 1:
+            if k >= n:
+                s = p[i] - p[i - n]
+        elif code == 2:
+            if k >= n - 1:
+                for j in range(n):
+                    s += (2 * j - (n - 1)) * (p[i - n + 1 + j] - p[i])
+        else:
+            if k == 1:
+                y = p[i] - p[i - 1]
+            elif k >= 2:
+                y = y + ((p[i] - p[i - 1]) - y) * a
+            s = y
+        if k >= warm_len:
+            out[i] = s
+            warm[i] = False
+        k += 1
+    return out, warm

@@ -1,0 +1,260 @@
+"""Mode-reversal combination (golden model, float64): the bias-cancelled output of eq. (5), causal,
+in two orders: **regress_first** (default for new models: subtract the model's bias per mode, then
+pair the *residuals*) and **combine_first** (legacy: pair the raw outputs, then subtract one bias).
+
+Input per sample i: ``mode[i]`` (0 FTR, 1, 2, 3 exchange) and ``rate[i]``, the raw loop output in
+deg/h with the run-log sign convention: in mode 2 the true rate and the non-reversing bias flip
+sign, the damping-asymmetry term does not.  So the *rate-corrected* sample
+
+    c[i] = s[i] * rate[i],    s = +1 in mode 1, -1 in mode 2
+
+equals  Omega + B_E + s * B_D:  averaging a mode-1 and a mode-2 value cancels B_D (eq. 5).
+
+A log is either FTR (every sample mode 0: output = rate, always valid, s = +1) or mode reversal
+(modes 1, 2, 3 only; a mix with mode 0 is an error).
+
+Orders (``ReversalConfig.order``; the spec of issue #10, /work/spec-rtr.md):
+
+* ``"combine_first"`` (legacy, model files of version 1): the value combined at sample i is
+  x[i] = c[i]; the combined output minus one bias bank B(u, v, z) is the compensated output
+  (host_tools.golden.compensate).  Combiners ``pair`` and ``trend``.
+* ``"regress_first"``: the model has two coefficient banks, bank 1 for mode-1 samples and bank 2
+  for mode-2 samples (a joint fit of common(u,v,z) + s * damping(u,v,z): bank1 = common + damping,
+  bank2 = common - damping).  The value combined is the *residual*
+  x[i] = r[i] = c[i] - B_m[i](u[i], v[i], z[i]); the combiner's output is the compensated output
+  (no bias is subtracted after).  Combiners ``none`` (out = r: joint regression alone), ``pair``
+  and ``trend`` (the paper's pairing / ours, applied to the residual: they cancel what the
+  regression leaves of the damping term, e.g. its non-repeatable change at power-on, without the
+  stale-window error of combine_first, because the residual varies slowly).  Why: combine_first
+  estimates the other mode's output at the present sample from a window up to one period old;
+  where temperature curves, the damping term changes non-linearly between the windows, and that
+  error is no function of (u, v, z), so no regression after the pairing removes it.
+
+Exact semantics (the fixed-point sequencer in firmware_ref copies them), with x[i] the value
+combined (c for combine_first, r for regress_first):
+
+* **Used samples.**  Sample i is *used* when mode[i] in {1, 2}, it is past its window's settling
+  (``pos >= settle_n``, see Windows) and ``ok[i]``: for regress_first ``ok`` = the rate estimator
+  is warm (not in warm-up, host_tools.golden.rate); for combine_first ``ok`` is always true (there the
+  warm-up only invalidates the final output, host_tools.golden.compensate).  Only used samples enter the
+  window sums and only used samples can be valid.
+* **Windows.** A window is a maximal run of consecutive samples of one mode m in {1, 2}; ``pos``
+  counts the samples of the open window from 0.  The first ``settle_n = round(settle_s * fs)``
+  samples of every window are *settling*.  Every used sample adds x[i] to the open window's sum
+  and count.  When the mode changes (to 3 or to the other mode), the open window is *committed*
+  if its count >= 1: ``W[m] = sum / count`` (the mean of x over the used samples), ``centre[m]`` =
+  mean of the first and last used sample index, ``end[m]`` = the last used index.
+* **Segments (time gaps).** At the start of every gap-free segment (``RunLog.segments``) the state
+  is reset as at power-on: the open window is discarded and no committed window remains.
+* **Output** at a used sample i of mode m, with o the other mode:
+
+  - ``"none"`` (regress_first only): out = x[i], valid.
+  - ``"pair"`` (the paper, section 3.4/4.4):   out = (x[i] + W[o]) / 2
+  - ``"trend"`` (ours):  out = (x[i] + W[o] + slope[o] * (i - centre[o])) / 2, where
+    ``slope[o] = (W[o] - W_prev[o]) / (centre[o] - centre_prev[o])`` [deg/h per sample] is the
+    change between the last two committed windows of mode o (0 until o has two committed windows
+    in this segment).  It extrapolates the other mode's value linearly to the present sample, so
+    the first-order effect of the temperature change between the two modes' windows (eq. 6)
+    cancels too; on a static run it equals "pair" plus the noise of the slope.
+
+  For pair and trend the output is valid when o has a committed window and ``i - end[o] <=
+  max_stale_n`` (``max_stale_n = round(max_stale_s * fs)``; default 300 s, the paper's period:
+  the other mode's estimate may be at most one reversal period old).  Both are valid from the
+  first sample of the first mode-2 window after a complete mode-1 window (180 s after power-on in
+  the paper's timing, as the paper says).
+* **Invalid samples** (exchange, settling, not ok, before the first pair, stale) output the last
+  valid output (0.0 before the first one) with ``valid = False``.  They never enter a fit or a
+  statistic.
+
+Note: the rate-corrected output also averages the *true rate* of the present sample with that of
+the other window, so a rotation that changes between windows is seen at half amplitude: like the
+paper, this is a method for bias, on a static or slowly turning gyroscope (combiner ``none``
+passes the present rate through).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from firmware_ref.vocabulary import ORDERS, REVERSAL_COMBINERS as COMBINERS
+DEFAULT_MAX_STALE_S = 300.0
+# the defaults of new models (host_tools.golden.compensate.fit_config_from_logs, the CLI of hdrg fit / diagnose)
+# and of the raw-log combination of hdrg metrics: chosen on the foreign benchmark (docs/REGRESS_THEN_REVERSE.md)
+DEFAULT_ORDER = "regress_first"
+DEFAULT_COMBINER = "pair"
+DEFAULT_SETTLE_S = 5.0   # settling time excluded after each exchange [s] of new regress_first + pair models (fit_config_from_logs)
+_KIND = {"pair": 0, "trend": 1, "none": 2}
+
+
+@dataclass
+class ReversalConfig:
+    """Combination settings stored with a model: combiner name, staleness limit [s], settling time
+    [s], order ('regress_first': per-mode bias banks, residuals combined; 'combine_first': legacy).
+    An unspecified order (the dataclass default, or a dict without "order" such as a model file of
+    version 1) is 'combine_first', so code written before the order existed keeps its meaning; new
+    models get their order from host_tools.golden.compensate.fit_config_from_logs (default
+    regress_first)."""
+
+    combiner: str = "pair"
+    max_stale_s: float = DEFAULT_MAX_STALE_S
+    settle_s: float = 0.0
+    order: str = "combine_first"
+
+    def __post_init__(self):
+        if self.combiner not in COMBINERS:
+            raise ValueError(f"reversal combiner must be one of {COMBINERS}, not {self.combiner!r}")
+        if self.order not in ORDERS:
+            raise ValueError(f"reversal order must be one of {ORDERS}, not {self.order!r}")
+        if self.combiner == "none" and self.order != "regress_first":
+            raise ValueError("reversal combiner 'none' needs order 'regress_first' (with combine_first "
+                             "nothing would cancel the damping term)")
+        if not self.max_stale_s > 0:
+            raise ValueError(f"reversal max_stale_s must be > 0, not {self.max_stale_s}")
+        if not self.settle_s >= 0:
+            raise ValueError(f"reversal settle_s must be >= 0, not {self.settle_s}")
+
+    def to_dict(self) -> dict:
+        return {"combiner": self.combiner, "max_stale_s": self.max_stale_s, "settle_s": self.settle_s,
+                "order": self.order}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "ReversalConfig":
+        kw = {k: d[k] for k in ("combiner", "max_stale_s", "settle_s", "order") if k in d}
+        kw.setdefault("order", "combine_first")
+        return cls(**kw)
+
+
+@dataclass
+class Combined:
+    """Output of :func:`combine`: ``out_dph`` float64[n] [deg/h], ``valid`` bool[n], ``sign`` int8[n]
+    (+1 mode 0/1, -1 mode 2, 0 exchange), the combiner used."""
+
+    out_dph: np.ndarray
+    valid: np.ndarray
+    sign: np.ndarray
+    combiner: str
+
+
+@numba.njit(cache=True)
+def _combine_kernel(mode, x, ok, seg_start, settle_n, max_stale_n, kind):
+    """The combiner of the module doc on values x (c or r), kind 0 pair, 1 trend, 2 none.
+    Returns (out, valid, used)."""
+    n = mode.shape[0]
+    out = np.zeros(n)
+    valid = np.zeros(n, np.bool_)
+    used = np.zeros(n, np.bool_)
+    W = np.zeros(3)
+    Wprev = np.zeros(3)
+    centre = np.zeros(3)
+    centre_prev = np.zeros(3)
+    end = np.zeros(3, np.int64)
+    ncommit = np.zeros(3, np.int64)
+    slope = np.zeros(3)
+    cur = 0
+    acc = 0.0
+    cnt = 0
+    first = 0
+    last = 0
+    pos = 0
+    hold = 0.0
+    for i in range(n):
+        m = mode[i]
+        if seg_start[i]:
+            cur = 0
+            acc = 0.0
+            cnt = 0
+            pos = 0
+            for k in range(3):
+                ncommit[k] = 0
+                slope[k] = 0.0
+        if m != cur:
+            if cur != 0 and cnt >= 1:
+                mean = acc / cnt
+                c_new = 0.5 * (first + last)
+                if ncommit[cur] >= 1:
+                    Wprev[cur] = W[cur]
+                    centre_prev[cur] = centre[cur]
+                    slope[cur] = (mean - Wprev[cur]) / (c_new - centre_prev[cur])
+                W[cur] = mean
+                centre[cur] = c_new
+                end[cur] = last
+                ncommit[cur] += 1
+            cur = m if (m == 1 or m == 2) else 0
+            acc = 0.0
+            cnt = 0
+            pos = 0
+        if cur != 0:
+            if pos >= settle_n and ok[i]:
+                c = x[i]
+                used[i] = True
+                if cnt == 0:
+                    first = i
+                last = i
+                acc += c
+                cnt += 1
+                o = 3 - cur
+                if kind == 2:
+                    hold = c
+                    valid[i] = True
+                elif ncommit[o] >= 1 and i - end[o] <= max_stale_n:
+                    other = W[o]
+                    if kind == 1:
+                        other += slope[o] * (i - centre[o])
+                    hold = 0.5 * (c + other)
+                    valid[i] = True
+            pos += 1
+        out[i] = hold
+    return out, valid, used
+
+
+def sign_of(mode) -> np.ndarray:
+    """s per sample, int8: +1 mode 0/1, -1 mode 2, 0 exchange (mode 3)."""
+    mode = np.asarray(mode)
+    return np.where(mode == 2, -1, np.where(mode == 3, 0, 1)).astype(np.int8)
+
+
+def check_modes(log) -> None:
+    """Refuse a mode-reversal log (some mode != 0) that also holds mode-0 (FTR) samples."""
+    mode = np.asarray(log.mode)
+    if log.reversal and np.any(mode == 0):
+        row = int(np.argmax(mode == 0))
+        line = log.line_of(row)
+        where = f"line {line}" if line is not None else f"row {row}"
+        raise ValueError(f"{log.source}: {where}: mode 0 (FTR) sample in a mode-reversal log "
+                         f"(a log is either all mode 0 or modes 1/2/3)")
+
+
+def combine_values(mode, x, ok, segments, cfg: ReversalConfig, fs_hz: float):
+    """The combiner of the module doc on per-sample values ``x`` [deg/h] (c for combine_first, the
+    residual r = c - B_mode for regress_first), with ``ok`` bool[n] (regress_first: rate estimator
+    warm), ``segments`` the segment start indices (RunLog.segments).  Returns (out float64[n],
+    valid bool[n], used bool[n])."""
+    mode = np.ascontiguousarray(mode, np.int64)
+    x = np.ascontiguousarray(x, np.float64)
+    ok = np.ascontiguousarray(ok, np.bool_)
+    if not (len(x) == len(mode) == len(ok)):
+        raise ValueError(f"combine_values: mode, x and ok differ in length ({len(mode)}, {len(x)}, {len(ok)})")
+    seg_start = np.zeros(len(mode), np.bool_)
+    seg_start[np.asarray(segments, np.int64)] = True
+    return _combine_kernel(mode, x, ok, seg_start, int(round(cfg.settle_s * fs_hz)),
+                           int(round(cfg.max_stale_s * fs_hz)), _KIND[cfg.combiner])
+
+
+def combine(log, combiner: str = "pair", max_stale_s: float | None = None, settle_s: float = 0.0,
+            fs_hz: float | None = None) -> Combined:
+    """Combine a run log's raw output into the bias-cancelled output, combine_first (legacy) order:
+    x = c (see the module doc).  ``log`` is a :class:`host_tools.golden.runlog.RunLog`.  ``fs_hz``
+    defaults to the log's sample rate."""
+    cfg = ReversalConfig(combiner, DEFAULT_MAX_STALE_S if max_stale_s is None else max_stale_s, settle_s,
+                         order="combine_first")
+    mode = np.asarray(log.mode, np.int64)
+    rate = np.asarray(log.rate_dph, np.float64)
+    sign = sign_of(mode)
+    if not log.reversal:
+        return Combined(rate.copy(), np.ones(len(rate), bool), sign, "ftr")
+    check_modes(log)
+    fs = log.sample_rate_hz if fs_hz is None else fs_hz
+    out, valid, _ = combine_values(mode, sign * rate, np.ones(len(mode), np.bool_), log.segments, cfg, fs)
+    return Combined(out, valid, sign, cfg.combiner)
