@@ -58,7 +58,7 @@ def rtl_aux_check(work: Path, simulator: str = "icarus", defines=(), n_vec: int 
         out = run_tool([need("vvp"), "-n", exe, *plus], what="vvp", timeout=1800)
     elif simulator == "verilator":
         obj = work / f"vl_aux_{tag}"
-        run_tool([need("verilator"), "--binary", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_aux",
+        run_tool([need("verilator"), "--binary", "-j", "0", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_aux",
               *(f"-D{d}" for d in defines), *(f"-G{k}={v}" for k, v in params.items()), "-Mdir", obj,
               *AUX_SOURCES], what="verilator", timeout=900)
         out = run_tool([obj / "Vtb_aux", *plus], what="verilator run", timeout=1800)

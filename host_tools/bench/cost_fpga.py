@@ -99,7 +99,7 @@ def rtl_check_verilator(work: Path) -> dict:
     """The same testbench compiled by Verilator 5 (--binary)."""
     params, plus = _eval_tb_args(work)
     obj = work / "verilator"
-    run_tool([need("verilator"), "--binary", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_eval_tm",
+    run_tool([need("verilator"), "--binary", "-j", "0", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_eval_tm",
           *(f"-G{k}={v}" for k, v in params.items()), "-Mdir", obj, *TM_SOURCES], what="verilator", timeout=900)
     out = run_tool([obj / "Vtb_eval_tm", *plus], what="verilator run", timeout=900)
     return _tb_result(out, "verilator")

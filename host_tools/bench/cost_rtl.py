@@ -5,10 +5,15 @@ vector sets on the RTL (docs/COST.md, "The whole pipeline in RTL").
 
 ``check_top`` builds the testbench (``iverilog -g2001`` or ``verilator --binary``), runs
 check-impl set by set and reads the testbench's cycle file (``+cycles=``: clock cycles from
-``start`` to ``done`` of every sample request; worst case and mean per set).
+``start`` to ``done`` of every sample request; worst case and mean per set).  Within one process
+a check is run once per (simulator, sets, defines, content of the RTL, testbench and vector files):
+`hdrg cost --target ice40` and `--target xc7` check the same RTL, so a test session that measures
+both (tests/test_cost.py, tests/test_rtl.py) simulates it once.
 """
 from __future__ import annotations
 
+import copy
+import hashlib
 from pathlib import Path
 
 from host_tools import vectors as V
@@ -43,7 +48,7 @@ def build_top(sim: str, work: Path, defines=()) -> list:
         return [need("vvp"), "-n", str(exe)]
     if sim == "verilator":
         obj = work / f"vl_top_{tag}"
-        run_tool([need("verilator"), "--binary", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_top",
+        run_tool([need("verilator"), "--binary", "-j", "0", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_top",
               *(f"-D{d}" for d in defines), "-Mdir", obj, *src], what="verilator", timeout=1800)
         return [str(obj / "Vtb_top")]
     raise CostError(f"unknown simulator {sim!r} (icarus, verilator)")
@@ -60,6 +65,11 @@ def _cycles(path: Path) -> dict:
 def check_top(sim: str, work: Path, sets=SETS, defines=(), log=print) -> dict:
     """check-impl of hdrg_top under ``sim`` on each of ``sets``: ``{set: {"vectors", "mismatches",
     "first", "samples", "cycles_max", "cycles_mean"}}`` (cycles: sample requests only)."""
+    key = (sim, tuple(sets), tuple(defines), _fingerprint())
+    if key in _CHECKED:
+        log(f"  {sim}{' ' + ' '.join(defines) if defines else ''}: the same RTL and vectors were checked in this "
+            f"process: reusing that result")
+        return copy.deepcopy(_CHECKED[key])
     argv = build_top(sim, work, defines)
     out = {}
     for name in sets:
@@ -70,4 +80,16 @@ def check_top(sim: str, work: Path, sets=SETS, defines=(), log=print) -> dict:
         out[name] = {"vectors": r["rows"], "mismatches": r["mismatches"], "first": r["first"], **_cycles(cyc)}
         log(f"  {sim}{' ' + ' '.join(defines) if defines else ''} {name}: {r['rows']} vectors, "
             f"{r['mismatches']} mismatches, max {out[name]['cycles_max']} cycles/sample")
+    _CHECKED[key] = copy.deepcopy(out)
     return out
+
+
+_CHECKED: dict = {}     # check_top's results in this process, by (sim, sets, defines, fingerprint)
+
+
+def _fingerprint() -> str:
+    """SHA-256 of every HDL source and testbench and of the vector files (their manifest)."""
+    h = hashlib.sha256()
+    for f in sorted(HDL.glob("*.v")) + [V.DEFAULT_DIR / "manifest.json"]:
+        h.update(f.name.encode() + b"\0" + f.read_bytes())
+    return h.hexdigest()
