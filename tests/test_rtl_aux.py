@@ -4,7 +4,9 @@ worst-case tables (every term the longest kind), the schedule's cycle count, a d
 build that fails, lint and synthesis figures.
 
 Default suite: Icarus on a per-case subset of the aux set and on the directed tables (a few seconds).
-Slow: the whole set under Icarus and Verilator, the broken build, lint, Yosys.
+Exhaustive (`pytest -m exhaustive`, not in the default run or CI: the whole pipeline hdrg_top is checked
+on the aux set under both simulators by tests/test_cost.py and tests/test_rtl.py): the module alone on
+the whole set under Icarus and Verilator for OP_CYCLES 2 and 4, its broken build, lint, Yosys.
 """
 from __future__ import annotations
 
@@ -107,14 +109,14 @@ def test_icarus_directed_worst_case_bit_exact(directed, op_cycles):
     assert r["cycles_min"] == 2 + op_cycles * 1, r  # aux_gen 0: one operation (z = clamp(Z))
 
 
-@pytest.mark.slow
+@pytest.mark.exhaustive
 @needs_iverilog
 def test_icarus_broken_rounding_fails(tmp_path):
     r = CA.rtl_aux_check(tmp_path, "icarus", defines=("HDRG_BREAK_ROUNDING",), files=_subset(tmp_path))
     assert r["mismatches"] > 100, r
 
 
-@pytest.mark.slow
+@pytest.mark.exhaustive
 @needs_iverilog
 @pytest.mark.parametrize("op_cycles", [2, 4])
 def test_icarus_aux_set_bit_exact(tmp_path, op_cycles):
@@ -123,7 +125,7 @@ def test_icarus_aux_set_bit_exact(tmp_path, op_cycles):
     assert r["vectors"] == meta["rows"] and r["mismatches"] == 0, r
 
 
-@pytest.mark.slow
+@pytest.mark.exhaustive
 @needs_verilator
 @pytest.mark.parametrize("op_cycles", [2, 4])
 def test_verilator_aux_set_and_directed_bit_exact(tmp_path, directed, op_cycles):
@@ -136,14 +138,14 @@ def test_verilator_aux_set_and_directed_bit_exact(tmp_path, directed, op_cycles)
     assert r["cycles_max"] == 2 + op_cycles * (F.AUX_MAX_TERMS * OPS_PER_TERM_MAX + 1), r
 
 
-@pytest.mark.slow
+@pytest.mark.exhaustive
 @needs_verilator
 @pytest.mark.parametrize("op_cycles", [2, 4])
 def test_verilator_lint_clean(op_cycles):
     assert CA.lint_aux(op_cycles).strip() == ""
 
 
-@pytest.mark.slow
+@pytest.mark.exhaustive
 @needs_yosys
 def test_yosys_ice40_fits_beside_the_evaluator(tmp_path):
     r = CA.synth_aux("ice40", tmp_path)

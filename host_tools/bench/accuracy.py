@@ -33,9 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import fnmatch
-import json
 import math
-import sys
 import time
 from dataclasses import dataclass
 

@@ -65,7 +65,7 @@ def _cycles(path: Path) -> dict:
 def check_top(sim: str, work: Path, sets=SETS, defines=(), log=print) -> dict:
     """check-impl of hdrg_top under ``sim`` on each of ``sets``: ``{set: {"vectors", "mismatches",
     "first", "samples", "cycles_max", "cycles_mean"}}`` (cycles: sample requests only)."""
-    key = (sim, tuple(sets), tuple(defines), _fingerprint())
+    key = (sim, tuple(sets), tuple(defines), fingerprint())
     if key in _CHECKED:
         log(f"  {sim}{' ' + ' '.join(defines) if defines else ''}: the same RTL and vectors were checked in this "
             f"process: reusing that result")
@@ -87,7 +87,7 @@ def check_top(sim: str, work: Path, sets=SETS, defines=(), log=print) -> dict:
 _CHECKED: dict = {}     # check_top's results in this process, by (sim, sets, defines, fingerprint)
 
 
-def _fingerprint() -> str:
+def fingerprint() -> str:
     """SHA-256 of every HDL source and testbench and of the vector files (their manifest)."""
     h = hashlib.sha256()
     for f in sorted(HDL.glob("*.v")) + [V.DEFAULT_DIR / "manifest.json"]:

@@ -45,7 +45,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 import time
 import warnings
 
