@@ -200,25 +200,13 @@ def calibration_study(n_clean: int = 16, n_effect: int = 18, seed: int = CALIBRA
     CALIBRATION_SHORT_S; run type as in the plan: i odd = mode reversal), clean hdrg-sim runs
     (FTR/MR, 1 and 2 cycles, CALIBRATION_HDRG_SEEDS) and the first ``n_effect`` effect runs.
     Returns {"clean": summary + records, "hdrg_clean": rows, "effect": summary + records}."""
-    from host_tools.simulation import sim
     say = progress or (lambda msg: None)
     clean = []
     for k, sp in enumerate([s for s in plan(3 * n_clean, seed) if s["effect"] is None][:n_clean]):
         rec = run_one(sp, duration_s=None if k % 2 == 0 else CALIBRATION_SHORT_S)
         clean.append(rec)
         say(f"clean {sp['i']}: {rec['verdict']}")
-    hdrg = []
-    for scen in ("paper-ftr-cycle-4dpm", "paper-mr-cycle-4dpm"):
-        for n_cyc in (1, 2):
-            prof = sim.cycle_profile(2.0, hold_s=1200, n_cycles=n_cyc)
-            for base in CALIBRATION_HDRG_SEEDS:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    logs = [sim.simulate(scen, seed=base + k, off=list(HDRG_OFF), profile=prof) for k in (1, 3, 2)]
-                    rep, _ = diagnose(logs[:2], logs[2:], plots=False)
-                hdrg.append({"scenario": scen, "cycles": n_cyc, "seed": base, "verdict": rep["verdict"],
-                             "steps": [(i["effect"], i["confirmed"]) for i in rep["iterations"]]})
-                say(str(hdrg[-1]))
+    hdrg = hdrg_clean_study(CALIBRATION_HDRG_SEEDS, progress=say)
     eff = []
     for sp in [s for s in plan(3 * n_effect, seed) if s["effect"] is not None][:n_effect]:
         eff.append(run_one(sp))
@@ -234,16 +222,16 @@ def calibration_study(n_clean: int = 16, n_effect: int = 18, seed: int = CALIBRA
 HDRG_OFF = ("turn_on", "electronics", "damping_asym")      # the clean world of tests/test_diagnose.py
 
 
-def hdrg_clean_study(progress=None) -> list:
+def hdrg_clean_study(bases=range(100, 150, 10), progress=None) -> list:
     """False discovery on clean runs of host_tools.simulation.sim: FTR and MR (paper-ftr-cycle-4dpm,
-    paper-mr-cycle-4dpm), short (one 2-degC/min cycle, 4800 s) and long (two, 9600 s), 5 seed
-    triples each (seeds b+1, b+3 train, b+2 held out; b = 100, 110, .., 140)."""
+    paper-mr-cycle-4dpm), short (one 2-degC/min cycle, 4800 s) and long (two, 9600 s), one seed
+    triple per base b (seeds b+1, b+3 train, b+2 held out; default b = 100, 110, .., 140)."""
     from host_tools.simulation import sim
     rows = []
     for scen in ("paper-ftr-cycle-4dpm", "paper-mr-cycle-4dpm"):
         for n_cyc in (1, 2):
             prof = sim.cycle_profile(2.0, hold_s=1200, n_cycles=n_cyc)
-            for base in range(100, 150, 10):
+            for base in bases:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
                     logs = [sim.simulate(scen, seed=base + k, off=list(HDRG_OFF), profile=prof) for k in (1, 3, 2)]
