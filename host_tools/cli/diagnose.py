@@ -6,7 +6,7 @@ import os
 import sys
 
 from host_tools.cli.options import add_model_options
-from host_tools.fitting.diagnose import CV_BLOCKS, CV_FOLDS, G_MIN, MAX_ITER, N_SURROGATES, _fmt, diagnose
+from host_tools.fitting.diagnose import CV_BLOCKS, CV_FOLDS, G_MIN, MAX_ITER, N_SURROGATES, fmt_value, diagnose
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -55,10 +55,10 @@ def run(args) -> int:
     on = "held-out" if hold else "training"
     base = report["baseline"][report["evaluated_on"]]
     print(f"hdrg diagnose: {report['verdict']} ({on} runs; std 1 s / std 100 s in deg/h)")
-    print(f"  base model: {_fmt(base['std_dph'])} / {_fmt(base['std100_dph'])}")
+    print(f"  base model: {fmt_value(base['std_dph'])} / {fmt_value(base['std100_dph'])}")
     for k, it in enumerate(report["iterations"], 1):
-        params = ", ".join(f"{a}={_fmt(b) if isinstance(b, float) else b}" for a, b in it["params"].items())
-        print(f"  {k}. {it['effect']} ({params}): {_fmt(it['after']['std_dph'])} / {_fmt(it['after']['std100_dph'])}"
+        params = ", ".join(f"{a}={fmt_value(b) if isinstance(b, float) else b}" for a, b in it["params"].items())
+        print(f"  {k}. {it['effect']} ({params}): {fmt_value(it['after']['std_dph'])} / {fmt_value(it['after']['std100_dph'])}"
               f"  [CV gain {it['cv_gain']:.3f} >= {it['threshold']:.3f}; {it['status']}]")
     print(f"  {report['verdict_detail']}")
     for a in (report.get("artifacts") or {}).get("lines", []):

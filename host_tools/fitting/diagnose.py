@@ -106,7 +106,7 @@ import numpy as np
 
 from firmware_ref.terms import K_AUX
 from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE, CONFIRM_TOL_1S, CONFIRM_TOL_RMS,  # noqa: F401
-                                         HELDOUT_METRIC, REPORT_TAUS, STAT_KEYS, _clean, _fmt, _residuals, _score,
+                                         HELDOUT_METRIC, REPORT_TAUS, STAT_KEYS, _clean, fmt_value, _residuals, _score,
                                          _stats_one, _step_metric, confirmed_on_holdout, error_stats, leg_rms,
                                          noise_floor, offsets_hold, step_errors)
 from host_tools.fitting.diagnose_noise import (_allan_bridged, _noise_series, artifact_of, characterize,  # noqa: F401
@@ -282,7 +282,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
             iterations.append(entry)
             if confirmed is False:
                 say(f"iteration {it}: {acc.family} NOT confirmed on the held-out runs "
-                    f"({_fmt(_score(before)[0])} -> {_fmt(_score(after)[0])} deg/h): reverted")
+                    f"({fmt_value(_score(before)[0])} -> {fmt_value(_score(after)[0])} deg/h): reverted")
                 entry["status"] = "not confirmed on held-out: reverted (the model stays the last confirmed one)"
                 model, cfg, gen_terms, rate_choice = before_model, before_cfg, before_gen, before_rate
                 excluded.add(_step_key(acc.family, acc.params))

@@ -167,5 +167,6 @@ def _step_metric(cb, ca) -> dict:
     return {"before": _score(cb)[0], "after": _score(ca)[0], "metric": HELDOUT_METRIC}
 
 
-def _fmt(x, prec=4):
+def fmt_value(x, prec=4) -> str:
+    """A number for the report and the console: ``prec`` significant digits, "n/a" for None."""
     return "n/a" if x is None else f"{x:.{prec}g}"

@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from host_tools.fitting import metrics
-from host_tools.fitting.diagnose_confirm import _fmt
+from host_tools.fitting.diagnose_confirm import fmt_value
 
 
 BAND_RATIO = 2 ** 0.25       # spectrum continuum: median over 1/4-octave bands
@@ -271,7 +271,7 @@ def _artifact_entry(line, cl, why) -> dict:
     return {"period_s": line["period_s"], "amp_dph": line["amp_dph"], "ratio": line["ratio"], "at": why,
             "cause": f"the mode-reversal combiner ({cl['combiner']}): a line at the reversal cycle "
                      f"({cl['reversal_period_s']:g} s), its harmonics or their sidebands with the chamber cycle "
-                     f"({_fmt(cl['chamber_period_s'])} s); not a periodic bias of the sensor",
+                     f"({fmt_value(cl['chamber_period_s'])} s); not a periodic bias of the sensor",
             "structural_fix": fix}
 
 

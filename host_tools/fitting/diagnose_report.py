@@ -11,7 +11,7 @@ import numpy as np
 from firmware_ref.terms import K_AUX, TERM_NAMES
 from host_tools.atomic import atomic_open, atomic_path
 from host_tools.golden.compensate import prepare, residual
-from host_tools.fitting.diagnose_confirm import STAT_KEYS, _fmt, _residuals
+from host_tools.fitting.diagnose_confirm import STAT_KEYS, fmt_value, _residuals
 from host_tools.fitting.diagnose_noise import _allan_bridged, _filled
 from host_tools.golden.model import jsonable
 from host_tools.golden.regressors import generator_values
@@ -31,7 +31,7 @@ def _verdict_detail(iterations, hold) -> str:
 
 
 def _stats_line(s):
-    return " | ".join(_fmt(s.get(k)) for k in STAT_KEYS)
+    return " | ".join(fmt_value(s.get(k)) for k in STAT_KEYS)
 
 
 def write_report(report, model, out_dir, train, hold, plots=True) -> None:
@@ -68,16 +68,16 @@ def markdown(doc, model) -> str:
     first = doc["baseline"][on]
     lines.append(f"| 0 | (base model) | terms {doc['settings']['terms']} | {_stats_line(first)} | | | |")
     for k, it in enumerate(doc["iterations"], 1):
-        params = ", ".join(f"{a}={_fmt(b) if isinstance(b, float) else b}" for a, b in it["params"].items())
+        params = ", ".join(f"{a}={fmt_value(b) if isinstance(b, float) else b}" for a, b in it["params"].items())
         lines.append(f"| {k} | {it['effect']} | {params} | {_stats_line(it['after'])} | "
-                     f"{_fmt(it['cv_gain'])} | {_fmt(it['threshold'])} | {it['status']} |")
+                     f"{fmt_value(it['cv_gain'])} | {fmt_value(it['threshold'])} | {it['status']} |")
     lines += ["", f"{doc['verdict_detail']}.  Confirmation: {doc['confirm_rule']}."]
     for a in (doc.get("artifacts") or {}).get("lines", []):
         lines += ["", f"Line at {a['period_s']:.4g} s ({a['at']}, {a['amp_dph']:.3g} deg/h): {a['cause']}.  "
                       f"Structural fix: {a['structural_fix']}."]
     nf = doc["noise_floor"]
-    lines += ["", f"Noise floor (white noise of the residual): {_fmt(nf['std_dph'])} deg/h at 1 s, "
-                  f"{_fmt(nf['std100_dph'])} deg/h at 100 s.", "",
+    lines += ["", f"Noise floor (white noise of the residual): {fmt_value(nf['std_dph'])} deg/h at 1 s, "
+                  f"{fmt_value(nf['std100_dph'])} deg/h at 100 s.", "",
               f"Selection rule: {doc['rule']}.", ""]
     if doc.get("stopped"):
         st = doc["stopped"]
@@ -91,9 +91,9 @@ def markdown(doc, model) -> str:
         lines += [f"## Iteration {k}: {it['effect']}", "",
                   f"CV gain {it['cv_gain']:.4f} (threshold {it['threshold']:.4f}), improves "
                   f"{it['folds_improved']} of {it['folds']} folds.  Training: "
-                  f"std 100 s {_fmt(it['train_before']['std100_dph'])} -> {_fmt(it['train_after']['std100_dph'])}; "
-                  f"{'held-out' if on == 'holdout' else 'training'}: {_fmt(it['before']['std100_dph'])} -> "
-                  f"{_fmt(it['after']['std100_dph'])} deg/h.", "", "Ranking:", ""]
+                  f"std 100 s {fmt_value(it['train_before']['std100_dph'])} -> {fmt_value(it['train_after']['std100_dph'])}; "
+                  f"{'held-out' if on == 'holdout' else 'training'}: {fmt_value(it['before']['std100_dph'])} -> "
+                  f"{fmt_value(it['after']['std100_dph'])} deg/h.", "", "Ranking:", ""]
         lines += [f"* {r['label']}: {r['gain']:.4f} ({r['folds_improved']}/{r['folds']})" for r in it["ranking"][:8]]
         lines.append("")
         for f in it.get("figures", []):
@@ -103,9 +103,9 @@ def markdown(doc, model) -> str:
     for which in ("train", "holdout"):
         for c in ch.get(which, []) or []:
             lines += [f"### Residual of the base model: {os.path.basename(c['source'])} ({which})", "",
-                      f"rms {_fmt(c['rms_dph'])} deg/h; Allan deviation above 2x the white-noise line at "
-                      f"tau = {', '.join(_fmt(t) for t in c['allan']['structure_taus_s']) or 'none'} s; "
-                      f"spectrum lines: {', '.join(_fmt(ln['period_s']) + ' s' for ln in c['lines']) or 'none'}.", ""]
+                      f"rms {fmt_value(c['rms_dph'])} deg/h; Allan deviation above 2x the white-noise line at "
+                      f"tau = {', '.join(fmt_value(t) for t in c['allan']['structure_taus_s']) or 'none'} s; "
+                      f"spectrum lines: {', '.join(fmt_value(ln['period_s']) + ' s' for ln in c['lines']) or 'none'}.", ""]
             dep = sorted(c["dependence"].items(), key=lambda kv: -abs(kv[1]["corr"]))
             lines.append("Dependence (correlation, range of binned means in deg/h): " + "; ".join(
                 f"{name} {d['corr']:+.2f} / {d['range_dph']:.3g}" for name, d in dep))

@@ -19,7 +19,7 @@ from host_tools.fitting import effects
 from host_tools.golden import runlog as rl
 from host_tools.golden.compensate import fit_config_from_logs, prepare
 from host_tools.fitting.cv import fold_ids, heldout_sse
-from host_tools.fitting.diagnose_confirm import _fmt
+from host_tools.fitting.diagnose_confirm import fmt_value
 from host_tools.fitting.diagnose_noise import (MAX_LINES, _artifact_entry, _combined, artifact_of, characterize,
                                        combiner_lines, noise_model, spectral_lines, surrogates)
 from host_tools.golden.regressors import AuxConfig, generator_values, regressor_matrix
@@ -414,7 +414,7 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
                 params = {"estimator": "lsq", "n": alt["n"], "window_s": alt["n"] / acfg.rate.fs}
             else:
                 params = {"estimator": "iir", "shift": alt["shift"], "tau_s": 2.0 ** alt["shift"] / acfg.rate.fs}
-            inner = ", ".join(f"{k}={_fmt(v)}" for k, v in params.items() if k != "estimator")
+            inner = ", ".join(f"{k}={fmt_value(v)}" for k, v in params.items() if k != "estimator")
             rows.append({"family": "rate_estimator", "label": f"rate_estimator({alt['estimator']}, {inner})",
                          "params": params, "terms": [], "gain": float(g[0]),
                          "folds_improved": int(np.sum(g_alt[:, 0] < g_base[:, 0])), "folds": nfold,
