@@ -51,7 +51,6 @@ import numpy as np
 from host_tools.fitting.fit_kernel import _A, _name, _predict, Accumulator, accumulate_groups  # noqa: F401
 from host_tools.golden.model import jsonable
 from firmware_ref.terms import K_AUX, N_TERMS, PAPER_TERMS, TERM_NAMES, TERM_POWERS, parse_terms
-from firmware_ref.vocabulary import ESTIMATORS, PROXY_KINDS
 
 __all__ = [
     "Accumulator", "FitResult", "UnidentifiableError", "accumulate_groups", "block_groups",
