@@ -37,6 +37,40 @@
 #define HDRG_COLD
 #endif
 #define P2(k) ((int64_t)1 << (k))
+#if defined(__GNUC__)
+#define HDRG_INLINE inline __attribute__((always_inline))
+#else
+#define HDRG_INLINE inline
+#endif
+
+/* the table fields a configuration-specialized build fixes at compile time (hdrg_fw.h): the
+ * per-sample path reads them through these, so that a fixed field is a constant */
+#ifdef HDRG_FIX_PROXY
+#define PROXY_KIND(t) ((void)(t), (uint32_t)HDRG_FIX_PROXY)
+#else
+#define PROXY_KIND(t) ((t)->proxy_kind)
+#endif
+#ifdef HDRG_FIX_EST
+#define RATE_EST(t) ((void)(t), (uint32_t)HDRG_FIX_EST)
+#else
+#define RATE_EST(t) ((t)->rate_est)
+#endif
+#ifdef HDRG_FIX_COMB
+#define COMBINER(t) ((void)(t), (uint32_t)HDRG_FIX_COMB)
+#else
+#define COMBINER(t) ((t)->combiner)
+#endif
+#ifdef HDRG_FIX_ORDER
+#define ORDER(t) ((void)(t), (uint32_t)HDRG_FIX_ORDER)
+#else
+#define ORDER(t) ((t)->order)
+#endif
+/* the effective window n: rate_n (diffn, lsq) or 1 (diff, iir: a constant when the estimator is fixed) */
+#if defined(HDRG_FIX_EST) && (HDRG_FIX_EST == 0 || HDRG_FIX_EST == 3)
+#define WIN_N(st) ((void)(st), 1u)
+#else
+#define WIN_N(st) ((st)->n)
+#endif
 
 /* ---------------------------------------------------------------- primitives (arith.py) -- */
 
@@ -425,6 +459,19 @@ static int check_fields(const hdrg_table_t *t, unsigned *bad)
     }
     NEED(t->aux_gen <= (HDRG_AUX_GEN ? 1u : 0u), HDRG_W_AUX_GEN);    /* -DHDRG_AUX_GEN=0: aux_gen 0 only */
     NEED(t->aux_gen == 1u || t->aux_nparams == 0u, HDRG_W_AUX_NPARAMS);
+    /* a configuration-specialized build refuses the tables of another configuration */
+#ifdef HDRG_FIX_PROXY
+    NEED(t->proxy_kind == (uint32_t)HDRG_FIX_PROXY, HDRG_W_PROXY_KIND);
+#endif
+#ifdef HDRG_FIX_EST
+    NEED(t->rate_est == (uint32_t)HDRG_FIX_EST, HDRG_W_RATE_EST);
+#endif
+#ifdef HDRG_FIX_COMB
+    NEED(t->combiner == (uint32_t)HDRG_FIX_COMB, HDRG_W_COMBINER);
+#endif
+#ifdef HDRG_FIX_ORDER
+    NEED(t->order == (uint32_t)HDRG_FIX_ORDER, HDRG_W_ORDER);
+#endif
     return HDRG_OK;
 }
 
@@ -766,13 +813,13 @@ void hdrg_reset(hdrg_state_t *st)
 /* the value of a stored proxy word */
 static int64_t pword(const hdrg_state_t *st, uint32_t w)
 {
-    return st->t.proxy_kind == 0u ? I64(w) : s32(w);
+    return PROXY_KIND(&st->t) == 0u ? I64(w) : s32(w);
 }
 
 /* the proxy word m samples back (0 <= m <= n) */
 static int64_t hist_back(const hdrg_state_t *st, uint32_t m)
 {
-    uint32_t i = st->head >= m ? st->head - m : st->head + st->n + 1u - m;
+    uint32_t i = st->head >= m ? st->head - m : st->head + WIN_N(st) + 1u - m;
     return pword(st, st->hist[i]);
 }
 
@@ -790,7 +837,7 @@ static int64_t state_length(const hdrg_table_t *t, unsigned s)
 static uint8_t next_state(const hdrg_table_t *t, unsigned s)
 {
     if (s == HDRG_ST_POWER_ON) {
-        return t->combiner == 0u ? HDRG_ST_FTR : HDRG_ST_EXCH_TO_1;
+        return COMBINER(t) == 0u ? HDRG_ST_FTR : HDRG_ST_EXCH_TO_1;
     }
     if (s == HDRG_ST_MODE_2) {
         return HDRG_ST_EXCH_TO_1;
@@ -833,7 +880,7 @@ static inline int32_t clamp_one(int64_t x, unsigned *flags, unsigned flag)
  * ASR(dP G_U + u_add, SH_U) with u_add = U_OFF + 2^(SH_U - 1) (hdrg_table_t) is one SMLAL and one
  * variable 64-bit shift (0 < G_U < 2^31, |U_OFF| <= 2^30, SH_U <= 62: |.| < 2^62 + 2^61); then
  * the clamp to +-2^30 */
-static int32_t proxy_u(const hdrg_table_t *t, int64_t p, unsigned *flags)
+static HDRG_INLINE int32_t proxy_u(const hdrg_table_t *t, int64_t p, unsigned *flags)
 {
     int64_t d = p - t->p_ref;
     int32_t dp = d > HDRG_INT32_SYM ? HDRG_INT32_SYM : d < -HDRG_INT32_SYM ? -HDRG_INT32_SYM : (int32_t)d;
@@ -842,10 +889,10 @@ static int32_t proxy_u(const hdrg_table_t *t, int64_t p, unsigned *flags)
 
 /* rate.RateState.step: pushes p; returns v, sets *s (the sum before its clamp) and the flags
  * HDRG_FLAG_WARMUP, HDRG_FLAG_RATE_CLAMPED in *flags */
-static int32_t rate_step(hdrg_state_t *st, uint32_t pw, int restart, int64_t *s_out, unsigned *flags)
+static HDRG_INLINE int32_t rate_step(hdrg_state_t *st, uint32_t pw, int restart, int64_t *s_out, unsigned *flags)
 {
     const hdrg_table_t *t = &st->t;
-    uint32_t k = st->k, n = st->n, j;
+    uint32_t k = st->k, n = WIN_N(st), j;
     int64_t p, s = 0, sc;
     if (restart) {
         rate_reset(st);
@@ -855,11 +902,11 @@ static int32_t rate_step(hdrg_state_t *st, uint32_t pw, int restart, int64_t *s_
     }
     st->hist[st->head] = pw;
     p = pword(st, pw);
-    if (t->rate_est <= 1u) {                        /* diff, diffn: |S| < 2^32 */
+    if (RATE_EST(t) <= 1u) {                        /* diff, diffn: |S| < 2^32 */
         if (k >= n) {
             s = p - hist_back(st, n);
         }
-    } else if (t->rate_est == 2u) {                 /* lsq: |S| < n^2 2^32 <= 2^56 */
+    } else if (RATE_EST(t) == 2u) {                 /* lsq: |S| < n^2 2^32 <= 2^56 */
         if (k >= n - 1u) {
             uint32_t idx = st->head >= n - 1u ? st->head - (n - 1u) : st->head + 2u;  /* mod n + 1 */
             for (j = 0; j < n; j++) {
@@ -916,13 +963,13 @@ static HDRG_COLD int comb_commit(hdrg_state_t *st, unsigned cur)
 
 /* sequencer.Combiner.step: returns cvalid, sets st->y_hold, HDRG_FLAG_SAT in *flags; b (the sample's B) and warm
  * are read by order 1 (the residual r = c - B) only */
-static int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, int64_t b, int warm,
+static HDRG_INLINE int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, int64_t b, int warm,
                      unsigned *flags)
 {
     const hdrg_table_t *t = &st->t;
     unsigned cur, o;
     int cvalid = 0;
-    if (t->combiner == 0u) {
+    if (COMBINER(t) == 0u) {
         st->y_hold = I64(r) * P2(HDRG_Y_FRAC - 10);  /* R << 11 */
         return 1;
     }
@@ -953,7 +1000,7 @@ static int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, in
     if (cur != 0u) {
         int64_t c = cur == 1u ? I64(r) : -I64(r);
         if (st->pos >= t->settle_n) {
-            if (t->order == 1u) {
+            if (ORDER(t) == 1u) {
                 int cs = 0;
                 if (warm) {
                     return 0;                       /* not used */
@@ -963,7 +1010,7 @@ static int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, in
                 if (cs) {
                     *flags |= HDRG_FLAG_SAT;
                 }
-                if (t->combiner == 3u) {            /* none: out = r */
+                if (COMBINER(t) == 3u) {            /* none: out = r */
                     if (st->cnt < HDRG_COUNT_MAX) {
                         st->acc += c;
                         st->cnt += 1u;
@@ -983,7 +1030,7 @@ static int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, in
             o = 3u - cur;
             if (st->ncommit[o] >= 1u && st->age[o] <= t->max_stale_n) {
                 int64_t other = st->w[o];
-                if (t->combiner == 2u) {
+                if (COMBINER(t) == 2u) {
                     int dc = 0;
                     int64_t d = hdrg_clamp(2 * I64(st->age[o]) + I64(st->span[o]), 0, HDRG_D_MAX, &dc);
                     if (dc) {
@@ -1156,20 +1203,21 @@ static HDRG_COLD int64_t aux_step(hdrg_state_t *st, const hdrg_input_t *in, cons
 
 #endif /* HDRG_AUX_GEN */
 
-/* compensate.Pipeline.step */
-int hdrg_step(hdrg_state_t *st, const hdrg_input_t *in, hdrg_sample_t *o)
-{
-    return hdrg_step_aux(st, in, NULL, o);
-}
+/* compensate.Pipeline.step: one sample.  o (hdrg_step_aux) gets every intermediate, r
+ * (hdrg_step_out) the outputs only; the two public functions inline this body with one of them
+ * NULL, so that the lean one has neither the stores nor the live registers of the intermediates
+ * (SET below: a store only when full, a constant of each caller). */
+#define SET(field, value) do { if (full) { o->field = (value); } } while (0)
 
-int hdrg_step_aux(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input_t *ax, hdrg_sample_t *o)
+static HDRG_INLINE int step_core(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input_t *ax,
+                                 int full, hdrg_sample_t *o, hdrg_out_t *r)
 {
     const hdrg_table_t *t = &st->t;
     int restart = in->restart != 0;
     int cvalid, valid, warm;
     unsigned state, mode, flags = 0;                /* flags are set where they arise */
     uint32_t pw;
-    int64_t b;
+    int64_t b, s;
     int32_t u, v, z;
     if (in->mode < -1 || in->mode > 3) {
         return HDRG_ERR_INPUT;
@@ -1190,14 +1238,17 @@ int hdrg_step_aux(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input
         state = mode == 0u ? HDRG_ST_FTR : mode == 1u ? HDRG_ST_MODE_1 : mode == 2u ? HDRG_ST_MODE_2
               : st->last_window == 1u ? HDRG_ST_EXCH_TO_2 : HDRG_ST_EXCH_TO_1;
     }
-    o->state = (uint8_t)state;
-    o->vs = STATE_VS[state];
-    o->mode = (uint8_t)mode;
-    o->sign = STATE_SIGN[state];
+    SET(state, (uint8_t)state);
+    SET(vs, STATE_VS[state]);
+    SET(mode, (uint8_t)mode);
+    SET(sign, STATE_SIGN[state]);
     /* 2. proxy, 3. rate (the outputs are stored as they arise: fewer live registers) */
-    pw = t->proxy_kind == 0u ? in->f : (uint32_t)in->t;   /* bit pattern, decoded by pword */
-    o->u = u = proxy_u(t, pword(st, pw), &flags);
-    o->v = v = rate_step(st, pw, restart, &o->s, &flags);
+    pw = PROXY_KIND(t) == 0u ? in->f : (uint32_t)in->t;   /* bit pattern, decoded by pword */
+    u = proxy_u(t, pword(st, pw), &flags);
+    SET(u, u);
+    v = rate_step(st, pw, restart, &s, &flags);
+    SET(v, v);
+    SET(s, s);
     warm = (flags & HDRG_FLAG_WARMUP) != 0u;
     /* 4b. aux: the generators (aux_gen 1; the sample counter kc is read by them only, so it is
      * kept for aux_gen 1 tables only) or the Z word */
@@ -1205,7 +1256,7 @@ int hdrg_step_aux(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input
     if (t->aux_gen == 1u) {
         int64_t k = (ax != NULL && ax->k_given) ? ax->k : st->kc;
         st->kc = k < HDRG_K_LIMIT ? k + 1 : HDRG_K_LIMIT;
-        z = clamp_one(aux_step(st, in, ax, k, mode, restart || st->fresh, o->s, warm), &flags,
+        z = clamp_one(aux_step(st, in, ax, k, mode, restart || st->fresh, s, warm), &flags,
                       HDRG_FLAG_AUX_CLAMPED);
         st->fresh = 0;
     } else
@@ -1213,9 +1264,10 @@ int hdrg_step_aux(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input
     {
         z = clamp_one(in->z, &flags, HDRG_FLAG_AUX_CLAMPED);
     }
-    o->z = z;
+    SET(z, z);
     /* 5. evaluator: bank 2 on mode-2 samples of a two-bank table */
-    o->b = b = hdrg_evaluate_bank(t, mode == 2u ? 2u : 1u, u, v, z, NULL);
+    b = hdrg_evaluate_bank(t, mode == 2u ? 2u : 1u, u, v, z, NULL);
+    SET(b, b);
     /* 5b. combiner (order 1 reads B) */
     cvalid = comb_step(st, mode, in->r, restart, b, warm, &flags);
     /* 6. compensate */
@@ -1223,7 +1275,7 @@ int hdrg_step_aux(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input
     if (valid) {
         int s1 = 0, s2 = 0;
         /* |y| < 2^47, |B| < 2^52; order 1: B is in y already */
-        st->out_hold = (int32_t)hdrg_sat_signed(hdrg_rhu(t->order == 0u ? st->y_hold - b : st->y_hold,
+        st->out_hold = (int32_t)hdrg_sat_signed(hdrg_rhu(ORDER(t) == 0u ? st->y_hold - b : st->y_hold,
                                                          HDRG_OUT_SHIFT), 32u, &s1);
         st->bias_hold = (int32_t)hdrg_sat_signed(hdrg_rhu(b, HDRG_OUT_SHIFT), 32u, &s2);
         if (s1 || s2) {
@@ -1235,12 +1287,33 @@ int hdrg_step_aux(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input
     } else if (!cvalid) {
         flags |= HDRG_FLAG_STALE;
     }
-    o->acc = st->acc;
-    o->cnt = st->cnt;
-    o->y = st->y_hold;
-    o->out = st->out_hold;
-    o->bias = st->bias_hold;
-    o->valid = (uint8_t)valid;
-    o->flags = (uint8_t)flags;
+    SET(acc, st->acc);
+    SET(cnt, st->cnt);
+    SET(y, st->y_hold);
+    SET(out, st->out_hold);
+    SET(bias, st->bias_hold);
+    SET(valid, (uint8_t)valid);
+    SET(flags, (uint8_t)flags);
+    if (!full) {
+        r->out = st->out_hold;
+        r->bias = st->bias_hold;
+        r->valid = (uint8_t)valid;
+        r->flags = (uint8_t)flags;
+    }
     return HDRG_OK;
+}
+
+int hdrg_step(hdrg_state_t *st, const hdrg_input_t *in, hdrg_sample_t *out)
+{
+    return hdrg_step_aux(st, in, NULL, out);
+}
+
+int hdrg_step_aux(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input_t *ax, hdrg_sample_t *out)
+{
+    return step_core(st, in, ax, 1, out, NULL);
+}
+
+int hdrg_step_out(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input_t *ax, hdrg_out_t *r)
+{
+    return step_core(st, in, ax, 0, NULL, r);
 }

@@ -47,6 +47,30 @@
 #define HDRG_AUX_GEN 1
 #endif
 
+/* A configuration-specialized build (the firmware engineer ships one configuration): each of
+ * these, when defined, fixes a table field at compile time, so that its branches and the code of
+ * the other choices fold away; the coefficients and every other field are still loaded at run
+ * time.  A table with another value of a fixed field is refused (HDRG_ERR_FIELD at that word).
+ *   -DHDRG_FIX_PROXY=k   proxy_kind (0 freq, 1 temp)
+ *   -DHDRG_FIX_EST=k     rate_est (0 diff, 1 diffn, 2 lsq, 3 iir)
+ *   -DHDRG_FIX_COMB=k    combiner (0 ftr, 1 pair, 2 trend, 3 none)
+ *   -DHDRG_FIX_ORDER=k   order (0 combine_first, 1 regress_first; n_banks follows)
+ * What `hdrg fit` picks for mode-reversal logs by default (regress_first pair, diff, freq proxy,
+ * no aux generators): -DHDRG_FIX_PROXY=0 -DHDRG_FIX_EST=0 -DHDRG_FIX_COMB=1 -DHDRG_FIX_ORDER=1
+ * -DHDRG_AUX_GEN=0.  Bit for bit the same answers for every table it accepts. */
+#if defined(HDRG_FIX_PROXY) && (HDRG_FIX_PROXY < 0 || HDRG_FIX_PROXY > 1)
+#error "HDRG_FIX_PROXY must be 0 or 1"
+#endif
+#if defined(HDRG_FIX_EST) && (HDRG_FIX_EST < 0 || HDRG_FIX_EST > 3)
+#error "HDRG_FIX_EST must be in 0..3"
+#endif
+#if defined(HDRG_FIX_COMB) && (HDRG_FIX_COMB < 0 || HDRG_FIX_COMB > 3)
+#error "HDRG_FIX_COMB must be in 0..3"
+#endif
+#if defined(HDRG_FIX_ORDER) && (HDRG_FIX_ORDER < 0 || HDRG_FIX_ORDER > 1)
+#error "HDRG_FIX_ORDER must be 0 or 1"
+#endif
+
 /* ---- table layout (version 2; version 1 is read as order 0 with one bank) --------------- */
 #define HDRG_MAGIC 0x47524448u          /* 'HDRG' as little-endian bytes */
 #define HDRG_LAYOUT_VERSION 2u
@@ -248,6 +272,12 @@ typedef struct hdrg_sample {
     uint8_t valid, flags;
 } hdrg_sample_t;
 
+/* The outputs of one sample for a firmware (hdrg_step_out): what the control loop reads. */
+typedef struct hdrg_out {
+    int32_t out, bias;  /* output words (held), LSB 2^-10 deg/h */
+    uint8_t valid, flags;
+} hdrg_out_t;
+
 /* The whole firmware state: the table and every register of the pipeline. */
 typedef struct hdrg_state {
     hdrg_table_t t;
@@ -325,6 +355,10 @@ int hdrg_step(hdrg_state_t *st, const hdrg_input_t *in, hdrg_sample_t *out);
 /* One sample with the aux generators' extra inputs (aux may be NULL); HDRG_ERR_INPUT also when
  * |K| > 2^62. */
 int hdrg_step_aux(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input_t *aux, hdrg_sample_t *out);
+/* The firmware entry point: one sample, the same as hdrg_step_aux bit for bit (same state, same
+ * out, bias, valid, flags), without the intermediates of hdrg_sample_t (fewer stores and live
+ * registers).  aux may be NULL. */
+int hdrg_step_out(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input_t *aux, hdrg_out_t *r);
 /* The bias B (LSB 2^-21 deg/h) at u, v in [-2^30, 2^30] (precondition) and any z (clamped;
  * *z_clamped may be NULL). */
 int64_t hdrg_evaluate(const hdrg_table_t *t, int32_t u, int32_t v, int32_t z, int *z_clamped);

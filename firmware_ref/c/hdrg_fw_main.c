@@ -2,6 +2,8 @@
  * hdrg_fw_main.c - stdin/stdout driver of the C twin (protocol: firmware_ref/c/README.md).
  *
  * Build:  gcc -std=c99 -O2 -Wall -Wextra -Werror -o hdrg_fw hdrg_fw.c hdrg_fw_main.c
+ * -DHDRG_DRIVER_LEAN: S requests run the firmware entry point hdrg_step_out (the O line's
+ * intermediates are 0; see req_sample).
  * Optional: -DHDRG_TABLE_HEADER='"hdrg_table.h"' (a header of `hdrg export --format c`) enables
  * the request `TABLE BUILTIN`, which loads the table compiled in from that header.
  *
@@ -283,7 +285,24 @@ static void req_sample(char **tok, int ntok)
         err("RANGE", e);
         return;
     }
+#ifdef HDRG_DRIVER_LEAN
+    {   /* the firmware entry point: out, bias, valid, flags; acc, cnt, y from the state; the
+         * other fields (intermediates) are not computed by it and answered 0 (compare with
+         * check-impl --fields out,bias,valid,flags,acc,cnt,y) */
+        hdrg_out_t r;
+        hdrg_step_out(&g_st, &in, &ax, &r);
+        memset(&o, 0, sizeof o);
+        o.acc = g_st.acc;
+        o.cnt = g_st.cnt;
+        o.y = g_st.y_hold;
+        o.out = r.out;
+        o.bias = r.bias;
+        o.valid = r.valid;
+        o.flags = r.flags;
+    }
+#else
     hdrg_step_aux(&g_st, &in, &ax, &o);
+#endif
     sample_fields(&o, f);
     fputs("O", stdout);
     for (i = 0; i < REC_OUT; i++) {

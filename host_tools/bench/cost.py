@@ -30,9 +30,11 @@ import re
 import subprocess
 from pathlib import Path
 
+from firmware_ref import vocabulary as VOC
 from host_tools import vectors as V
 from host_tools.bench.cost_fpga import measure_fpga, summary_lines
 from host_tools.bench.cost_tools import CostError, need, run_tool, tool_version
+from host_tools.golden.compensate import DEFAULT_COMBINER, DEFAULT_ORDER, DEFAULT_RATE
 from host_tools.vectors.runner import requests
 
 ROOT = Path(__file__).resolve().parent.parent.parent
@@ -49,6 +51,8 @@ ARM_FLAGS = ("-std=c99", "-mthumb", "-mfloat-abi=soft", "-Wall", "-Wextra", "-We
              # the inlined build reads the inline chains of the executed addresses (addr2line -i)
              "-g")
 STEP = "hdrg_step_aux"                  # the per-sample entry point
+LEAN_STEP = "hdrg_step_out"             # the firmware entry point (outputs only; driver -DHDRG_DRIVER_LEAN)
+CORE = "step_core"                      # the body both entry points inline (transparent in the inline chains)
 TRACE_SAMPLES = 300                     # samples per traced case (the first ones: power-on, warm-up, reversals)
 # function -> stage (the -fno-inline build); primitives are charged to the stage that calls them
 STAGES = {
@@ -67,6 +71,18 @@ PRIMITIVES = ("hdrg_asr", "hdrg_rhu", "hdrg_mul_rhu", "hdrg_floor_div", "hdrg_di
               "hdrg_clamp", "hdrg_sat_signed", "abs64", "I64", "asr64", "asr32", "rhu64", "rhu32", "mulq30",
               "clamp_one", "nlz32", "divlu", "hdrg_udiv64", "floor_divmod", "div_round")
 STAGE_OF = {f: s for s, fs in STAGES.items() for f in fs}
+STAGE_OF[LEAN_STEP] = "step"
+# the O fields the lean driver (-DHDRG_DRIVER_LEAN: hdrg_step_out) answers; the rest are 0
+LEAN_FIELDS = ("acc", "cnt", "y", "out", "bias", "valid", "flags")
+# the configuration-specialized build (hdrg_fw.h HDRG_FIX_*): what `hdrg fit` picks for mode-reversal logs
+# by default (DEFAULT_RATE's estimator, reversal's DEFAULT_ORDER + DEFAULT_COMBINER, the freq proxy, no
+# aux generators); table field -> value, and the -D flags that fix them
+SPECIAL = {"proxy_kind": VOC.PROXY_KINDS.index("freq"), "rate_est": VOC.ESTIMATORS.index(DEFAULT_RATE["estimator"]),
+           "combiner": VOC.COMBINERS.index(DEFAULT_COMBINER), "order": VOC.ORDERS.index(DEFAULT_ORDER),
+           "aux_gen": 0}
+_FIX = {"proxy_kind": "HDRG_FIX_PROXY", "rate_est": "HDRG_FIX_EST", "combiner": "HDRG_FIX_COMB",
+        "order": "HDRG_FIX_ORDER", "aux_gen": "HDRG_AUX_GEN"}
+SPECIAL_DEFINES = tuple(f"{_FIX[k]}={v}" for k, v in SPECIAL.items())
 
 
 # -- MCU: build ----------------------------------------------------------------------------------------
@@ -177,15 +193,15 @@ def elf_functions(elf: Path) -> tuple:
     return sizes, edges
 
 
-def mcu_sizes(b: dict) -> dict:
+def mcu_sizes(b: dict, step: str = STEP) -> dict:
     """Code bytes of the library object and of the per-sample path (every function of the linked ELF
     reachable from hdrg_step_aux, libgcc helpers included); worst stack of a sample and of a table
     load (GCC's call graph and stack use; libgcc helpers are not in it)."""
     lib_syms = symbols(b["lib"])
     stack, edges, dynamic = call_graph(b["ci"])
     fsizes, fedges = elf_functions(b["elf"])
-    step_code = {f: fsizes[f] for f in sorted(reachable(fedges, STEP))}
-    s_bytes, s_path = worst_stack(stack, edges, STEP)
+    step_code = {f: fsizes[f] for f in sorted(reachable(fedges, step))}
+    s_bytes, s_path = worst_stack(stack, edges, step)
     p_bytes, p_path = worst_stack(stack, edges, "hdrg_init")
     return {"library": section_sizes(b["lib"]), "functions": {f: s for f, (_, s) in sorted(lib_syms.items())},
             "step_functions": step_code, "code_bytes": sum(step_code.values()),
@@ -246,13 +262,13 @@ def case_requests(set_name: str, cases=None, n: int = TRACE_SAMPLES) -> str:
     return "\n".join(lines) + "\nQUIT\n"
 
 
-def trace_samples(target: str, b: dict, requests: str, workdir: Path) -> list:
+def trace_samples(target: str, b: dict, requests: str, workdir: Path, step: str = STEP) -> list:
     """Run the driver on QEMU one instruction per block with the exec log; returns, per sample,
-    the list of executed addresses from the entry of hdrg_step_aux to the return to the driver."""
+    the list of executed addresses from the entry of ``step`` to the return to the driver."""
     elf_syms = symbols(b["elf"])
-    entry = elf_syms[STEP][0]
+    entry = elf_syms[step][0]
     dis = disassembly(b["elf"])
-    rets = sorted(a + s for a, (mn, ops, s) in dis.items() if mn.startswith("bl") and f"<{STEP}>" in ops)
+    rets = sorted(a + s for a, (mn, ops, s) in dis.items() if mn.startswith("bl") and f"<{step}>" in ops)
     ranges = _merge(_text_ranges(b, elf_syms) + [(r, r + 2) for r in rets])
     log = workdir / "exec.log"
     filt = ",".join(f"0x{lo:x}..0x{hi - 1:x}" for lo, hi in ranges)
@@ -338,7 +354,7 @@ def inline_chains(elf: Path, addrs) -> dict:
     return chains
 
 
-def stage_counts_inline(samples: list, elf: Path) -> tuple:
+def stage_counts_inline(samples: list, elf: Path, step: str = STEP) -> tuple:
     """(Counter, {address: stage or None}): instructions per stage of the production (inlined) build, summed over the samples: an address
     belongs to the function its inline chain enters from hdrg_step_aux (proxy_u, rate_step, ... inlined
     into it), or to the outermost function of the chain in a called function (hdrg_evaluate_bank);
@@ -347,10 +363,10 @@ def stage_counts_inline(samples: list, elf: Path) -> tuple:
     chains = inline_chains(elf, {pc for s in samples for pc in s})
     name_of = {}
     for a, ch in chains.items():
-        ch = [f.split(".")[0] for f in ch]
-        if STEP in ch:
-            i = ch.index(STEP)
-            f = ch[i - 1] if i > 0 else STEP
+        ch = [f.split(".")[0] for f in ch if f.split(".")[0] != CORE]
+        if step in ch:
+            i = ch.index(step)
+            f = ch[i - 1] if i > 0 else step
             name_of[a] = "step" if f in PRIMITIVES else STAGE_OF.get(f, f"other ({f})")
         else:
             f = ch[-1] if ch else "?"
@@ -381,6 +397,87 @@ def _stage_runs(stream: list, stage_of_pc) -> list:
         else:
             runs.append((stage, [pc]))
     return runs
+
+
+def check_cases(argv, accepts: dict, fields=None, log=print) -> dict:
+    """check-impl of what a build accepts: of every vector set, the cases whose table has the field
+    values ``accepts`` (table field -> value; {}: every case) compared answer by answer (the O fields
+    ``fields``, default all), and the other cases' tables must be refused (ERR to their TABLE request).
+    The primitives set (no table) is compared whole."""
+    manifest = V.read_manifest(V.DEFAULT_DIR)
+    rep = {"sets": {}, "vectors": 0, "mismatches": 0, "tables_refused": 0, "refusals_missed": 0, "first": None}
+    for name, meta in manifest["sets"].items():
+        reqs = requests(V.load_set(V.DEFAULT_DIR, name, meta), fields)
+        pr = subprocess.run(argv, input=("".join(r[0] + "\n" for r in reqs) + "QUIT\n").encode(),
+                            capture_output=True, timeout=1200)
+        got = pr.stdout.decode(errors="replace").splitlines()
+        case, ok, rows, bad, refused = -1, True, 0, 0, 0
+        for k, (line, exp, row, pos) in enumerate(reqs):
+            ans = got[k].split() if k < len(got) else []
+            if line.startswith("TABLE"):
+                case += 1
+                f = meta["tables"][meta["cases"][case]["table"]]["fields"]
+                ok = all(f.get(key, 0) == v for key, v in accepts.items())
+                if not ok:
+                    refused += 1
+                    rep["refusals_missed"] += ans[:1] != ["ERR"]
+            if not ok:
+                continue
+            rows += row is not None
+            if not (ans == exp if pos is None else len(ans) == len(exp) and all(ans[p] == exp[p] for p in pos)):
+                bad += 1
+                if rep["first"] is None:
+                    rep["first"] = f"{name}, request {k}: {line[:120]}\n  expected {' '.join(exp)}\n  got {got[k:k + 1]}"
+        rep["sets"][name] = {"vectors": rows, "mismatches": bad, "tables_refused": refused}
+        rep["vectors"] += rows
+        rep["mismatches"] += bad
+        rep["tables_refused"] += refused
+        log(f"{name}: {rows} vectors compared, {bad} mismatches, {refused} tables refused")
+    return rep
+
+
+def measure_build(target: str, work: Path, name: str, defines=(), accepts=None, log=print) -> dict:
+    """A firmware build with the lean entry point hdrg_step_out (driver -DHDRG_DRIVER_LEAN) and ``defines``:
+    at -O2 and -Os checked on every vector it accepts (``accepts``: table field -> value, as check_cases;
+    the O fields LEAN_FIELDS), the others refused; the -O2 trace of the e2e cases it accepts; code bytes of
+    the per-sample path (reachable from hdrg_step_out) at -Os; a -DHDRG_BREAK_ROUNDING build must fail."""
+    accepts = accepts or {}
+    e2e = V.read_manifest(V.DEFAULT_DIR)["sets"]["e2e"]
+    cases = [i for i, c in enumerate(e2e["cases"])
+             if all(e2e["tables"][c["table"]]["fields"].get(k, 0) == v for k, v in accepts.items())]
+    res = {"build": name, "entry": LEAN_STEP, "defines": list(defines), "accepts": accepts, "fields": list(LEAN_FIELDS),
+           "e2e_cases": [e2e["cases"][i]["name"] for i in cases]}
+    defs = ("HDRG_DRIVER_LEAN", *defines)
+    for opt in ("-O2", "-Os"):
+        b = build_mcu(target, opt, work / f"{target}-{name}{opt}", defines=defs)
+        rep = check_cases(qemu_argv(target, b["elf"]), accepts, LEAN_FIELDS, log=lambda s: log(f"  {name} {opt}: {s}"))
+        sz = mcu_sizes(b, LEAN_STEP)
+        res[opt] = {"bit_exact": rep["mismatches"] == 0 and rep["refusals_missed"] == 0, "check": rep,
+                    "code_bytes": sz["code_bytes"], "step_functions": sz["step_functions"], "library": sz["library"],
+                    "stack_step_bytes": sz["stack_step_bytes"]}
+        if opt == "-O2":
+            dis = disassembly(b["elf"])
+            samples = trace_samples(target, b, case_requests("e2e", cases), work, step=LEAN_STEP)
+            counts, stage_of_pc = stage_counts_inline(samples, b["elf"], LEAN_STEP)
+            cyc_stage = collections.Counter()
+            for s_ in samples:
+                for st_, part in _stage_runs(s_, stage_of_pc):
+                    cyc_stage[st_] += cycles_m4(part, dis, **M4_MODEL["nominal"])
+            n = len(samples)
+            res["per_sample"] = {"samples": n, "instructions": _stats([len(s_) for s_ in samples]),
+                                 "cycles_m4_model": {k: _stats([cycles_m4(s_, dis, **m) for s_ in samples])
+                                                     for k, m in M4_MODEL.items()},
+                                 "per_stage_instructions": {k: round(v / n, 1) for k, v in counts.most_common()},
+                                 "per_stage_cycles": {k: round(v / n, 1) for k, v in cyc_stage.most_common()}}
+    bad = build_mcu(target, "-O2", work / f"{target}-{name}-broken", defines=(*defs, "HDRG_BREAK_ROUNDING"))
+    res["broken_build_caught"] = check_cases(qemu_argv(target, bad["elf"]), accepts, LEAN_FIELDS,
+                                             log=lambda s: None)["mismatches"] > 0
+    res.update({"bit_exact": res["-O2"]["bit_exact"] and res["-Os"]["bit_exact"],
+                "vectors": res["-O2"]["check"]["vectors"],
+                "cycles_per_sample": res["per_sample"]["cycles_m4_model"]["nominal"]["mean"],
+                "instructions_per_sample": res["per_sample"]["instructions"]["mean"],
+                "code_bytes": res["-Os"]["code_bytes"]})
+    return res
 
 
 def measure_mcu(target: str, work: Path, log=print) -> dict:
@@ -426,6 +523,14 @@ def measure_mcu(target: str, work: Path, log=print) -> dict:
             cyc = {k: _stats([cycles_m4(s, dis, **m) for s in samples]) for k, m in M4_MODEL.items()}
             res[opt]["per_sample"][wname] = {"samples": len(samples), "instructions": _stats([len(s) for s in samples]),
                                              "cycles_m4_model": cyc}
+            if wname == "e2e":          # per case (the trace holds the first TRACE_SAMPLES of each, in order)
+                pc, k = {}, 0
+                for c in manifest["sets"]["e2e"]["cases"]:
+                    part = samples[k:k + min(TRACE_SAMPLES, c["rows"][1] - c["rows"][0])]
+                    k += len(part)
+                    pc[c["name"]] = {"instructions": round(sum(map(len, part)) / len(part), 1), "cycles_nominal": round(
+                        sum(cycles_m4(s_, dis, **M4_MODEL["nominal"]) for s_ in part) / len(part), 1)}
+                res[opt]["per_sample"][wname]["per_case"] = pc
             if opt == "-O2":            # per stage: the same trace, each address by its inline chain
                 counts, stage_of_pc = stage_counts_inline(samples, b["elf"])
                 cyc_stage = collections.Counter()
@@ -443,8 +548,13 @@ def measure_mcu(target: str, work: Path, log=print) -> dict:
         f = f.split(".")[0]
         per_stage_code[STAGE_OF.get(f, "primitives" if f in PRIMITIVES else f"other ({f})")] += sz_
     res["code_bytes_per_stage_noinline"] = dict(per_stage_code.most_common())
+    # the firmware entry point (outputs only), generic and specialized to the default configuration
+    res["builds"] = {"lean": measure_build(target, work, "lean", log=log),
+                     "specialized": measure_build(target, work, "specialized", SPECIAL_DEFINES, SPECIAL, log=log)}
     ps = res["-O2"]["per_sample"]["e2e"]
-    res.update({"bit_exact": res["-O2"]["bit_exact"] and res["-Os"]["bit_exact"],
+    res.update({"build": "generic (hdrg_step_aux, every table), e2e all cases",
+                "bit_exact": res["-O2"]["bit_exact"] and res["-Os"]["bit_exact"]
+                and all(b_["bit_exact"] for b_ in res["builds"].values()),
                 "instructions_per_sample": ps["instructions"]["mean"],
                 "cycles_per_sample": ps["cycles_m4_model"]["nominal"]["mean"],
                 "code_bytes": res["-Os"]["code_bytes"], "code_bytes_O2": res["-O2"]["code_bytes"],
@@ -495,7 +605,7 @@ def measure(target: str, work: Path, log=print) -> dict:
 
 
 def summary(r: dict) -> str:
-    lines = [f"target {r['target']}: bit_exact {r['bit_exact']}"]
+    lines = [f"target {r['target']}: bit_exact {r['bit_exact']}" + (f" (figures below: {r['build']})" if "build" in r else "")]
     for k in ("cycles_per_sample", "instructions_per_sample", "code_bytes", "code_bytes_O2", "code_bytes_no_aux_gen",
               "stack_bytes",
               "ns_per_sample", "luts", "ffs", "dsps", "brams", "fmax_mhz", "broken_build_caught"):
@@ -513,6 +623,15 @@ def summary(r: dict) -> str:
                      f"({na['vectors']} vectors, aux tables refused: {na['aux_tables_refused']})")
         lines.append("  code bytes by stage (-O2 -fno-inline): "
                      + ", ".join(f"{k} {v}" for k, v in r["code_bytes_per_stage_noinline"].items()))
+        for name, b_ in r.get("builds", {}).items():
+            c = b_["per_sample"]["cycles_m4_model"]
+            lines.append(f"  build {name} ({b_['entry']}; {' '.join('-D' + d for d in b_['defines']) or 'generic'}): "
+                         f"bit_exact {b_['bit_exact']} ({b_['vectors']} vectors, {b_['-O2']['check']['tables_refused']} "
+                         f"tables refused), broken build caught {b_['broken_build_caught']}; e2e {', '.join(b_['e2e_cases'])}: "
+                         f"{b_['instructions_per_sample']} instructions, cycles nominal {b_['cycles_per_sample']} (low "
+                         f"{c['low']['mean']}, high {c['high']['mean']}; max {c['nominal']['max']}); per-sample code "
+                         f"-Os {b_['code_bytes']} B, -O2 {b_['-O2']['code_bytes']} B; per stage (cycles) "
+                         + ", ".join(f"{k} {v}" for k, v in b_["per_sample"]["per_stage_cycles"].items()))
         for opt in ("-O2", "-Os"):
             o = r[opt]
             lines.append(f"  {opt}: library text/data/bss {o['library']}, per-sample code {o['code_bytes']} B, "
@@ -523,5 +642,8 @@ def summary(r: dict) -> str:
                 lines.append(f"    {w}: {d['samples']} samples, instructions {d['instructions']}, cycles nominal "
                              f"{c['nominal']['mean']} (low {c['low']['mean']}, high {c['high']['mean']}; max "
                              f"{c['nominal']['max']})")
+                if "per_case" in d:
+                    lines.append("      per case (instructions / cycles nominal): " + ", ".join(
+                        f"{k} {v['instructions']} / {v['cycles_nominal']}" for k, v in d["per_case"].items()))
     lines.append("  tools: " + "; ".join(f"{k}: {v}" for k, v in r.get("tools", {}).items()))
     return "\n".join(lines)
