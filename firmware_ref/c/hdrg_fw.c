@@ -618,10 +618,10 @@ static void derive_bank(hdrg_bank_t *k, const int32_t *m, const uint32_t *e_row,
     unsigned i, j;
     for (i = 0; i < 4u; i++) {
         for (j = 0; j < 3u; j++) {
-            k->add[3u * i + j] = I64(m[POLY[i][2u - j]]) * P2(HDRG_Q) + HALF_Q;
+            k->row[i].add[j] = I64(m[POLY[i][2u - j]]) * P2(HDRG_Q) + HALF_Q;
         }
-        k->top[i] = m[POLY[i][3]];
-        k->align[i] = e_row[i] - e_acc;
+        k->row[i].top = m[POLY[i][3]];
+        k->row[i].align = e_row[i] - e_acc;
     }
     k->m7 = m[K_AUX];
     k->k7_shift = (unsigned)HDRG_Q + e_7 - e_acc;
@@ -732,6 +732,7 @@ int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, uns
         return err;
     }
     t->s_lim = P2(t->s_bits) - 1;
+    t->p_ref_ob = t->proxy_kind == 0u ? words[HDRG_W_P_REF] : words[HDRG_W_P_REF] ^ 0x80000000u;
     t->u_add = I64(t->u_off) + (t->sh_u == 0u ? 0 : HALF(t->sh_u));
     t->v_half = t->sh_v == 0u ? 0 : HALF(t->sh_v);
     derive_bank(&t->bank[0], t->mant, t->e_row, t->e_7, t->e_acc);
@@ -876,14 +877,38 @@ static inline int32_t clamp_one(int64_t x, unsigned *flags, unsigned flag)
     return (int32_t)x;
 }
 
+/* the same of an int32 (the Z word): 32-bit compares */
+static inline int32_t clamp32_one(int32_t x, unsigned *flags, unsigned flag)
+{
+    if (x > (int32_t)HDRG_ONE) {
+        *flags |= flag;
+        return (int32_t)HDRG_ONE;
+    }
+    if (x < -(int32_t)HDRG_ONE) {
+        *flags |= flag;
+        return -(int32_t)HDRG_ONE;
+    }
+    return x;
+}
+
 /* proxy.proxy_u: dP = clamp(P - P_REF, +-(2^31 - 1)) is an int32, so RHU(dP G_U + U_OFF, SH_U) =
  * ASR(dP G_U + u_add, SH_U) with u_add = U_OFF + 2^(SH_U - 1) (hdrg_table_t) is one SMLAL and one
  * variable 64-bit shift (0 < G_U < 2^31, |U_OFF| <= 2^30, SH_U <= 62: |.| < 2^62 + 2^61); then
  * the clamp to +-2^30 */
-static HDRG_INLINE int32_t proxy_u(const hdrg_table_t *t, int64_t p, unsigned *flags)
+static HDRG_INLINE int32_t proxy_u(const hdrg_table_t *t, uint32_t pw, unsigned *flags)
 {
-    int64_t d = p - t->p_ref;
-    int32_t dp = d > HDRG_INT32_SYM ? HDRG_INT32_SYM : d < -HDRG_INT32_SYM ? -HDRG_INT32_SYM : (int32_t)d;
+    /* dP on 32-bit words: P and P_REF in offset binary (a T word's sign bit flipped: the uint32s are
+     * ordered as the values, and their difference is P - P_REF), so |P - P_REF| < 2^32 is a - r or
+     * r - a, clamped to 2^31 - 1 before the conversion to int32 */
+    uint32_t a = pw ^ (PROXY_KIND(t) == 0u ? 0u : 0x80000000u), r = t->p_ref_ob, d;
+    int32_t dp;
+    if (a >= r) {
+        d = a - r;
+        dp = d > (uint32_t)HDRG_INT32_SYM ? HDRG_INT32_SYM : (int32_t)d;
+    } else {
+        d = r - a;
+        dp = d > (uint32_t)HDRG_INT32_SYM ? -HDRG_INT32_SYM : -(int32_t)d;
+    }
     return clamp_one(asr64(t->u_add + I64(dp) * t->g_u, t->sh_u), flags, HDRG_FLAG_PROXY_CLAMPED);
 }
 
@@ -1061,12 +1086,13 @@ static inline int32_t horner_step(int32_t a, int32_t w, int64_t add)
  * e_i - E); written out four times by the caller (no loop) */
 static inline int32_t horner_row(const hdrg_bank_t *k, unsigned i, int32_t v)
 {
-    const int64_t *c = k->add + 3u * i;
-    int32_t p = k->top[i];
+    const hdrg_row_t *w = &k->row[i];
+    const int64_t *c = w->add;
+    int32_t p = w->top;
     p = horner_step(p, v, c[0]);
     p = horner_step(p, v, c[1]);
     p = horner_step(p, v, c[2]);
-    return rhu32(p, k->align[i]);
+    return rhu32(p, w->align);
 }
 
 /* clamp of an int32 to [-2^30, 2^30] (*clamped may be NULL) */
@@ -1085,19 +1111,17 @@ static inline int32_t clamp_q30(int32_t x, int *clamped)
  * clamped in the pipeline), z is clamped here, e_i - E in 0..31 and e_7 - E in 0..31
  * (check_fields).  Each inner Horner step is one SMLAL (horner_step), each outer one mulq30 plus
  * a 32-bit add, each row alignment RHU(q, e_i - E) a 32-bit rhu32; only the k7 z product
- * (shift 30..61) and the result B (|B| < 2^52) are 64-bit. */
-int64_t hdrg_evaluate_bank(const hdrg_table_t *t, unsigned bank, int32_t u, int32_t v, int32_t z, int *z_clamped)
+ * (shift 30..61) and the result B (|B| < 2^52) are 64-bit.  evaluate_k: one bank (a pointer: every
+ * load of the bank at a short offset from one register), z clamped already; out of line (the step
+ * calls it directly). */
+static HDRG_COLD int64_t evaluate_k(const hdrg_bank_t *k, int32_t u, int32_t v, int32_t zz)
 {
-    const hdrg_bank_t *k = &t->bank[bank == 2u ? 1 : 0];
-    int32_t a[4], acc, zz = clamp_q30(z, z_clamped);
-    a[0] = horner_row(k, 0u, v);
-    a[1] = horner_row(k, 1u, v);
-    a[2] = horner_row(k, 2u, v);
-    a[3] = horner_row(k, 3u, v);
-    acc = a[3];
-    acc = mulq30(acc, u) + a[2];
-    acc = mulq30(acc, u) + a[1];
-    acc = mulq30(acc, u) + a[0];
+    int32_t acc;
+    /* the rows from u^3 down, each folded in as soon as it is formed (two live row values) */
+    acc = horner_row(k, 3u, v);
+    acc = mulq30(acc, u) + horner_row(k, 2u, v);
+    acc = mulq30(acc, u) + horner_row(k, 1u, v);
+    acc = mulq30(acc, u) + horner_row(k, 0u, v);
     /* RHU(m_7 z, s), s = 30 + e_7 - E: |m_7 z| < 2^61 (one SMLAL onto 2^(s-1)), |.| <= |m_7| */
 #ifdef HDRG_BREAK_ROUNDING
     acc += (int32_t)asr64((int64_t)k->m7 * zz, k->k7_shift);
@@ -1108,6 +1132,11 @@ int64_t hdrg_evaluate_bank(const hdrg_table_t *t, unsigned bank, int32_t u, int3
         return rhu32(acc, k->e_acc - (unsigned)HDRG_Y_FRAC);
     }
     return (int64_t)acc * P2((unsigned)HDRG_Y_FRAC - k->e_acc);   /* |acc| < 2^31: below 2^52 */
+}
+
+int64_t hdrg_evaluate_bank(const hdrg_table_t *t, unsigned bank, int32_t u, int32_t v, int32_t z, int *z_clamped)
+{
+    return evaluate_k(&t->bank[bank == 2u ? 1 : 0], u, v, clamp_q30(z, z_clamped));
 }
 
 int64_t hdrg_evaluate(const hdrg_table_t *t, int32_t u, int32_t v, int32_t z, int *z_clamped)
@@ -1244,7 +1273,7 @@ static HDRG_INLINE int step_core(hdrg_state_t *st, const hdrg_input_t *in, const
     SET(sign, STATE_SIGN[state]);
     /* 2. proxy, 3. rate (the outputs are stored as they arise: fewer live registers) */
     pw = PROXY_KIND(t) == 0u ? in->f : (uint32_t)in->t;   /* bit pattern, decoded by pword */
-    u = proxy_u(t, pword(st, pw), &flags);
+    u = proxy_u(t, pw, &flags);
     SET(u, u);
     v = rate_step(st, pw, restart, &s, &flags);
     SET(v, v);
@@ -1262,11 +1291,11 @@ static HDRG_INLINE int step_core(hdrg_state_t *st, const hdrg_input_t *in, const
     } else
 #endif
     {
-        z = clamp_one(in->z, &flags, HDRG_FLAG_AUX_CLAMPED);
+        z = clamp32_one(in->z, &flags, HDRG_FLAG_AUX_CLAMPED);
     }
     SET(z, z);
     /* 5. evaluator: bank 2 on mode-2 samples of a two-bank table */
-    b = hdrg_evaluate_bank(t, mode == 2u ? 2u : 1u, u, v, z, NULL);
+    b = evaluate_k(mode == 2u ? &t->bank[1] : &t->bank[0], u, v, z);   /* z is clamped */
     SET(b, b);
     /* 5b. combiner (order 1 reads B) */
     cvalid = comb_step(st, mode, in->r, restart, b, warm, &flags);

@@ -194,12 +194,15 @@ typedef struct hdrg_aux_term {
  * p = c[i][3], then three Horner steps p = RHU(p v, 30) + c[i][2], c[i][1], c[i][0], written as
  * floor((p v + add) / 2^30) with add = c[i][j] 2^30 + 2^29 (the rounding constant and the next
  * coefficient folded into one SMLAL addend: RHU(p v, 30) + c = floor((p v + 2^29 + c 2^30) / 2^30)). */
+typedef struct hdrg_row {     /* one row, contiguous (one base register for all its loads) */
+    int64_t add[3];             /* add[k] = c[i][2 - k] 2^30 + 2^29 */
+    int32_t top;                /* c[i][3] */
+    uint32_t align;             /* e_i - E (0..31) */
+} hdrg_row_t;
 typedef struct hdrg_bank {
-    int64_t add[12];            /* add[3 i + k] = c[i][2 - k] 2^30 + 2^29 */
+    hdrg_row_t row[4];
     int64_t k7_half;            /* 2^(k7_shift - 1) */
-    int32_t top[4];             /* c[i][3] */
     int32_t m7;                 /* k7 mantissa */
-    uint32_t align[4];          /* e_i - E (0..31) */
     uint32_t k7_shift;          /* 30 + e_7 - E (30..61) */
     uint32_t e_acc;             /* E */
 } hdrg_bank_t;
@@ -231,6 +234,7 @@ typedef struct hdrg_table {
     hdrg_aux_term_t aux_term[HDRG_AUX_MAX_TERMS];
     uint32_t n_words, crc;
     int64_t s_lim;              /* 2^s_bits - 1: the rate-sum clamp */
+    uint32_t p_ref_ob;          /* p_ref in offset binary: the word (freq), the word with bit 31 flipped (temp) */
     int64_t u_add;              /* u_off + 2^(sh_u - 1) (u_off if sh_u = 0): u = ASR(dP g_u + u_add, sh_u) */
     int64_t v_half;             /* 2^(sh_v - 1) (0 if sh_v = 0): v = ASR(S g_v + v_half, sh_v) */
     hdrg_bank_t bank[2];        /* bank 1, bank 2 (a copy of bank 1 for a one-bank table) */

@@ -60,7 +60,7 @@ STAGES = {
     "proxy": ("proxy_u", "pword", "s32"),
     "rate": ("rate_step", "hist_back", "rate_reset"),
     "combiner": ("comb_step", "comb_restart", "comb_commit"),
-    "evaluator": ("hdrg_evaluate", "hdrg_evaluate_bank", "horner_row", "horner_step", "clamp_q30"),
+    "evaluator": ("hdrg_evaluate", "hdrg_evaluate_bank", "evaluate_k", "horner_row", "horner_step", "clamp_q30"),
     "aux": ("aux_step", "aux_norm", "hdrg_rhuw", "hdrg_sin_q30"),
     "step": ("hdrg_step_aux", "hdrg_step"),
     "table parser": ("hdrg_table_parse", "check_fields", "parse_aux", "check_horner", "check_horner_bank",
@@ -69,7 +69,7 @@ STAGES = {
 }
 PRIMITIVES = ("hdrg_asr", "hdrg_rhu", "hdrg_mul_rhu", "hdrg_floor_div", "hdrg_div_round", "hdrg_div_round_scaled",
               "hdrg_clamp", "hdrg_sat_signed", "abs64", "I64", "asr64", "asr32", "rhu64", "rhu32", "mulq30",
-              "clamp_one", "nlz32", "divlu", "hdrg_udiv64", "floor_divmod", "div_round")
+              "clamp_one", "clamp32_one", "nlz32", "divlu", "hdrg_udiv64", "floor_divmod", "div_round")
 STAGE_OF = {f: s for s, fs in STAGES.items() for f in fs}
 STAGE_OF[LEAN_STEP] = "step"
 # the O fields the lean driver (-DHDRG_DRIVER_LEAN: hdrg_step_out) answers; the rest are 0
