@@ -11,7 +11,11 @@ as properties (hypothesis) through the driver protocol:
   Horner interval bound: every exponent layout (E from 0 to 52, row alignments and e_7 - E from 0
   to 31), both banks, against firmware_ref.evaluator.evaluate;
 * the build without aux generators (-DHDRG_AUX_GEN=0): the same answers for aux_gen 0 tables and
-  aux_gen 1 tables refused at word aux_gen.
+  aux_gen 1 tables refused at word aux_gen;
+* the firmware entry point hdrg_step_out (driver -DHDRG_DRIVER_LEAN): the same outputs and state as
+  hdrg_step_aux on every kind of table (logged and self-timed modes, aux generators);
+* the configuration-specialized build (-DHDRG_FIX_*, host_tools.bench.cost.SPECIAL_DEFINES): the
+  same answers for tables of its configuration, the others refused at the word of the fixed field.
 
 One driver process per test (the requests of all examples are batched).
 """
@@ -25,7 +29,9 @@ from firmware_ref import formats as F
 from firmware_ref.evaluator import evaluate
 from firmware_ref.table import FIELD_INDEX
 from firmware_ref.terms import K_AUX, POLY_INDEX
-from test_c_twin import GCC, build, run_text, table_line, table_of, with_fields
+from host_tools import vectors as V
+from host_tools.bench.cost import LEAN_FIELDS, SPECIAL, SPECIAL_DEFINES
+from test_c_twin import FIELDS, GCC, build, run_text, table_line, table_of, with_fields
 
 pytestmark = pytest.mark.skipif(GCC is None, reason="gcc not found on PATH: the C twin cannot be built")
 
@@ -154,3 +160,69 @@ def test_build_without_aux_generators(tmp_path):
     out = run_text(lean, ["TABLE " + " ".join(f"{w:08x}" for w in aux_words)], expect_rc=1)
     assert out == [f"ERR FIELD word {FIELD_INDEX['aux_gen']} aux_gen"], out
     assert run_text(full, ["TABLE " + " ".join(f"{w:08x}" for w in aux_words)])[0].startswith("T ")
+
+
+def _stream(n=80, self_timed=False, aux=False):
+    """S lines: a drifting F word, R, logged modes cycling 0..3 (or -1), restarts, Z (K A0 with aux)."""
+    return [f"S {1632370688 + 700 * i - 3 * i * i} {(i * 997) % 4000 - 2000} {1024 + 37 * i} "
+            f"{-1 if self_timed else (i // 7) % 4} {int(i in (0, 41))} {(i - 40) << 24}" + (f" {i} {i * 1000}" if aux else "")
+            for i in range(n)]
+
+
+def _lean_view(lines):
+    """The O lines reduced to the fields the lean driver answers (LEAN_FIELDS); the others must be 0."""
+    pos = [1 + FIELDS.index(f) for f in LEAN_FIELDS]
+    return [[ln.split()[p] for p in pos] if ln.startswith("O ") else ln for ln in lines]
+
+
+@pytest.fixture(scope="module")
+def full_and_lean(tmp_path_factory):
+    d = tmp_path_factory.mktemp("c_lean")
+    return build(d, "full"), build(d, "lean", defines=("HDRG_DRIVER_LEAN",))
+
+
+@pytest.mark.parametrize("est,combiner,self_timed", [("diff", "pair", False), ("lsq", "trend", False),
+                                                     ("iir", "pair", False), ("diffn", "pair", True)])
+def test_lean_entry_point_equals_full_step(full_and_lean, est, combiner, self_timed):
+    """hdrg_step_out: out, bias, valid, flags and the state (acc, cnt, y) as hdrg_step_aux, sample by sample."""
+    full, lean = full_and_lean
+    reqs = [table_line(table_of(est, combiner))] + _stream(self_timed=self_timed)
+    got, exp = run_text(lean, reqs), run_text(full, reqs)
+    assert _lean_view(got) == _lean_view(exp)
+    others = [1 + i for i, f in enumerate(FIELDS) if f not in LEAN_FIELDS]
+    assert all(ln.split()[p] == "0" for ln in got[1:] for p in others)
+    if not self_timed:      # the outputs move (self-timed: 80 samples are power-on and exchanges)
+        assert len({ln.split()[1 + FIELDS.index("out")] for ln in exp[1:]}) > 5
+
+
+def test_lean_entry_point_on_the_vector_tables(full_and_lean):
+    """The e2e tables (ftr; combine_first pair; regress_first pair, none, trend: two banks) and an aux
+    generator table (aux_gen 1, K and A0 given)."""
+    full, lean = full_and_lean
+    manifest = V.read_manifest(V.DEFAULT_DIR)
+    for name, case in [("e2e", c) for c in range(len(manifest["sets"]["e2e"]["cases"]))] + [("aux", -1)]:
+        meta = manifest["sets"][name]
+        table = V.load_set(V.DEFAULT_DIR, name, meta).tables[meta["cases"][case]["table"]]
+        reqs = [table_line(table)] + _stream(aux=name == "aux")
+        assert _lean_view(run_text(lean, reqs)) == _lean_view(run_text(full, reqs)), (name, case)
+
+
+def test_specialized_build_accepts_its_configuration_only(tmp_path):
+    """-DHDRG_FIX_* of the default configuration (regress_first pair, diff, freq, no aux generators): its
+    tables answer as in the generic build; a table of another configuration is refused at the fixed word."""
+    full = build(tmp_path, "full")
+    spec = build(tmp_path, "spec", defines=("HDRG_DRIVER_LEAN", *SPECIAL_DEFINES))
+    meta = V.read_manifest(V.DEFAULT_DIR)["sets"]["e2e"]
+    vs = V.load_set(V.DEFAULT_DIR, "e2e", meta)
+    tables = [vs.tables[c["table"]] for c in meta["cases"]]
+    mine = [t for t in tables if all(getattr(t, k) == v for k, v in SPECIAL.items())]
+    assert mine, "no e2e table of the default configuration"
+    reqs = [table_line(mine[0])] + _stream()
+    assert _lean_view(run_text(spec, reqs)) == _lean_view(run_text(full, reqs))
+    order0 = next(t for t in tables if t.order == 0 and t.combiner == mine[0].combiner)
+    refused = {"combiner": with_fields(mine[0], combiner=2), "rate_est": with_fields(mine[0], rate_est=1),
+               "proxy_kind": with_fields(mine[0], proxy_kind=1), "order": order0}
+    for word, table in refused.items():
+        assert run_text(full, [table_line(table)])[0].startswith("T "), word       # a legal table
+        out = run_text(spec, [table_line(table)], expect_rc=1)
+        assert out == [f"ERR FIELD word {FIELD_INDEX[word]} {word}"], (word, out)

@@ -108,6 +108,19 @@ def test_mcu_cost_json(target, tmp_path):
     na = r["-Os-no-aux-gen"]
     assert na["bit_exact"] is True and na["aux_tables_refused"] is True and "aux" not in na["sets"]
     assert 0 < r["code_bytes_no_aux_gen"] < r["code_bytes"]
+    # the firmware entry point, generic and specialized: checked, traced, smaller
+    lean, spec = r["builds"]["lean"], r["builds"]["specialized"]
+    assert lean["vectors"] == r["-O2"]["vectors"] and lean["-O2"]["check"]["tables_refused"] == 0
+    assert spec["defines"] == list(cost.SPECIAL_DEFINES) and spec["e2e_cases"] and len(spec["e2e_cases"]) < len(cases)
+    assert spec["-O2"]["check"]["tables_refused"] > 0 and spec["-O2"]["check"]["refusals_missed"] == 0
+    for b in (lean, spec):
+        assert b["bit_exact"] is True and b["broken_build_caught"] is True and b["entry"] == cost.LEAN_STEP
+        assert 100 < b["instructions_per_sample"] <= b["cycles_per_sample"]
+        assert not any(k.startswith("other") for k in b["per_sample"]["per_stage_instructions"])
+        assert cost.LEAN_STEP in b["-Os"]["step_functions"] and cost.STEP not in b["-Os"]["step_functions"]
+    generic_case = e2e["per_case"][spec["e2e_cases"][0]]
+    assert spec["instructions_per_sample"] < generic_case["instructions"]
+    assert spec["code_bytes"] < lean["code_bytes"] <= r["code_bytes"]
 
 
 @pytest.mark.slow
@@ -136,6 +149,20 @@ def test_fpga_cost_json(target, tmp_path):
         assert e["luts"] <= 5280 and e["dsps"] <= 8 and e["fmax_mhz"] >= cost_fpga.FMAX_GOAL_MHZ
     else:
         assert r["fmax_mhz"] is None
+
+
+@pytest.mark.skipif(not shutil.which("gcc"), reason="gcc not installed")
+def test_check_cases_of_host_specialized_build(tmp_path):
+    """check_cases on the host build of the specialized lean driver: its configuration's vectors match,
+    every other table is refused; the -DHDRG_BREAK_ROUNDING build of it mismatches."""
+    from test_c_twin import build
+    defines = ("HDRG_DRIVER_LEAN", *cost.SPECIAL_DEFINES)
+    good = cost.check_cases([str(build(tmp_path, "spec", defines=defines))], cost.SPECIAL, cost.LEAN_FIELDS, log=None)
+    assert good["mismatches"] == 0 and good["refusals_missed"] == 0 and good["first"] is None
+    assert good["sets"]["e2e"]["vectors"] > 0 and good["tables_refused"] > 10 and good["sets"]["primitives"]["vectors"] > 0
+    bad = cost.check_cases([str(build(tmp_path, "broken", defines=(*defines, "HDRG_BREAK_ROUNDING")))], cost.SPECIAL,
+                           cost.LEAN_FIELDS, log=None)
+    assert bad["mismatches"] > 0 and bad["vectors"] == good["vectors"]
 
 
 @pytest.mark.skipif(not shutil.which("gcc"), reason="gcc not installed")

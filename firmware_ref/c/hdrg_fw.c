@@ -900,15 +900,10 @@ static HDRG_INLINE int32_t proxy_u(const hdrg_table_t *t, uint32_t pw, unsigned 
     /* dP on 32-bit words: P and P_REF in offset binary (a T word's sign bit flipped: the uint32s are
      * ordered as the values, and their difference is P - P_REF), so |P - P_REF| < 2^32 is a - r or
      * r - a, clamped to 2^31 - 1 before the conversion to int32 */
-    uint32_t a = pw ^ (PROXY_KIND(t) == 0u ? 0u : 0x80000000u), r = t->p_ref_ob, d;
-    int32_t dp;
-    if (a >= r) {
-        d = a - r;
-        dp = d > (uint32_t)HDRG_INT32_SYM ? HDRG_INT32_SYM : (int32_t)d;
-    } else {
-        d = r - a;
-        dp = d > (uint32_t)HDRG_INT32_SYM ? -HDRG_INT32_SYM : -(int32_t)d;
-    }
+    uint32_t a = pw ^ (PROXY_KIND(t) == 0u ? 0u : 0x80000000u), r = t->p_ref_ob;
+    uint32_t d = a >= r ? a - r : r - a;
+    int32_t m = d > (uint32_t)HDRG_INT32_SYM ? HDRG_INT32_SYM : (int32_t)d;
+    int32_t dp = a >= r ? m : -m;
     return clamp_one(asr64(t->u_add + I64(dp) * t->g_u, t->sh_u), flags, HDRG_FLAG_PROXY_CLAMPED);
 }
 
