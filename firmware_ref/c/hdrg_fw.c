@@ -912,19 +912,25 @@ static HDRG_INLINE int32_t proxy_u(const hdrg_table_t *t, uint32_t pw, unsigned 
 static HDRG_INLINE int32_t rate_step(hdrg_state_t *st, uint32_t pw, int restart, int64_t *s_out, unsigned *flags)
 {
     const hdrg_table_t *t = &st->t;
-    uint32_t k = st->k, n = WIN_N(st), j;
+    uint32_t k = st->k, n = WIN_N(st), j, prev = 0;
     int64_t p, s = 0, sc;
     if (restart) {
         rate_reset(st);
         k = 0;
-    } else {
-        st->head = st->head == n ? 0u : st->head + 1u;
     }
-    st->hist[st->head] = pw;
+    if (n == 1u) {                                  /* diff, iir, a window of 1: the ring is hist[0] */
+        prev = st->hist[0];                         /* the previous word (read only when k >= 1) */
+        st->hist[0] = pw;
+    } else {
+        if (!restart) {
+            st->head = st->head == n ? 0u : st->head + 1u;
+        }
+        st->hist[st->head] = pw;
+    }
     p = pword(st, pw);
     if (RATE_EST(t) <= 1u) {                        /* diff, diffn: |S| < 2^32 */
         if (k >= n) {
-            s = p - hist_back(st, n);
+            s = p - (n == 1u ? pword(st, prev) : hist_back(st, n));
         }
     } else if (RATE_EST(t) == 2u) {                 /* lsq: |S| < n^2 2^32 <= 2^56 */
         if (k >= n - 1u) {
@@ -936,9 +942,9 @@ static HDRG_INLINE int32_t rate_step(hdrg_state_t *st, uint32_t pw, int restart,
         }
     } else {                                        /* iir: |y| < 2^56 */
         if (k == 1u) {
-            st->iy = (p - hist_back(st, 1u)) * P2(HDRG_IIR_FRAC);
+            st->iy = (p - pword(st, prev)) * P2(HDRG_IIR_FRAC);      /* iir: n = 1 */
         } else if (k >= 2u) {
-            st->iy += hdrg_rhu((p - hist_back(st, 1u)) * P2(HDRG_IIR_FRAC) - st->iy, t->rate_shift);
+            st->iy += hdrg_rhu((p - pword(st, prev)) * P2(HDRG_IIR_FRAC) - st->iy, t->rate_shift);
         }
         s = st->iy;
     }
