@@ -100,6 +100,18 @@ static inline int64_t rhu64(int64_t x, unsigned s)
 #endif
 }
 
+/* RHU(x, s) of a bounded value, |x| <= 2^62, 1 <= s <= 62: floor((x + 2^(s-1)) / 2^s), the sum fits
+ * int64 (with a constant s: one 64-bit add and a constant shift).  The per-sample sites below state
+ * their bounds. */
+static inline int64_t rhu64b(int64_t x, unsigned s)
+{
+#ifdef HDRG_BREAK_ROUNDING
+    return asr64(x, s);
+#else
+    return asr64(x + P2(s - 1u), s);
+#endif
+}
+
 /* RHU(x, s) of a 32-bit word, 0 <= s <= 31 (any int32 x): ASR(x, s) plus bit s - 1 of x, since
  * x = q 2^s + r (0 <= r < 2^s) rounds up exactly when r >= 2^(s-1).  No intermediate leaves
  * int32 (x + 2^(s-1) could). */
@@ -1032,7 +1044,7 @@ static HDRG_INLINE int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int
                     return 0;                       /* not used */
                 }
                 /* r = symsat32(RHU(c 2^11 - B, 11)): |c 2^11| < 2^42, |B| < 2^52 */
-                c = hdrg_sat_signed(hdrg_rhu(c * P2(HDRG_OUT_SHIFT) - b, HDRG_OUT_SHIFT), 32u, &cs);
+                c = hdrg_sat_signed(rhu64b(c * P2(HDRG_OUT_SHIFT) - b, HDRG_OUT_SHIFT), 32u, &cs);
                 if (cs) {
                     *flags |= HDRG_FLAG_SAT;
                 }
@@ -1062,7 +1074,7 @@ static HDRG_INLINE int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int
                     if (dc) {
                         *flags |= HDRG_FLAG_SAT;
                     }
-                    other += hdrg_rhu(st->slope[o] * d, HDRG_SLOPE_EXTRA);  /* < 2^40 2^22 */
+                    other += rhu64b(st->slope[o] * d, HDRG_SLOPE_EXTRA);  /* < 2^40 2^22 */
                 }
                 st->y_hold = c * P2(HDRG_MEAN_EXTRA) + other;
                 cvalid = 1;
@@ -1305,9 +1317,9 @@ static HDRG_INLINE int step_core(hdrg_state_t *st, const hdrg_input_t *in, const
     if (valid) {
         int s1 = 0, s2 = 0;
         /* |y| < 2^47, |B| < 2^52; order 1: B is in y already */
-        st->out_hold = (int32_t)hdrg_sat_signed(hdrg_rhu(ORDER(t) == 0u ? st->y_hold - b : st->y_hold,
+        st->out_hold = (int32_t)hdrg_sat_signed(rhu64b(ORDER(t) == 0u ? st->y_hold - b : st->y_hold,
                                                          HDRG_OUT_SHIFT), 32u, &s1);
-        st->bias_hold = (int32_t)hdrg_sat_signed(hdrg_rhu(b, HDRG_OUT_SHIFT), 32u, &s2);
+        st->bias_hold = (int32_t)hdrg_sat_signed(rhu64b(b, HDRG_OUT_SHIFT), 32u, &s2);
         if (s1 || s2) {
             flags |= HDRG_FLAG_SAT;
         }

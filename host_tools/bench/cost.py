@@ -68,7 +68,7 @@ STAGES = {
                      "hdrg_word_name", "hdrg_error_name", "hdrg_init", "hdrg_reset", "derive_bank"),
 }
 PRIMITIVES = ("hdrg_asr", "hdrg_rhu", "hdrg_mul_rhu", "hdrg_floor_div", "hdrg_div_round", "hdrg_div_round_scaled",
-              "hdrg_clamp", "hdrg_sat_signed", "abs64", "I64", "asr64", "asr32", "rhu64", "rhu32", "mulq30",
+              "hdrg_clamp", "hdrg_sat_signed", "abs64", "I64", "asr64", "asr32", "rhu64", "rhu64b", "rhu32", "mulq30",
               "clamp_one", "clamp32_one", "nlz32", "divlu", "hdrg_udiv64", "floor_divmod", "div_round")
 STAGE_OF = {f: s for s, fs in STAGES.items() for f in fs}
 STAGE_OF[LEAN_STEP] = "step"
