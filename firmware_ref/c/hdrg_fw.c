@@ -37,7 +37,9 @@
 #define HDRG_COLD
 #endif
 #define P2(k) ((int64_t)1 << (k))
-#if defined(__GNUC__)
+/* the stages of the per-sample path, inlined into both entry points (GCC, Clang; not in a
+ * -fno-inline build, which the per-stage code bytes of `hdrg cost` use) */
+#if defined(__GNUC__) && !defined(__NO_INLINE__)
 #define HDRG_INLINE inline __attribute__((always_inline))
 #else
 #define HDRG_INLINE inline

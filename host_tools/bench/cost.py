@@ -62,7 +62,7 @@ STAGES = {
     "combiner": ("comb_step", "comb_restart", "comb_commit"),
     "evaluator": ("hdrg_evaluate", "hdrg_evaluate_bank", "evaluate_k", "horner_row", "horner_step", "clamp_q30"),
     "aux": ("aux_step", "aux_norm", "hdrg_rhuw", "hdrg_sin_q30"),
-    "step": ("hdrg_step_aux", "hdrg_step"),
+    "step": ("hdrg_step_aux", "hdrg_step", "hdrg_step_out", "step_core"),
     "table parser": ("hdrg_table_parse", "check_fields", "parse_aux", "check_horner", "check_horner_bank",
                      "hdrg_crc32_words",
                      "hdrg_word_name", "hdrg_error_name", "hdrg_init", "hdrg_reset", "derive_bank"),
@@ -71,7 +71,6 @@ PRIMITIVES = ("hdrg_asr", "hdrg_rhu", "hdrg_mul_rhu", "hdrg_floor_div", "hdrg_di
               "hdrg_clamp", "hdrg_sat_signed", "abs64", "I64", "asr64", "asr32", "rhu64", "rhu64b", "rhu32", "mulq30",
               "clamp_one", "clamp32_one", "nlz32", "divlu", "hdrg_udiv64", "floor_divmod", "div_round")
 STAGE_OF = {f: s for s, fs in STAGES.items() for f in fs}
-STAGE_OF[LEAN_STEP] = "step"
 # the O fields the lean driver (-DHDRG_DRIVER_LEAN: hdrg_step_out) answers; the rest are 0
 LEAN_FIELDS = ("acc", "cnt", "y", "out", "bias", "valid", "flags")
 # the configuration-specialized build (hdrg_fw.h HDRG_FIX_*): what `hdrg fit` picks for mode-reversal logs
