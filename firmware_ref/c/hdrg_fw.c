@@ -1178,22 +1178,21 @@ static HDRG_COLD int64_t aux_step(hdrg_state_t *st, const hdrg_input_t *in, cons
     for (j = 0; j < t->aux_nterms; j++) {
         const hdrg_aux_term_t *a = &t->aux_term[j];
         const int64_t *c = a->c;
-        int64_t g = 0, y, x;
+        int64_t g = 0, y = 0, x, *ys = &st->aux_y[j];
+        /* the Q1.60 filter / decay state (one code path for the three kinds that have one):
+         * set it to setv, or move it toward target: ys += RHUW(coef, target - ys, sh) */
+        int filt = 0, set = restart;
+        int64_t setv = 0, target = 0, coef = c[0];
+        unsigned sh = (unsigned)c[1];
         switch (a->kind) {
         case HDRG_AUX_INPUT:
             x = a->src == 0u ? I64(in->f) : a->src == 1u ? I64(in->t) : (ax != NULL ? I64(ax->a[a->src - 2u]) : 0);
-            y = aux_norm(x, c);
+            g = y = aux_norm(x, c);
             if (c[5] != 0) {
-                if (restart) {
-                    st->aux_y[j] = y * HDRG_ONE;
-                } else {
-                    st->aux_y[j] += hdrg_rhuw(c[4], y * HDRG_ONE - st->aux_y[j], (unsigned)c[5]);
-                }
-                y = hdrg_rhu(st->aux_y[j], HDRG_Q);
-            }
-            g = y;
-            for (i = 1; i < a->power; i++) {
-                g = hdrg_rhu(g * y, HDRG_Q);
+                filt = 1;
+                setv = target = y * HDRG_ONE;
+                coef = c[4];
+                sh = (unsigned)c[5];
             }
             break;
         case HDRG_AUX_RATE:
@@ -1207,28 +1206,22 @@ static HDRG_COLD int64_t aux_step(hdrg_state_t *st, const hdrg_input_t *in, cons
             g = HDRG_ONE;
             break;
         case HDRG_AUX_DECAY_ON:
-            if (restart) {
-                st->aux_y[j] = one60;
-            } else {
-                st->aux_y[j] += hdrg_rhuw(c[0], -st->aux_y[j], (unsigned)c[1]);
-            }
-            g = hdrg_rhu(st->aux_y[j], HDRG_Q);
+            filt = 1;
+            setv = one60;
             break;
-        case HDRG_AUX_DECAY_EXCHANGE:
+        case HDRG_AUX_DECAY_EXCHANGE:               /* restart: 0 (a step toward 0 from 0 is 0) */
+            filt = 1;
             if (restart) {
-                st->aux_y[j] = 0;
                 st->aux_ex[j] = 0;
             }
             if (mode == 3u) {
-                st->aux_y[j] = 0;
+                set = 1;
                 st->aux_ex[j] = 1;
             } else if (st->aux_ex[j]) {
-                st->aux_y[j] = one60;
+                set = 1;
+                setv = one60;
                 st->aux_ex[j] = 0;
-            } else {
-                st->aux_y[j] += hdrg_rhuw(c[0], -st->aux_y[j], (unsigned)c[1]);
             }
-            g = hdrg_rhu(st->aux_y[j], HDRG_Q);
             break;
         case HDRG_AUX_RAMP:
             g = kk >= c[0] ? HDRG_ONE : hdrg_rhu(kk * c[1], (unsigned)c[2]);   /* kk < N < 2^31 */
@@ -1236,6 +1229,15 @@ static HDRG_COLD int64_t aux_step(hdrg_state_t *st, const hdrg_input_t *in, cons
         default:                                    /* osc: the phase K W mod 2^64 (unsigned) */
             g = hdrg_sin_q30((uint64_t)kk * (uint64_t)c[0] + (c[2] != 0 ? UINT64_C(0x4000000000000000) : 0u));
             break;
+        }
+        if (filt) {
+            *ys = set ? setv : *ys + hdrg_rhuw(coef, target - *ys, sh);
+            g = y = hdrg_rhu(*ys, HDRG_Q);
+        }
+        if (a->kind == HDRG_AUX_INPUT) {
+            for (i = 1; i < a->power; i++) {
+                g = hdrg_rhu(g * y, HDRG_Q);
+            }
         }
         if (a->sign) {
             g = sm * g;
