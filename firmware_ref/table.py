@@ -141,7 +141,7 @@ AUX_COEF = {    # kind -> meaning of c0.. (unused words are 0)
     "one": (),
     "decay_on": ("B: b = 1 - a = B 2^-SB", "SB 31..62"),
     "decay_exchange": ("B: b = 1 - a = B 2^-SB", "SB 31..62"),
-    "ramp": ("N >= 1", "G > 0: k / N = RHU(k G, SH)", "SH 0..62"),
+    "ramp": ("N >= 1", "G > 0: k / N = RHU(k G, SH); RHU((N - 1) G, SH) <= 2^30", "SH 0..62"),
     "osc": ("W low word (uint32)", "W high word, 0..2^31-1 (W >= 1)", "part: 0 sin, 1 cos"),
 }
 KIND_INPUT, KIND_RATE, KIND_ONE, KIND_DECAY_ON, KIND_DECAY_EXCHANGE, KIND_RAMP, KIND_OSC = range(7)
@@ -275,6 +275,10 @@ def check_aux(aux: AuxTable, proxy_kind: int) -> None:
             need(0 < c[0] <= lim31, f"{where}: N {c[0]} not in 1..2^31-1")
             need(0 < c[1] <= lim31, f"{where}: G {c[1]} not in 1..2^31-1")
             need(0 <= c[2] <= 62, f"{where}: SH {c[2]} not in 0..62")
+            top = (c[0] - 1) * c[1]                  # g at k = N - 1, the ramp's largest value
+            top = top if c[2] == 0 else (top + (1 << (c[2] - 1))) >> c[2]
+            need(top <= F.ONE, f"{where}: RHU((N - 1) G, SH) = {top} exceeds 2^30: g would leave Q1.30 "
+                               f"(and w g overflow int64 on the chip)")
         elif t.kind == KIND_OSC:
             need(1 <= c[0] < 1 << 63, f"{where}: phase step W {c[0]} not in 1..2^63-1")
             need(c[2] in (0, 1), f"{where}: part {c[2]} not 0 (sin) or 1 (cos)")

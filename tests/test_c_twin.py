@@ -837,6 +837,11 @@ def test_aux_table_checks(c_exe):
         ("rate_g_big", put({term(2, 0): 1, term(2, 5): 40, term(2, 6): 1 << 22}), term(2, 6)),
         ("ramp_n_0", put({term(2, 0): 5, term(2, 5): 0, term(2, 6): 7}), term(2, 5)),
         ("ramp_sh", put({term(2, 0): 5, term(2, 5): 4, term(2, 6): 7, term(2, 7): 63}), term(2, 7)),
+        # g = RHU((N - 1) G, SH) above 2^30 (here 2^40): w g would overflow int64
+        ("ramp_above_one", put({term(2, 0): 5, term(2, 5): 1 << 20, term(2, 6): (1 << 30) - 1, term(2, 7): 9}),
+         term(2, 6)),
+        ("ramp_one_lsb_over", put({term(2, 0): 5, term(2, 5): 2, term(2, 6): (1 << 30) + 1, term(2, 7): 0}),
+         term(2, 6)),
         ("one_coef", put({term(2, 0): 2, term(2, 6): 0}), term(2, 5)),
         ("weight_sum", put({term(j, 4): 1 << 29 for j in range(6)}), term(5, 4)),
     ]

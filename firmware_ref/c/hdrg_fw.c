@@ -563,6 +563,8 @@ static int parse_aux(hdrg_table_t *t, const uint32_t *p, unsigned *bad)
             NEED(a->c[0] > 0, w0 + 5u);
             NEED(a->c[1] > 0, w0 + 6u);
             NEED(a->c[2] >= 0 && a->c[2] <= 62, w0 + 7u);
+            /* g <= 2^30 at k = N - 1 ((N - 1) G < 2^62), else w g could overflow int64 */
+            NEED(hdrg_rhu((a->c[0] - 1) * a->c[1], (unsigned)a->c[2]) <= HDRG_ONE, w0 + 6u);
             used = 3u;
         } else if (a->kind == HDRG_AUX_OSC) {
             NEED(a->c[1] >= 0, w0 + 6u);                /* W < 2^63 */
