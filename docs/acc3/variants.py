@@ -1,0 +1,62 @@
+# Measurement script of docs/ACCURACY.md "Rate and lag selection" (not part of the package).
+# Usage: PYTHONPATH=. python docs/acc3/variants.py SET START END OUT.jsonl VARIANT [VARIANT ...]
+"""Per foreign device of set SET: fit_default (`hdrg fit RUN`) under module-constant variants
+(VARIANTS below), held-out std / floor as in `hdrg bench accuracy`, FTR and MR; fit time."""
+import json, sys, time
+import numpy as np
+import host_tools.golden.compensate as C
+from host_tools.fitting import fit_lag as FL, fit as F, fit_pipeline as FP
+from host_tools.golden.compensate import compensate
+from host_tools.bench.accuracy import floor_of, SEED_STRIDE
+from host_tools.simulation.sim_foreign import foreign_device, simulate_foreign, damping_bias
+
+VARIANTS = {
+    "base": {},                                   # the defaults as committed
+    "nosensor": {(FL, "LAG_SENSOR"): False},
+    "common": {"samples": "common"},
+    "common_nosensor": {"samples": "common", (FL, "LAG_SENSOR"): False},
+    "ftrauto": {(C, "DEFAULT_RATE_SELECTION_FTR"): "auto"},
+    "ftrauto_nosensor": {(C, "DEFAULT_RATE_SELECTION_FTR"): "auto", (FL, "LAG_SENSOR"): False},
+    "m10": {(FL, "LAG_MARGIN"): 0.1},
+    "m30": {(FL, "LAG_MARGIN"): 0.3},
+    "sensor_only0": {(FL, "SENSOR_TAUS_S"): (0.0,)},
+}
+S, a, b, outp, names = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], sys.argv[5:]
+_orig_auto = F.fit_auto_rate
+
+
+def run(tr, ho, fl, var):
+    saved = {}
+    for k, v in var.items():
+        if isinstance(k, tuple):
+            saved[k] = getattr(*k)
+            setattr(k[0], k[1], v)
+    samples = var.get("samples", "own")
+    FP.fit_auto_rate = lambda *a_, **kw: _orig_auto(*a_, samples=samples, **kw)
+    try:
+        t = time.time()
+        m, _ = FP.fit_default([tr])
+        dt = time.time() - t
+        out = compensate(ho, m)
+        v = out["valid"] > 0
+        return {"r": float(np.std(out.rate_dph[v]) / fl), "t": dt, "lag": m.fit.get("lag_block", {}).get("chosen"),
+                "rate": m.config.rate.estimator + str(m.config.rate.shift if m.config.rate.estimator == "iir" else m.config.rate.n)}
+    finally:
+        for k, v in saved.items():
+            setattr(k[0], k[1], v)
+
+
+fo = open(outp, "w")
+for i in range(a, b):
+    seed = S * SEED_STRIDE + i
+    dev = foreign_device(seed)
+    sc0, _ = dev.damping_change(0); sc1, _ = dev.damping_change(1)
+    rec = {"seed": seed, "dc": float(abs(sc1 - sc0) * np.std(damping_bias(dev, 2.0, None)))}
+    for rev in (False, True):
+        key = "mr" if rev else "ftr"
+        tr = simulate_foreign(dev, 4.0, rev, 0, 0, None)
+        ho = simulate_foreign(dev, 2.0, rev, 1, 1, None)
+        fl = floor_of(simulate_foreign(dev, 2.0, rev, 1, 1, None, thermal=False))
+        rec[key] = {n: run(tr, ho, fl, VARIANTS[n]) for n in names}
+    fo.write(json.dumps(rec) + "\n"); fo.flush()
+    print(seed, "done", flush=True)
