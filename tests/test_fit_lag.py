@@ -84,7 +84,7 @@ def test_block_found_on_a_lagged_device_and_holds_out(monkeypatch):
     model, res = fit_default([tr])
     info = model.fit["lag_block"]
     assert info["chosen"] and model.config.aux.generator == "sum" and 7 in model.terms
-    assert info["cv_rms"] < (1 - FL.LAG_MARGIN) * info["base_cv_rms"]
+    assert info["margin"] == FL.LAG_MARGIN["ftr"] and info["cv_rms"] < (1 - info["margin"]) * info["base_cv_rms"]
     assert _std_held_out(model, ho) < 0.7 * _std_held_out(base, ho)
     assert model.to_dict()["fit"]["lag_block"]["chosen"] == info["chosen"]
     check_close(ho, model, "lag block, FTR")   # the FTR block (up to two taus) in fixed point too

@@ -13,6 +13,10 @@ from host_tools.simulation.sim_foreign import foreign_device, simulate_foreign, 
 VARIANTS = {
     "base": {},                                   # the defaults as committed
     "nosensor": {(FL, "LAG_SENSOR"): False},
+    "old": {(FL, "LAG_SENSOR"): False, (FL, "LAG_REFIT_TOP"): 1, (FL, "LAG_SCREEN_GATE"): 0.2},   # before acc3
+    "sensor_oldrule": {(FL, "LAG_REFIT_TOP"): 1, (FL, "LAG_SCREEN_GATE"): 0.2},
+    "top1": {(FL, "LAG_REFIT_TOP"): 1},
+    "top3": {(FL, "LAG_REFIT_TOP"): 3},
     "common": {"samples": "common"},
     "common_nosensor": {"samples": "common", (FL, "LAG_SENSOR"): False},
     "ftrauto": {(C, "DEFAULT_RATE_SELECTION_FTR"): "auto"},

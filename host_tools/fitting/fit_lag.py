@@ -1,29 +1,41 @@
 """The lag-state block of the default fit (issue #10): a thermal node that lags the proxy
 differently from what one proxy u and its rate v can represent, modelled as a low-order polynomial
-of the proxy through first-order filters, carried to the firmware as the k7 auxiliary regressor.
+of the proxy, or of the temperature sensor, through first-order filters, carried to the firmware
+as the k7 auxiliary regressor.
 
 Regressors (host_tools.golden.regressors, generator ``input`` on the model's proxy column with the model's
 proxy normalization, so ``q = u``): ``g_{tau,k} = lag(u, tau)^k``, k = 1..order, the first-order
 low-pass of u with time constant tau [s] restarted at every segment start (exactly the firmware's
-aux kind ``input`` with filter SB and power k, firmware_ref/aux.py).
+aux kind ``input`` with filter SB and power k, firmware_ref/aux.py).  **Sensor blocks** (LAG_SENSOR,
+when the proxy is the resonator frequency and the logs have ``temp_c``): the same on the
+temperature sensor, ``lag(T, tau)^k`` with T = (temp_c - ref) / span normalized over the training
+range (:func:`sensor_source`), tau in SENSOR_TAUS_S (0 = the sensor itself).  The sensor sits on
+another thermal node than the resonator: a second observation of the temperature field.
 
 Choice (:func:`add_lag_block`), on the training runs only:
 
-1. **Screen** every candidate of :func:`candidates` (one tau of LAG_TAUS_S with order 2 or 3; for
-   FTR also two taus with order 3 each) by cross-validated squared error of the least-squares fit
-   of the base model's polynomial terms + the candidate's lag columns, per coefficient bank
-   (regress_first: mode 1 / mode 2), over the same groups as host_tools.fitting.fit.fit_logs (time blocks
-   of one run, or runs).  All candidates share one pass of Gram matrices per (bank, group).
-2. **Pack** the winner into ONE k7 sum: per bank b the lag coefficients a_b (deg/h) of the full
-   training fit; FTR: ``z = sum_k a_k g_k / T``; regress_first: ``z = sum_k (P_k g_k + Q_k s g_k) /
-   T`` with P = (a_1 + a_2) / 2, Q = (a_1 - a_2) / 2 (``sign`` terms: s = +1 on mode 1, -1 on
-   mode 2, so z is a_b . g / T on bank b), T = sum |weights| (so sum |w| = 1 and |z| <= 1; zero
-   weights are left out).  Then the model is refitted with host_tools.fitting.fit.fit_logs (same terms,
-   so 'auto' may keep or drop k7; each bank fits its own k7 ~ T).
-3. **Keep** it only when both the screen and the refit's cross-validated rms beat the base model by
-   LAG_MARGIN (relative); else the base model is returned unchanged.  The model's fit info holds
-   ``lag_block``: {"chosen": label or None, "base_cv_rms", "cv_rms", "candidates": [{label,
-   screen_cv_rms}]} (model.json).
+1. **Screen** every candidate of :func:`candidates` (one tau with order 2 or 3, of the proxy or the
+   sensor; for FTR also two taus with order 3 each) by cross-validated squared error of the
+   least-squares fit of the base model's polynomial terms + the candidate's lag columns, per
+   coefficient bank (regress_first: mode 1 / mode 2), over the same groups as
+   host_tools.fitting.fit.fit_logs (time blocks of one run, or runs).  All candidates share one
+   pass of Gram matrices per (bank, group).
+2. **Pack** each of the LAG_REFIT_TOP candidates of least screen rms into ONE k7 sum: per bank b
+   the lag coefficients a_b (deg/h) of the full training fit; FTR: ``z = sum_k a_k g_k / T``;
+   regress_first: ``z = sum_k (P_k g_k + Q_k s g_k) / T`` with P = (a_1 + a_2) / 2, Q = (a_1 -
+   a_2) / 2 (``sign`` terms: s = +1 on mode 1, -1 on mode 2, so z is a_b . g / T on bank b), T =
+   sum |weights| (so sum |w| = 1 and |z| <= 1; zero weights are left out), and refit the model with
+   host_tools.fitting.fit.fit_logs (same terms, so 'auto' may keep or drop k7; each bank fits its
+   own k7 ~ T).
+   Only candidates whose screen rms beats the base screen by LAG_SCREEN_GATE are refitted (FTR
+   0.2; mode reversal: no gate; the screen fits the base's terms without re-selecting them and can
+   rank a candidate whose refit is far better below the base).
+3. **Keep** the refit of least cross-validated rms only when it beats the base model by
+   LAG_MARGIN (relative; FTR 0.2, mode reversal 0.1); else the base model is returned unchanged.
+   (Before: one refit, screen gate and margin 0.2 for both; docs/ACCURACY.md "Rate and lag
+   selection".)  The model's fit
+   info holds ``lag_block``: {"chosen": label or None, "base_cv_rms", "cv_rms", "candidates":
+   [{label, screen_cv_rms, refit_cv_rms if refitted}]} (model.json).
 
 Firmware limit: at most 6 terms in the k7 sum (firmware_ref.formats.AUX_MAX_TERMS), hence one tau
 for mode reversal (3 powers x (P, Q)) and at most two taus of order 3 for FTR.
@@ -40,9 +52,13 @@ from host_tools.golden.regressors import AuxConfig, generator_values, regressor_
 
 LAG_TAUS_S = (60.0, 120.0, 240.0, 480.0, 960.0, 1920.0)   # screened time constants [s]
 LAG_ORDERS = (2, 3)           # polynomial orders of a single-tau block
-LAG_MARGIN = 0.2              # required relative reduction of the cross-validated rms (screen and refit)
+# per kind of log ("ftr", "mr"); chosen on foreign devices of set 1 and, for FTR, the measured logs
+# (docs/ACCURACY.md "Rate and lag selection"):
+LAG_MARGIN = {"ftr": 0.2, "mr": 0.1}          # required relative reduction of the refit's cross-validated rms
+LAG_SCREEN_GATE = {"ftr": 0.2, "mr": None}    # a refitted candidate's screen rms must beat the base screen by this (None: no gate)
 MAX_TAU_FRACTION = 0.5        # tau <= this x the longest training run (as host_tools.fitting.effects)
 LAG_PAIRS_FTR = True          # FTR: also two-tau blocks (order 3 each)
+LAG_REFIT_TOP = 2             # refit this many candidates of least screen CV rms; keep the best refit
 LAG_SENSOR = True             # also blocks of the temperature sensor (temp_c) when the proxy is the frequency
 SENSOR_TAUS_S = (0.0,) + LAG_TAUS_S   # sensor time constants [s] (0: the sensor itself, no filter)
 SENSOR_COLUMN = "temp_c"
@@ -209,40 +225,59 @@ def lag_config(config, cand, coefs, sensor=None):
 
 
 def add_lag_block(logs, model, res, terms=None, *, cv_blocks=8, taus=LAG_TAUS_S, orders=LAG_ORDERS,
-                  margin=None, drop_unidentifiable=True, significance=None, min_gain=0.02, sensor_taus=None):
+                  margin=None, drop_unidentifiable=True, significance=None, min_gain=0.02, sensor_taus=None,
+                  top=None, screen_gate=None):
     """The base ``model`` (and its FitResult ``res``, with a cross-validated rms) of ``logs``,
     extended by the lag-state block when it lowers the cross-validated rms by ``margin`` (None:
-    LAG_MARGIN; module doc).  Returns (model, FitResult).  A model that already has an aux regressor is returned as is."""
+    LAG_MARGIN of the kind, 'ftr' or 'mr'; module doc): the ``top`` (None: LAG_REFIT_TOP) candidates
+    of least screen CV rms are refitted (terms as given), the refit of least CV rms is kept when it
+    beats the base by the margin.  ``screen_gate`` (None: LAG_SCREEN_GATE of the kind; 'off': no
+    gate) also requires a refitted candidate's screen rms to beat the base screen by that fraction.  Returns (model, FitResult).
+    A model that already has an aux regressor is returned as is."""
     from host_tools.fitting.fit import fit_logs
 
     logs = list(logs)
-    margin = LAG_MARGIN if margin is None else margin
+    kind = "ftr" if model.config.reversal is None else "mr"
+    margin = LAG_MARGIN[kind] if margin is None else margin
+    top = LAG_REFIT_TOP if top is None else top
+    screen_gate = LAG_SCREEN_GATE[kind] if screen_gate is None else (None if screen_gate == "off" else screen_gate)
     if model.config.aux.generator != "none":
         return model, res
     sc = screen(logs, model, cv_blocks=cv_blocks, taus=taus, orders=orders, sensor_taus=sensor_taus)
     base_cv = (res.cv or {}).get("cv_rms")
-    info = {"method": "lag-state block of the proxy, chosen by cross-validated rms (host_tools.fitting.fit_lag)",
-            "margin": margin, "screen_base_cv_rms": sc["base"], "base_cv_rms": base_cv, "chosen": None,
+    info = {"method": "lag-state block of the proxy (or the sensor), chosen by cross-validated rms "
+                      "(host_tools.fitting.fit_lag)", "margin": margin, "refit_top": top, "screen_gate": screen_gate,
+            "screen_base_cv_rms": sc["base"], "base_cv_rms": base_cv, "chosen": None,
             "candidates": [{k: v for k, v in r.items() if k != "cand"} for r in sc["rows"]]}
     model.fit["lag_block"] = info
     if not sc["rows"] or base_cv is None:
         return model, res
-    best = min(sc["rows"], key=lambda r: r["screen_cv_rms"])
-    if not best["screen_cv_rms"] < (1.0 - margin) * sc["base"]:
+    ranked = sorted(range(len(sc["rows"])), key=lambda i: sc["rows"][i]["screen_cv_rms"])[:top]
+    if screen_gate is not None:
+        ranked = [i for i in ranked if sc["rows"][i]["screen_cv_rms"] < (1.0 - screen_gate) * sc["base"]]
+    best = None
+    for i in ranked:
+        row = sc["rows"][i]
+        cfg2 = lag_config(model.config, row["cand"], sc["coefs"](row["cand"]), sc["sensor"])
+        if cfg2 is None:
+            info["candidates"][i]["error"] = "more terms than the firmware's k7 sum holds"
+            continue
+        try:
+            model2, res2 = fit_logs(logs, cfg2, terms, cv_blocks=cv_blocks, blocks=True,
+                                    drop_unidentifiable=drop_unidentifiable, significance=significance,
+                                    min_gain=min_gain)
+        except ValueError as exc:
+            info["candidates"][i]["error"] = str(exc)
+            continue
+        info["candidates"][i]["refit_cv_rms"] = res2.cv["cv_rms"]
+        if best is None or res2.cv["cv_rms"] < best[0]:
+            best = (res2.cv["cv_rms"], row["block"], model2, res2)
+    if best is None:
         return model, res
-    cfg2 = lag_config(model.config, best["cand"], sc["coefs"](best["cand"]), sc["sensor"])
-    if cfg2 is None:
+    info["cv_rms"] = best[0]
+    if not best[0] < (1.0 - margin) * base_cv:
         return model, res
-    try:
-        model2, res2 = fit_logs(logs, cfg2, terms, cv_blocks=cv_blocks, blocks=True,
-                                drop_unidentifiable=drop_unidentifiable, significance=significance, min_gain=min_gain)
-    except ValueError as exc:
-        info["error"] = str(exc)
-        return model, res
-    info["cv_rms"] = res2.cv["cv_rms"]
-    if not res2.cv["cv_rms"] < (1.0 - margin) * base_cv:
-        return model, res
-    info["chosen"] = best["block"]
+    _, info["chosen"], model2, res2 = best
     if "rate_selection" in model.fit:
         model2.fit["rate_selection"] = model.fit["rate_selection"]
     model2.fit["lag_block"] = info
