@@ -583,14 +583,14 @@ def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8
             pr.used = pr.used & np.asarray(masks[i], bool)
         if not pr.used.any():
             raise ValueError(f"{log.source}: no valid sample to fit (all exchange, warm-up or before the first pair)")
-        masks = [pr.used & (pr.mode == 1), pr.used & (pr.mode == 2)] if two else [pr.used]
+        bank_w = [pr.used & (pr.mode == 1), pr.used & (pr.mode == 2)] if two else [pr.used]
         if (auto if blocks is None else blocks) and len(logs) == 1:
             groups = block_groups(len(pr.y), cv_blocks)
-            per = [accumulate_groups(pr.u, pr.v, pr.z, pr.y, w, groups) for w in masks]
+            per = [accumulate_groups(pr.u, pr.v, pr.z, pr.y, w, groups) for w in bank_w]
             for g in per[0]:
                 accs[f"{log.source}#block{g}"] = tuple(p[g] for p in per) if two else per[0][g]
         else:
-            banks = tuple(Accumulator().add(pr.u, pr.v, pr.z, pr.y, w) for w in masks)
+            banks = tuple(Accumulator().add(pr.u, pr.v, pr.z, pr.y, w) for w in bank_w)
             accs[f"{log.source}#{i}"] = banks if two else banks[0]
     res = fit_accumulators(accs, terms, drop_unidentifiable=drop_unidentifiable,
                            significance=significance, min_gain=min_gain)
