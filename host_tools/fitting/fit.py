@@ -624,7 +624,7 @@ def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, 
     estimator with a longer warm-up is scored on fewer, later samples: iir 9 skips 1024 samples,
     the power-on transient of a run).  'common': every candidate on the samples used by EVERY
     candidate, then the chosen one refitted on all its own samples (no refit when they are the
-    common ones).  'common' changed the pick on 8 of 40 foreign mode-reversal devices and made the
+    common ones).  'common' changed the pick on 5 of 40 foreign mode-reversal devices and made the
     held-out p90 worse (docs/ACCURACY.md "Rate and lag selection"), hence not the default.
     A candidate that cannot be fitted (e.g. no sample past its warm-up) is skipped and reported
     (one whose configuration cannot be built is also left out of the common set).  Returns
