@@ -78,15 +78,15 @@ def lag_term(config, tau_s: float, power: int, weight: float = 1.0, sign: bool =
 
 def sensor_source(logs, config):
     """(column, ref, span) of the temperature sensor for sensor blocks, or None: LAG_SENSOR off, the
-    proxy is the sensor itself, a log lacks the column, or it does not vary.  ref/span: the training
+    proxy is the sensor itself, a log lacks the column, has a non-finite value in it, or it does
+    not vary.  ref/span: the training
     range widened by SENSOR_MARGIN on each side (degC)."""
     if not LAG_SENSOR or config.proxy.column == SENSOR_COLUMN:
         return None
     if not all(SENSOR_COLUMN in log.columns for log in logs):
         return None
     x = np.concatenate([np.asarray(log.columns[SENSOR_COLUMN], np.float64) for log in logs])
-    x = x[np.isfinite(x)]
-    if not x.size or not x.max() > x.min():
+    if not x.size or not np.isfinite(x).all() or not x.max() > x.min():
         return None
     lo, hi = float(x.min()), float(x.max())
     w = SENSOR_MARGIN * (hi - lo)
