@@ -16,6 +16,7 @@ VARIANTS = {
     "old": {(FL, "LAG_SENSOR"): False, (FL, "LAG_REFIT_TOP"): 1, (FL, "LAG_SCREEN_GATE"): 0.2},   # before acc3
     "sensor_oldrule": {(FL, "LAG_REFIT_TOP"): 1, (FL, "LAG_SCREEN_GATE"): 0.2},
     "top1": {(FL, "LAG_REFIT_TOP"): 1},
+    "pairs_mr": {(FL, "LAG_PAIRS_MR"): True},
     "top3": {(FL, "LAG_REFIT_TOP"): 3},
     "common": {"samples": "common"},
     "common_nosensor": {"samples": "common", (FL, "LAG_SENSOR"): False},

@@ -58,6 +58,7 @@ LAG_MARGIN = {"ftr": 0.2, "mr": 0.1}          # required relative reduction of t
 LAG_SCREEN_GATE = {"ftr": 0.2, "mr": None}    # a refitted candidate's screen rms must beat the base screen by this (None: no gate)
 MAX_TAU_FRACTION = 0.5        # tau <= this x the longest training run (as host_tools.fitting.effects)
 LAG_PAIRS_FTR = True          # FTR: also two-tau blocks (order 3 each)
+LAG_PAIRS_MR = False          # mode reversal: also two-tau blocks of orders (1, 1), (2, 1), (1, 2) (6 terms at most)
 LAG_REFIT_TOP = 2             # refit this many candidates of least screen CV rms; keep the best refit
 LAG_SENSOR = True             # also blocks of the temperature sensor (temp_c) when the proxy is the frequency
 SENSOR_TAUS_S = (0.0,) + LAG_TAUS_S   # sensor time constants [s] (0: the sensor itself, no filter)
@@ -104,6 +105,9 @@ def candidates(duration_s: float, reversal: bool, taus=LAG_TAUS_S, orders=LAG_OR
     out = [(el(s, k),) for s in src for k in orders]
     if not reversal and (LAG_PAIRS_FTR if pairs is None else pairs):
         out += [(el(s1, 3), el(s2, 3)) for i, s1 in enumerate(src) for s2 in src[i + 1:]]
+    if reversal and (LAG_PAIRS_MR if pairs is None else pairs):
+        out += [(el(s1, k1), el(s2, k2)) for i, s1 in enumerate(src) for s2 in src[i + 1:]
+                for k1, k2 in ((1, 1), (2, 1), (1, 2))]
     return out
 
 
