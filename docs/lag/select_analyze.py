@@ -1,5 +1,5 @@
-# Analysis of docs/acc3/lag_sweep.py output: lag-block selection rules replayed offline.
-# Usage: python docs/acc3/lag_analyze.py OUT*.jsonl
+# Analysis of docs/lag/select_sweep.py output: lag-block selection rules replayed offline.
+# Usage: python docs/lag/select_analyze.py OUT*.jsonl
 import json, sys
 import numpy as np
 recs = [json.loads(l) for f in sys.argv[1:] for l in open(f)]

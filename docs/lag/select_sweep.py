@@ -1,5 +1,5 @@
 # Measurement script of docs/ACCURACY.md "Rate and lag selection" (not part of the package).
-# Usage: PYTHONPATH=. python docs/acc3/lag_sweep.py SET START END OUT.jsonl
+# Usage: PYTHONPATH=. python docs/lag/select_sweep.py SET START END OUT.jsonl
 """Per foreign device: base default fit (lag off), then every lag candidate: per-group screen SSE
 under several CV groupings, the forced refit's CV rms and held-out ratio."""
 import json, sys, time

@@ -1,6 +1,6 @@
 # Measurement script of docs/ACCURACY.md "Rate and lag selection": fit time of fit_default per
 # training run (foreign devices 100..105, 4 degC/min, FTR and MR), median over the devices.
-# Usage: PYTHONPATH=<tree> python docs/acc3/fit_time.py   (run the old and new tree at the same time)
+# Usage: PYTHONPATH=<tree> python docs/lag/fit_time.py   (run the old and new tree at the same time)
 import time
 import numpy as np
 from host_tools.fitting.fit_pipeline import fit_default

@@ -1,4 +1,4 @@
-# Analysis of docs/acc3/variants.py output.
+# Analysis of docs/lag/variants.py output.
 import json, sys
 import numpy as np
 recs = [json.loads(l) for f in sys.argv[1:] for l in open(f)]

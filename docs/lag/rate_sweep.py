@@ -1,5 +1,5 @@
 # Measurement script of docs/ACCURACY.md "Rate and lag selection" (not part of the package).
-# Usage: PYTHONPATH=. python docs/acc3/rate_sweep.py SET START END OUT.jsonl
+# Usage: PYTHONPATH=. python docs/lag/rate_sweep.py SET START END OUT.jsonl
 """Per foreign device of set SET (seeds SET*100000 + i): for FTR and MR and each rate candidate of
 fit_auto_rate, the base fit (terms auto, lag off) scored by CV on its own samples and on the samples
 valid for every candidate; held-out ratio of the base and of the base + lag block (auto)."""

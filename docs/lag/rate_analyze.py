@@ -1,4 +1,4 @@
-# Analysis of docs/acc3/rate_sweep.py output: rate-selection rules replayed offline.
+# Analysis of docs/lag/rate_sweep.py output: rate-selection rules replayed offline.
 import json, sys
 import numpy as np
 recs = [json.loads(l) for f in sys.argv[1:] for l in open(f)]

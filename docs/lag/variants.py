@@ -1,5 +1,5 @@
 # Measurement script of docs/ACCURACY.md "Rate and lag selection" (not part of the package).
-# Usage: PYTHONPATH=. python docs/acc3/variants.py SET START END OUT.jsonl VARIANT [VARIANT ...]
+# Usage: PYTHONPATH=. python docs/lag/variants.py SET START END OUT.jsonl VARIANT [VARIANT ...]
 """Per foreign device of set SET: fit_default (`hdrg fit RUN`) under module-constant variants
 (VARIANTS below), held-out std / floor as in `hdrg bench accuracy`, FTR and MR; fit time."""
 import json, sys, time
@@ -13,8 +13,10 @@ from host_tools.simulation.sim_foreign import foreign_device, simulate_foreign, 
 VARIANTS = {
     "base": {},                                   # the defaults as committed
     "nosensor": {(FL, "LAG_SENSOR"): False},
-    "old": {(FL, "LAG_SENSOR"): False, (FL, "LAG_REFIT_TOP"): 1, (FL, "LAG_SCREEN_GATE"): 0.2},   # before acc3
-    "sensor_oldrule": {(FL, "LAG_REFIT_TOP"): 1, (FL, "LAG_SCREEN_GATE"): 0.2},
+    "old": {(FL, "LAG_SENSOR"): False, (FL, "LAG_REFIT_TOP"): 1, (FL, "LAG_SCREEN_GATE"): {"ftr": 0.2, "mr": 0.2},
+            (FL, "LAG_MARGIN"): {"ftr": 0.2, "mr": 0.2}},   # the rule before (bcf758a)
+    "sensor_oldrule": {(FL, "LAG_REFIT_TOP"): 1, (FL, "LAG_SCREEN_GATE"): {"ftr": 0.2, "mr": 0.2},
+                       (FL, "LAG_MARGIN"): {"ftr": 0.2, "mr": 0.2}},
     "top1": {(FL, "LAG_REFIT_TOP"): 1},
     "pairs_mr": {(FL, "LAG_PAIRS_MR"): True},
     "top3": {(FL, "LAG_REFIT_TOP"): 3},
@@ -22,8 +24,8 @@ VARIANTS = {
     "common_nosensor": {"samples": "common", (FL, "LAG_SENSOR"): False},
     "ftrauto": {(C, "DEFAULT_RATE_SELECTION_FTR"): "auto"},
     "ftrauto_nosensor": {(C, "DEFAULT_RATE_SELECTION_FTR"): "auto", (FL, "LAG_SENSOR"): False},
-    "m10": {(FL, "LAG_MARGIN"): 0.1},
-    "m30": {(FL, "LAG_MARGIN"): 0.3},
+    "m10": {(FL, "LAG_MARGIN"): {"ftr": 0.1, "mr": 0.1}},
+    "m30": {(FL, "LAG_MARGIN"): {"ftr": 0.3, "mr": 0.3}},
     "sensor_only0": {(FL, "SENSOR_TAUS_S"): (0.0,)},
 }
 S, a, b, outp, names = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], sys.argv[5:]
