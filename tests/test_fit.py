@@ -293,3 +293,35 @@ def test_bench_fit_time_rate_auto_vs_fixed(benchmark, how):
     model = benchmark.pedantic(run, rounds=3, iterations=1, warmup_rounds=1)
     assert model.coef_mode2 is not None and np.all(np.isfinite(model.coef))
     benchmark.extra_info.update({"samples": len(log), "rate": model.config.rate.estimator})
+
+
+def test_rate_auto_on_common_samples_scores_every_candidate_on_the_same_samples():
+    """fit_auto_rate(samples='common'): each candidate's reported CV rms is its fit on the samples
+    used by every candidate (fit_logs masks), the least one is chosen and then refitted on all its
+    own samples; 'own' (the default) scores each on its own samples.  Bad options are refused."""
+    from host_tools.golden.compensate import fit_config_from_logs, prepare
+    from host_tools.fitting.fit import RATE_CANDIDATES, fit_auto_rate, fit_logs
+    from host_tools.simulation.sim_foreign import foreign_device, simulate_foreign
+
+    log = simulate_foreign(foreign_device(3), 4.0, True, 0, 0, 3000.0)
+    cands = (RATE_CANDIDATES[0], RATE_CANDIDATES[-1])          # diff (warm-up 1), iir 9 (1024)
+    terms = (0, 1, 4, 5)
+    cfgs = [fit_config_from_logs([log], rate_estimator=e, n=n, shift=s) for e, n, s in cands]
+    used = [prepare(log, c).used for c in cfgs]
+    common = used[0] & used[1]
+    assert common.sum() < used[0].sum()                        # the iir warm-up removes samples
+    own = [fit_logs([log], c, terms, blocks=True)[1] for c in cfgs]
+    com = [fit_logs([log], c, terms, blocks=True, masks=[common])[1] for c in cfgs]
+    assert com[0].n == common.sum() == com[1].n and own[0].n == used[0].sum()
+    for samples, want in (("own", own), ("common", com)):
+        model, res = fit_auto_rate([log], terms, candidates=cands, samples=samples)
+        sel = model.fit["rate_selection"]
+        assert [r["cv_rms"] for r in sel["candidates"]] == pytest.approx([r.cv["cv_rms"] for r in want], rel=1e-12)
+        k = int(np.argmin([r.cv["cv_rms"] for r in want]))
+        assert sel["chosen"] == ("diff", "iir shift=9")[k] and sel["samples"] == samples
+        assert res.n == used[k].sum()                          # the chosen one on all its own samples
+        assert res.cv["cv_rms"] == pytest.approx(own[k].cv["cv_rms"], rel=1e-12)
+    with pytest.raises(ValueError, match="samples"):
+        fit_auto_rate([log], terms, candidates=cands, samples="all")
+    with pytest.raises(ValueError, match="mask"):
+        fit_logs([log], cfgs[0], terms, masks=[common[:-1]])

@@ -84,7 +84,7 @@ def test_block_found_on_a_lagged_device_and_holds_out(monkeypatch):
     model, res = fit_default([tr])
     info = model.fit["lag_block"]
     assert info["chosen"] and model.config.aux.generator == "sum" and 7 in model.terms
-    assert info["cv_rms"] < (1 - FL.LAG_MARGIN) * info["base_cv_rms"]
+    assert info["margin"] == FL.LAG_MARGIN["ftr"] and info["cv_rms"] < (1 - info["margin"]) * info["base_cv_rms"]
     assert _std_held_out(model, ho) < 0.7 * _std_held_out(base, ho)
     assert model.to_dict()["fit"]["lag_block"]["chosen"] == info["chosen"]
     check_close(ho, model, "lag block, FTR")   # the FTR block (up to two taus) in fixed point too
@@ -113,3 +113,46 @@ def test_lag_model_fixed_point_agrees_with_golden(lagged_mr):
     assert any(t["sign"] for t in m2.config.aux.terms) and 7 in m2.terms
     ho = simulate_foreign(dev, 2.0, True, 1, 1, DUR)
     check_close(ho, m2, "lag block, regress_first")
+
+
+# -- sensor blocks: the temperature sensor (temp_c) as a second thermal observation -----------------
+
+def test_sensor_candidates_only_when_the_proxy_is_not_the_sensor(lagged_mr):
+    _, tr, model, _ = lagged_mr
+    assert model.config.proxy.column == "freq_hz"
+    col, ref, span = FL.sensor_source([tr], model.config)
+    t = np.asarray(tr.columns["temp_c"])
+    assert col == "temp_c" and ref - span < t.min() and t.max() < ref + span
+    sc = FL.screen([tr], model, taus=(240.0,), orders=(3,), sensor_taus=(0.0, 480.0))
+    assert [r["block"] for r in sc["rows"]] == ["lag(u, 240 s)^1..3", "lag(T, 0 s)^1..3", "lag(T, 480 s)^1..3"]
+    temp_cfg = hc.fit_config_from_logs([tr], proxy_kind="temp", rate_estimator="iir", shift=7)
+    assert FL.sensor_source([tr], temp_cfg) is None   # the proxy is the sensor: nothing new
+    assert FL.candidates(4000.0, True, (240.0,), (3,), sensor_taus=(0.0, 60.0)) == [
+        ((240.0, 3),), ((0.0, 3, "sensor"),), ((60.0, 3, "sensor"),)]
+
+
+def test_sensor_block_packs_the_sensor_and_runs_in_fixed_point(lagged_mr):
+    """A sensor block: z is the bank's polynomial of the normalized (lagged) sensor, and the model
+    (both banks, sign terms, an input on temp_c) agrees in fixed point with the golden."""
+    dev, tr, model, res = lagged_mr
+    sc = FL.screen([tr], model, taus=(), orders=(3,), sensor_taus=(120.0,))
+    cand = sc["rows"][0]["cand"]
+    a1, a2 = sc["coefs"](cand)
+    cfg = FL.lag_config(model.config, cand, [a1, a2], sc["sensor"])
+    assert {t["column"] for t in cfg.aux.terms} == {"temp_c"}
+    with pytest.raises(ValueError, match="sensor"):
+        FL.lag_config(model.config, cand, [a1, a2])
+    col, ref, span = sc["sensor"]
+    q = np.clip((np.asarray(tr.columns["temp_c"], float) - ref) / span, -1, 1)
+    g = generator_values(tr, FL.lag_term(model.config, 120.0, 1, sensor=sc["sensor"]), model.config.rate.fs)
+    assert g[0] == pytest.approx(q[0]) and np.ptp(g) < np.ptp(q)   # restarted at the start, low-passed
+    G = np.column_stack([g, g ** 2, g ** 3])
+    total = float(np.sum(np.abs((a1 + a2) / 2)) + np.sum(np.abs((a1 - a2) / 2)))
+    z = aux_regressor(tr, cfg.aux)
+    mode = np.asarray(tr.mode)
+    np.testing.assert_allclose(z[mode == 1], G[mode == 1] @ a1 / total, atol=1e-12)
+    m2, _ = fit_logs([tr], cfg, "auto", blocks=True, drop_unidentifiable=True)
+    if 7 not in m2.terms:
+        m2, _ = fit_logs([tr], cfg, tuple(m2.terms) + (7,), blocks=True, drop_unidentifiable=True)
+    assert 7 in m2.terms
+    check_close(simulate_foreign(dev, 2.0, True, 1, 1, DUR), m2, "sensor block, regress_first")

@@ -1,4 +1,5 @@
-# Measurement script of docs/ACCURACY.md "Lag-state block" (not part of the package).
+# Measurement script of docs/ACCURACY.md "Lag-state block" and "Rate and lag selection" (not part of the
+# package). Prints the rate chosen; variants of host_tools.golden.compensate (C.NAME=VALUE) and fit_lag (NAME=VALUE).
 """Measured FTR data (tests/data): fit on one leg / half, hold out the other; std at 1 s of the
 compensated held-out output [deg/h] of the default fit (host_tools.fitting.fit_pipeline.fit_default) with the
 lag-state block off and on (host_tools.golden.compensate.DEFAULT_LAG_BLOCK), and the block chosen.
@@ -25,9 +26,10 @@ def std1(y, t, v):
     return metrics.at_tau(metrics.bias_metrics(y, t, v, taus=(1.0,)), 1.0)["stability_dph"]
 
 
-for kv in sys.argv[1:]:        # e.g. LAG_MARGIN=0.2 LAG_PAIRS_FTR=False: a variant of the module constants
+for kv in sys.argv[1:]:        # e.g. 'LAG_MARGIN={"ftr": 0.05, "mr": 0.1}' LAG_PAIRS_FTR=False: a variant of the module constants
     k, v = kv.split("=")
-    setattr(FL, k, eval(v))
+    mod, k = (C, k[2:]) if k.startswith("C.") else (FL, k)
+    setattr(mod, k, eval(v))
 cases = []
 for ax in "xy":
     log = rl.read(os.path.join(D, f"tofupilot-imu-thermal/tofupilot-imu-{ax}.csv"))
@@ -51,7 +53,8 @@ for name, tr, ho in cases:
             out = C.compensate(ho, model)
             row.append(std1(out.rate_dph, ho.t_s, out["valid"] > 0))
             if mode == "auto":
-                chosen = model.fit.get("lag_block", {}).get("chosen") or "none"
+                chosen = (model.fit.get("lag_block", {}).get("chosen") or "none") + "; rate " + (
+                    model.fit.get("rate_selection", {}).get("chosen") or model.config.rate.estimator)
         except ValueError as exc:
             row.append(float("nan"))
             chosen = f"error: {exc}"[:60]

@@ -40,7 +40,7 @@ for seed in range(a, b):
         d["cands"] = []
         for x in singles + pairs:
             e = {"block": x["block"], "screen": x["screen_cv_rms"]}
-            cfg2 = FL.lag_config(m.config, x["cand"], sc["coefs"](x["cand"]))
+            cfg2 = FL.lag_config(m.config, x["cand"], sc["coefs"](x["cand"]), sc["sensor"])
             if cfg2 is None:
                 e["err"] = "too many terms"
             else:

@@ -38,7 +38,7 @@ def run(args) -> int:
     try:
         if default:
             # what the benchmark picked (host_tools.fitting.fit_pipeline.fit_default): rate auto for mode-reversal logs,
-            # the lag-state block of the proxy when cross-validation supports it
+            # the lag-state block of the proxy or the sensor when cross-validation supports it
             model, res = fit_default(logs, args.terms, drop_unidentifiable=args.drop_unidentifiable,
                                      cv_blocks=args.cv_blocks, **kw)
         elif args.rate_estimator == "auto":
@@ -54,11 +54,11 @@ def run(args) -> int:
                 for r in sel["candidates"]) + " deg/h cross-validated rms)")
         lag = model.fit.get("lag_block")
         if lag and lag.get("chosen"):
-            print(f"lag-state block of the proxy: {lag['chosen']} (cross-validated rms "
+            print(f"lag-state block (u: proxy, T: sensor): {lag['chosen']} (cross-validated rms "
                   f"{lag['base_cv_rms']:.4g} -> {lag['cv_rms']:.4g} deg/h)")
         elif lag:
             why = lag.get("error") or f"no candidate lowered the cross-validated rms by {100 * lag['margin']:.0f} %"
-            print(f"lag-state block of the proxy: not kept ({why})")
+            print(f"lag-state block (u: proxy, T: sensor): not kept ({why})")
     except UnidentifiableError as exc:
         raise ValueError(str(exc).replace("drop_unidentifiable=True", "--drop-unidentifiable (or --terms auto / "
                                           "--terms k0,k1,...)")) from None

@@ -549,7 +549,7 @@ def design_matrix(u, v, z=None, terms=range(N_TERMS)) -> np.ndarray:
 # -- run-log glue and the `hdrg fit` command ------------------------------------------------------
 
 def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8, significance=None,
-             min_gain=0.02, blocks=None):
+             min_gain=0.02, blocks=None, masks=None):
     """Fit a :class:`host_tools.golden.model.BiasModel` with ``config`` (a ModelConfig) to RunLogs.
 
     Each log goes through the golden pipeline (:func:`host_tools.golden.compensate.prepare`): only its
@@ -562,7 +562,9 @@ def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8
     host_tools.golden.compensate.DEFAULT_TERMS.  ``blocks`` True: cut a single run into ``cv_blocks``
     time blocks whatever the terms (so fixed terms get a cross-validated rms too); None: only for
     'auto'.  ``significance`` of the 'auto' selection (:func:`select_terms`): None ->
-    host_tools.golden.compensate.DEFAULT_SIGNIFICANCE.  Returns (model, FitResult)."""
+    host_tools.golden.compensate.DEFAULT_SIGNIFICANCE.  ``masks``: None, or one bool array per log
+    (its length) AND-ed with the used samples (e.g. the samples valid for several rate estimators,
+    :func:`fit_auto_rate`).  Returns (model, FitResult)."""
     from host_tools.golden.compensate import DEFAULT_SIGNIFICANCE, DEFAULT_TERMS, prepare
     from host_tools.golden.model import BiasModel
 
@@ -571,18 +573,24 @@ def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8
     auto = isinstance(terms, str) and terms.strip().lower() == "auto"
     two = config.reversal is not None and config.reversal.order == "regress_first"
     accs = {}
+    if masks is not None and len(masks) != len(logs):
+        raise ValueError(f"masks: one per log expected, got {len(masks)} for {len(logs)} logs")
     for i, log in enumerate(logs):
         pr = prepare(log, config)
+        if masks is not None:
+            if np.shape(masks[i]) != pr.used.shape:
+                raise ValueError(f"{log.source}: mask of shape {np.shape(masks[i])}, the log has {len(pr.used)} samples")
+            pr.used = pr.used & np.asarray(masks[i], bool)
         if not pr.used.any():
             raise ValueError(f"{log.source}: no valid sample to fit (all exchange, warm-up or before the first pair)")
-        masks = [pr.used & (pr.mode == 1), pr.used & (pr.mode == 2)] if two else [pr.used]
+        bank_w = [pr.used & (pr.mode == 1), pr.used & (pr.mode == 2)] if two else [pr.used]
         if (auto if blocks is None else blocks) and len(logs) == 1:
             groups = block_groups(len(pr.y), cv_blocks)
-            per = [accumulate_groups(pr.u, pr.v, pr.z, pr.y, w, groups) for w in masks]
+            per = [accumulate_groups(pr.u, pr.v, pr.z, pr.y, w, groups) for w in bank_w]
             for g in per[0]:
                 accs[f"{log.source}#block{g}"] = tuple(p[g] for p in per) if two else per[0][g]
         else:
-            banks = tuple(Accumulator().add(pr.u, pr.v, pr.z, pr.y, w) for w in masks)
+            banks = tuple(Accumulator().add(pr.u, pr.v, pr.z, pr.y, w) for w in bank_w)
             accs[f"{log.source}#{i}"] = banks if two else banks[0]
     res = fit_accumulators(accs, terms, drop_unidentifiable=drop_unidentifiable,
                            significance=significance, min_gain=min_gain)
@@ -606,38 +614,66 @@ def _rate_label(est, n, shift):
 
 
 def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, significance=None, min_gain=0.02,
-                  drop_unidentifiable=True, **config_kw):
+                  drop_unidentifiable=True, samples="own", **config_kw):
     """Rate estimator 'auto': for every candidate (estimator, n, shift) build the config
     (host_tools.golden.compensate.fit_config_from_logs with ``config_kw``), fit ``terms`` with
     cross-validation over the runs (one run: ``cv_blocks`` time blocks, see :func:`fit_logs`), and
-    keep the candidate of least cross-validated rms.  A candidate that cannot be fitted (e.g. no
-    sample past its warm-up) is skipped and reported.  Returns (model, FitResult); the model's
-    fit info holds "rate_selection": {"method", "chosen", "candidates": [{"estimator", "cv_rms" or
+    keep the candidate of least cross-validated rms.
+
+    ``samples`` 'own' (default): each candidate is fitted and scored on its own used samples (an
+    estimator with a longer warm-up is scored on fewer, later samples: iir 9 skips 1024 samples,
+    the power-on transient of a run).  'common': every candidate on the samples used by EVERY
+    candidate, then the chosen one refitted on all its own samples (no refit when they are the
+    common ones).  'common' changed the pick on 5 of 40 foreign mode-reversal devices and made the
+    held-out p90 worse (docs/ACCURACY.md "Rate and lag selection"), hence not the default.
+    A candidate that cannot be fitted (e.g. no sample past its warm-up) is skipped and reported
+    (one whose configuration cannot be built is also left out of the common set).  Returns
+    (model, FitResult); the model's fit info holds
+    "rate_selection": {"method", "samples", "chosen", "candidates": [{"estimator", "cv_rms" or
     "error"}]} (written to model.json).  ``drop_unidentifiable`` as in :func:`fit_logs`; when no
     candidate fits and one failed as unidentifiable, that UnidentifiableError is raised."""
-    from host_tools.golden.compensate import fit_config_from_logs
+    from host_tools.golden.compensate import fit_config_from_logs, prepare
 
-    rows, best, unidentifiable = [], None, None
+    if samples not in ("common", "own"):
+        raise ValueError(f"samples must be 'common' or 'own', not {samples!r}")
+    logs = list(logs)
+    kw = dict(cv_blocks=cv_blocks, blocks=True, drop_unidentifiable=drop_unidentifiable,
+              significance=significance, min_gain=min_gain)
+    rows, cfgs, unidentifiable = {}, {}, None
     for est, n, shift in candidates:
         label = _rate_label(est, n, shift)
         try:
-            cfg = fit_config_from_logs(logs, rate_estimator=est, n=n, shift=shift, **config_kw)
-            model, res = fit_logs(logs, cfg, terms, cv_blocks=cv_blocks, blocks=True,
-                                  drop_unidentifiable=drop_unidentifiable, significance=significance, min_gain=min_gain)
+            cfgs[label] = fit_config_from_logs(logs, rate_estimator=est, n=n, shift=shift, **config_kw)
         except ValueError as exc:
-            rows.append({"estimator": label, "error": str(exc)})
+            rows[label] = {"estimator": label, "error": str(exc)}
+    masks = own = None
+    if samples == "common" and cfgs:
+        own = {label: [prepare(log, cfg).used for log in logs] for label, cfg in cfgs.items()}
+        masks = [np.logical_and.reduce([m[i] for m in own.values()]) for i in range(len(logs))]
+        if not all(m.any() for m in masks):   # no common sample: fall back to each candidate's own
+            masks = None
+    best = None
+    for label, cfg in cfgs.items():
+        try:
+            model, res = fit_logs(logs, cfg, terms, masks=masks, **kw)
+        except ValueError as exc:
+            rows[label] = {"estimator": label, "error": str(exc)}
             unidentifiable = unidentifiable or (exc if isinstance(exc, UnidentifiableError) else None)
             continue
-        rows.append({"estimator": label, "cv_rms": res.cv["cv_rms"]})
+        rows[label] = {"estimator": label, "cv_rms": res.cv["cv_rms"]}
         if best is None or res.cv["cv_rms"] < best[0]:
             best = (res.cv["cv_rms"], model, res, label)
     if best is None and unidentifiable is not None:
         raise unidentifiable   # (drop_unidentifiable=False) the caller can name the remedy
     if best is None:
         raise ValueError("rate estimator 'auto': no candidate could be fitted: "
-                         + "; ".join(f"{r['estimator']}: {r['error']}" for r in rows))
+                         + "; ".join(f"{r['estimator']}: {r['error']}" for r in rows.values()))
+    rows = [rows[_rate_label(*c)] for c in candidates]
     _, model, res, label = best
+    if masks is not None and any((o != m).any() for o, m in zip(own[label], masks)):
+        model, res = fit_logs(logs, cfgs[label], terms, **kw)   # the chosen one on all its samples
     model.fit["rate_selection"] = {"method": "least cross-validated rms (time blocks of one run, or runs)",
+                                   "samples": "common" if masks is not None else "own",
                                    "chosen": label, "candidates": rows}
     return model, res
 

@@ -1,29 +1,41 @@
 """The lag-state block of the default fit (issue #10): a thermal node that lags the proxy
 differently from what one proxy u and its rate v can represent, modelled as a low-order polynomial
-of the proxy through first-order filters, carried to the firmware as the k7 auxiliary regressor.
+of the proxy, or of the temperature sensor, through first-order filters, carried to the firmware
+as the k7 auxiliary regressor.
 
 Regressors (host_tools.golden.regressors, generator ``input`` on the model's proxy column with the model's
 proxy normalization, so ``q = u``): ``g_{tau,k} = lag(u, tau)^k``, k = 1..order, the first-order
 low-pass of u with time constant tau [s] restarted at every segment start (exactly the firmware's
-aux kind ``input`` with filter SB and power k, firmware_ref/aux.py).
+aux kind ``input`` with filter SB and power k, firmware_ref/aux.py).  **Sensor blocks** (LAG_SENSOR,
+when the proxy is the resonator frequency and the logs have ``temp_c``): the same on the
+temperature sensor, ``lag(T, tau)^k`` with T = (temp_c - ref) / span normalized over the training
+range (:func:`sensor_source`), tau in SENSOR_TAUS_S (0 = the sensor itself).  The sensor sits on
+another thermal node than the resonator: a second observation of the temperature field.
 
 Choice (:func:`add_lag_block`), on the training runs only:
 
-1. **Screen** every candidate of :func:`candidates` (one tau of LAG_TAUS_S with order 2 or 3; for
-   FTR also two taus with order 3 each) by cross-validated squared error of the least-squares fit
-   of the base model's polynomial terms + the candidate's lag columns, per coefficient bank
-   (regress_first: mode 1 / mode 2), over the same groups as host_tools.fitting.fit.fit_logs (time blocks
-   of one run, or runs).  All candidates share one pass of Gram matrices per (bank, group).
-2. **Pack** the winner into ONE k7 sum: per bank b the lag coefficients a_b (deg/h) of the full
-   training fit; FTR: ``z = sum_k a_k g_k / T``; regress_first: ``z = sum_k (P_k g_k + Q_k s g_k) /
-   T`` with P = (a_1 + a_2) / 2, Q = (a_1 - a_2) / 2 (``sign`` terms: s = +1 on mode 1, -1 on
-   mode 2, so z is a_b . g / T on bank b), T = sum |weights| (so sum |w| = 1 and |z| <= 1; zero
-   weights are left out).  Then the model is refitted with host_tools.fitting.fit.fit_logs (same terms,
-   so 'auto' may keep or drop k7; each bank fits its own k7 ~ T).
-3. **Keep** it only when both the screen and the refit's cross-validated rms beat the base model by
-   LAG_MARGIN (relative); else the base model is returned unchanged.  The model's fit info holds
-   ``lag_block``: {"chosen": label or None, "base_cv_rms", "cv_rms", "candidates": [{label,
-   screen_cv_rms}]} (model.json).
+1. **Screen** every candidate of :func:`candidates` (one tau with order 2 or 3, of the proxy or the
+   sensor; for FTR also two taus with order 3 each) by cross-validated squared error of the
+   least-squares fit of the base model's polynomial terms + the candidate's lag columns, per
+   coefficient bank (regress_first: mode 1 / mode 2), over the same groups as
+   host_tools.fitting.fit.fit_logs (time blocks of one run, or runs).  All candidates share one
+   pass of Gram matrices per (bank, group).
+2. **Pack** each of the LAG_REFIT_TOP candidates of least screen rms into ONE k7 sum: per bank b
+   the lag coefficients a_b (deg/h) of the full training fit; FTR: ``z = sum_k a_k g_k / T``;
+   regress_first: ``z = sum_k (P_k g_k + Q_k s g_k) / T`` with P = (a_1 + a_2) / 2, Q = (a_1 -
+   a_2) / 2 (``sign`` terms: s = +1 on mode 1, -1 on mode 2, so z is a_b . g / T on bank b), T =
+   sum |weights| (so sum |w| = 1 and |z| <= 1; zero weights are left out), and refit the model with
+   host_tools.fitting.fit.fit_logs (same terms, so 'auto' may keep or drop k7; each bank fits its
+   own k7 ~ T).
+   Only candidates whose screen rms beats the base screen by LAG_SCREEN_GATE are refitted (FTR
+   0.2; mode reversal: no gate; the screen fits the base's terms without re-selecting them and can
+   rank a candidate whose refit is far better below the base).
+3. **Keep** the refit of least cross-validated rms only when it beats the base model by
+   LAG_MARGIN (relative; FTR 0.2, mode reversal 0.1); else the base model is returned unchanged.
+   (Before: one refit, screen gate and margin 0.2 for both; docs/ACCURACY.md "Rate and lag
+   selection".)  The model's fit
+   info holds ``lag_block``: {"chosen": label or None, "base_cv_rms", "cv_rms", "candidates":
+   [{label, screen_cv_rms, refit_cv_rms if refitted}]} (model.json).
 
 Firmware limit: at most 6 terms in the k7 sum (firmware_ref.formats.AUX_MAX_TERMS), hence one tau
 for mode reversal (3 powers x (P, Q)) and at most two taus of order 3 for FTR.
@@ -40,31 +52,72 @@ from host_tools.golden.regressors import AuxConfig, generator_values, regressor_
 
 LAG_TAUS_S = (60.0, 120.0, 240.0, 480.0, 960.0, 1920.0)   # screened time constants [s]
 LAG_ORDERS = (2, 3)           # polynomial orders of a single-tau block
-LAG_MARGIN = 0.2              # required relative reduction of the cross-validated rms (screen and refit)
+# per kind of log ("ftr", "mr"); chosen on foreign devices of set 1 and, for FTR, the measured logs
+# (docs/ACCURACY.md "Rate and lag selection"):
+LAG_MARGIN = {"ftr": 0.2, "mr": 0.1}          # required relative reduction of the refit's cross-validated rms
+LAG_SCREEN_GATE = {"ftr": 0.2, "mr": None}    # a refitted candidate's screen rms must beat the base screen by this (None: no gate)
 MAX_TAU_FRACTION = 0.5        # tau <= this x the longest training run (as host_tools.fitting.effects)
 LAG_PAIRS_FTR = True          # FTR: also two-tau blocks (order 3 each)
+LAG_PAIRS_MR = False          # mode reversal: also two-tau blocks of orders (1, 1), (2, 1), (1, 2) (6 terms at most)
+LAG_REFIT_TOP = 2             # refit this many candidates of least screen CV rms; keep the best refit
+LAG_SENSOR = True             # also blocks of the temperature sensor (temp_c) when the proxy is the frequency
+SENSOR_TAUS_S = (0.0,) + LAG_TAUS_S   # sensor time constants [s] (0: the sensor itself, no filter)
+SENSOR_COLUMN = "temp_c"
+SENSOR_MARGIN = 0.1           # sensor normalization: training range widened by this x its width on each side
 _RIDGE = 1e-10                # relative diagonal load of the scaled screen solves (collinear lags)
 
 
-def lag_term(config, tau_s: float, power: int, weight: float = 1.0, sign: bool = False) -> dict:
-    """Generator term lag(u, tau_s)^power of the model's proxy (host_tools.golden.regressors 'input')."""
+def lag_term(config, tau_s: float, power: int, weight: float = 1.0, sign: bool = False, sensor=None) -> dict:
+    """Generator term lag(u, tau_s)^power of the model's proxy (host_tools.golden.regressors 'input');
+    with ``sensor`` = (column, ref, span): of that column normalized as (x - ref) / span instead."""
     p = config.proxy
-    return {"gen": "input", "column": p.column, "ref": float(p.ref), "span": float(p.span),
+    column, ref, span = (p.column, p.ref, p.span) if sensor is None else sensor
+    return {"gen": "input", "column": column, "ref": float(ref), "span": float(span),
             "tau_s": float(tau_s), "power": int(power), "weight": float(weight), "sign": bool(sign),
             "effect": "thermal_lag"}
 
 
-def candidates(duration_s: float, reversal: bool, taus=LAG_TAUS_S, orders=LAG_ORDERS, pairs=None) -> list:
-    """Candidate blocks: tuples of (tau_s, order); taus longer than MAX_TAU_FRACTION x the run dropped."""
-    taus = [t for t in taus if t <= MAX_TAU_FRACTION * duration_s]
-    out = [((t, k),) for t in taus for k in orders]
+def sensor_source(logs, config):
+    """(column, ref, span) of the temperature sensor for sensor blocks, or None: LAG_SENSOR off, the
+    proxy is the sensor itself, a log lacks the column, has a non-finite value in it, or it does
+    not vary.  ref/span: the training
+    range widened by SENSOR_MARGIN on each side (degC)."""
+    if not LAG_SENSOR or config.proxy.column == SENSOR_COLUMN:
+        return None
+    if not all(SENSOR_COLUMN in log.columns for log in logs):
+        return None
+    x = np.concatenate([np.asarray(log.columns[SENSOR_COLUMN], np.float64) for log in logs])
+    if not x.size or not np.isfinite(x).all() or not x.max() > x.min():
+        return None
+    lo, hi = float(x.min()), float(x.max())
+    w = SENSOR_MARGIN * (hi - lo)
+    return (SENSOR_COLUMN, 0.5 * (lo + hi), 0.5 * (hi - lo) + w)
+
+
+def candidates(duration_s: float, reversal: bool, taus=LAG_TAUS_S, orders=LAG_ORDERS, pairs=None,
+               sensor_taus=()) -> list:
+    """Candidate blocks: tuples of elements (tau_s, order) (the proxy) or (tau_s, order, 'sensor');
+    taus longer than MAX_TAU_FRACTION x the run dropped.  ``sensor_taus``: taus of sensor blocks
+    (empty: none)."""
+    keep = lambda ts: [t for t in ts if t <= MAX_TAU_FRACTION * duration_s]   # noqa: E731
+    src = [(t,) for t in keep(taus)] + [(t, "sensor") for t in keep(sensor_taus)]
+    el = lambda s, k: (s[0], k) + s[1:]   # noqa: E731
+    out = [(el(s, k),) for s in src for k in orders]
     if not reversal and (LAG_PAIRS_FTR if pairs is None else pairs):
-        out += [((t1, 3), (t2, 3)) for i, t1 in enumerate(taus) for t2 in taus[i + 1:]]
+        out += [(el(s1, 3), el(s2, 3)) for i, s1 in enumerate(src) for s2 in src[i + 1:]]
+    if reversal and (LAG_PAIRS_MR if pairs is None else pairs):
+        out += [(el(s1, k1), el(s2, k2)) for i, s1 in enumerate(src) for s2 in src[i + 1:]
+                for k1, k2 in ((1, 1), (2, 1), (1, 2))]
     return out
 
 
+def _key(el):
+    """(source, tau) of a candidate element: source '' (the proxy) or 'sensor'."""
+    return (el[2] if len(el) > 2 else "", el[0])
+
+
 def _label(cand) -> str:
-    return " + ".join(f"lag(u, {t:g} s)^1..{k}" for t, k in cand)
+    return " + ".join(f"lag({'T' if len(e) > 2 else 'u'}, {e[0]:g} s)^1..{e[1]}" for e in cand)
 
 
 def _groups(pr, n_logs, cv_blocks, log_index):
@@ -74,9 +127,9 @@ def _groups(pr, n_logs, cv_blocks, log_index):
     return np.full(len(pr.y), log_index, np.int64)
 
 
-def _screen_grams(logs, config, poly, taus, cv_blocks):
-    """Per bank: {group: Gram of [poly columns | lag(u, tau)^1..3 for tau in taus | y]} over the
-    samples the fit uses."""
+def _screen_grams(logs, config, poly, keys, cv_blocks, sensor=None):
+    """Per bank: {group: Gram of [poly columns | lag(x, tau)^1..3 for (source, tau) in keys | y]}
+    over the samples the fit uses (x: the proxy, or for source 'sensor' the ``sensor`` column)."""
     from host_tools.golden.compensate import prepare
     two = config.reversal is not None and config.reversal.order == "regress_first"
     fs = config.rate.fs
@@ -84,8 +137,8 @@ def _screen_grams(logs, config, poly, taus, cv_blocks):
     for i, log in enumerate(logs):
         pr = prepare(log, config)
         cols = [regressor_matrix(pr.u, pr.v)[:, list(poly)]]
-        for t in taus:
-            y1 = generator_values(log, lag_term(config, t, 1), fs)
+        for src, t in keys:
+            y1 = generator_values(log, lag_term(config, t, 1, sensor=sensor if src else None), fs)
             cols.append(np.column_stack([y1, y1 * y1, y1 * y1 * y1]))
         A = np.column_stack(cols + [pr.y])
         g = _groups(pr, len(logs), cv_blocks, i)
@@ -123,86 +176,112 @@ def _cv_sse(banks, idx) -> float:
     return sse
 
 
-def screen(logs, model, *, cv_blocks=8, taus=LAG_TAUS_S, orders=LAG_ORDERS) -> dict:
+def screen(logs, model, *, cv_blocks=8, taus=LAG_TAUS_S, orders=LAG_ORDERS, sensor_taus=None) -> dict:
     """Step 1 of the module doc for the base ``model`` of ``logs``: {"base": screen cv rms of the
     base polynomial terms, "rows": [{"block", "screen_cv_rms", "cand"}], "coefs": f(cand) -> the
-    per-bank lag coefficients of the full training fit}.  No candidate (runs too short): rows []."""
+    per-bank lag coefficients of the full training fit, "sensor": the sensor source or None}.
+    ``sensor_taus`` None: SENSOR_TAUS_S when :func:`sensor_source` has a sensor.  No candidate
+    (runs too short): rows []."""
     cfg = model.config
     poly = (0,) + tuple(sorted(k for k in model.terms if k not in (0, K_AUX)))
     duration = max(float(log.t_s[-1] - log.t_s[0]) for log in logs)
-    cands = candidates(duration, cfg.reversal is not None, taus, orders)
+    sensor = sensor_source(logs, cfg)
+    sensor_taus = (SENSOR_TAUS_S if sensor_taus is None else sensor_taus) if sensor else ()
+    cands = candidates(duration, cfg.reversal is not None, taus, orders, sensor_taus=sensor_taus)
     if not cands:
-        return {"base": None, "rows": [], "coefs": None}
-    used_taus = sorted({t for c in cands for t, _ in c})
-    banks = _screen_grams(logs, cfg, poly, used_taus, cv_blocks)
+        return {"base": None, "rows": [], "coefs": None, "sensor": sensor}
+    keys = sorted({_key(e) for c in cands for e in c})
+    banks = _screen_grams(logs, cfg, poly, keys, cv_blocks, sensor)
     npoly = len(poly)
 
     def idx_of(cand):
         idx = list(range(npoly))
-        for t, k in cand:
-            j = npoly + 3 * used_taus.index(t)
-            idx += list(range(j, j + k))
+        for e in cand:
+            j = npoly + 3 * keys.index(_key(e))
+            idx += list(range(j, j + e[1]))
         return idx
 
     nsamp = sum(G[0, 0] for bank in banks for G in bank.values())   # column 0 is k0 = 1: the sample count
     rms = lambda idx: float(np.sqrt(_cv_sse(banks, idx) / nsamp))   # noqa: E731
     rows = [{"block": _label(c), "screen_cv_rms": rms(idx_of(c)), "cand": c} for c in cands]
-    return {"base": rms(list(range(npoly))), "rows": rows,
+    return {"base": rms(list(range(npoly))), "rows": rows, "sensor": sensor,
             "coefs": lambda c: [_solve(sum(bank.values()), idx_of(c))[npoly:] for bank in banks]}
 
 
-def lag_config(config, cand, coefs):
+def lag_config(config, cand, coefs, sensor=None):
     """The model config with the block ``cand`` packed into one k7 sum (module doc, step 2), or
-    None when it does not fit the firmware (more than AUX_MAX_TERMS non-zero terms)."""
-    powers = [(t, p) for t, k in cand for p in range(1, k + 1)]
+    None when it does not fit the firmware (more than AUX_MAX_TERMS non-zero terms).  ``sensor``:
+    the (column, ref, span) of sensor elements (:func:`sensor_source`)."""
+    powers = [(e, p) for e in cand for p in range(1, e[1] + 1)]
     if len(coefs) == 2:
         P, Q = (coefs[0] + coefs[1]) / 2.0, (coefs[0] - coefs[1]) / 2.0
-        raw = [(t, p, w, False) for (t, p), w in zip(powers, P)] + [(t, p, w, True) for (t, p), w in zip(powers, Q)]
+        raw = [(e, p, w, False) for (e, p), w in zip(powers, P)] + [(e, p, w, True) for (e, p), w in zip(powers, Q)]
     else:
-        raw = [(t, p, w, False) for (t, p), w in zip(powers, coefs[0])]
+        raw = [(e, p, w, False) for (e, p), w in zip(powers, coefs[0])]
     raw = [r for r in raw if r[2] != 0.0]
     total = sum(abs(r[2]) for r in raw)
     if not (raw and total > 0 and len(raw) <= AUX_MAX_TERMS):
         return None
-    return replace(config, aux=AuxConfig("sum", {"fs": config.rate.fs,
-                                                 "terms": [lag_term(config, t, p, w / total, s) for t, p, w, s in raw]}))
+    if any(len(e) > 2 for e in cand) and sensor is None:
+        raise ValueError("a sensor block needs the sensor source (column, ref, span)")
+    return replace(config, aux=AuxConfig("sum", {"fs": config.rate.fs, "terms": [
+        lag_term(config, e[0], p, w / total, s, sensor if len(e) > 2 else None) for e, p, w, s in raw]}))
 
 
 def add_lag_block(logs, model, res, terms=None, *, cv_blocks=8, taus=LAG_TAUS_S, orders=LAG_ORDERS,
-                  margin=None, drop_unidentifiable=True, significance=None, min_gain=0.02):
+                  margin=None, drop_unidentifiable=True, significance=None, min_gain=0.02, sensor_taus=None,
+                  top=None, screen_gate=None):
     """The base ``model`` (and its FitResult ``res``, with a cross-validated rms) of ``logs``,
     extended by the lag-state block when it lowers the cross-validated rms by ``margin`` (None:
-    LAG_MARGIN; module doc).  Returns (model, FitResult).  A model that already has an aux regressor is returned as is."""
+    LAG_MARGIN of the kind, 'ftr' or 'mr'; module doc): the ``top`` (None: LAG_REFIT_TOP) candidates
+    of least screen CV rms are refitted (terms as given), the refit of least CV rms is kept when it
+    beats the base by the margin.  ``screen_gate`` (None: LAG_SCREEN_GATE of the kind; 'off': no
+    gate) also requires a refitted candidate's screen rms to beat the base screen by that fraction.  Returns (model, FitResult).
+    A model that already has an aux regressor is returned as is."""
     from host_tools.fitting.fit import fit_logs
 
     logs = list(logs)
-    margin = LAG_MARGIN if margin is None else margin
+    kind = "ftr" if model.config.reversal is None else "mr"
+    margin = LAG_MARGIN[kind] if margin is None else margin
+    top = LAG_REFIT_TOP if top is None else top
+    screen_gate = LAG_SCREEN_GATE[kind] if screen_gate is None else (None if screen_gate == "off" else screen_gate)
     if model.config.aux.generator != "none":
         return model, res
-    sc = screen(logs, model, cv_blocks=cv_blocks, taus=taus, orders=orders)
+    sc = screen(logs, model, cv_blocks=cv_blocks, taus=taus, orders=orders, sensor_taus=sensor_taus)
     base_cv = (res.cv or {}).get("cv_rms")
-    info = {"method": "lag-state block of the proxy, chosen by cross-validated rms (host_tools.fitting.fit_lag)",
-            "margin": margin, "screen_base_cv_rms": sc["base"], "base_cv_rms": base_cv, "chosen": None,
+    info = {"method": "lag-state block of the proxy (or the sensor), chosen by cross-validated rms "
+                      "(host_tools.fitting.fit_lag)", "margin": margin, "refit_top": top, "screen_gate": screen_gate,
+            "screen_base_cv_rms": sc["base"], "base_cv_rms": base_cv, "chosen": None,
             "candidates": [{k: v for k, v in r.items() if k != "cand"} for r in sc["rows"]]}
     model.fit["lag_block"] = info
     if not sc["rows"] or base_cv is None:
         return model, res
-    best = min(sc["rows"], key=lambda r: r["screen_cv_rms"])
-    if not best["screen_cv_rms"] < (1.0 - margin) * sc["base"]:
+    ranked = sorted(range(len(sc["rows"])), key=lambda i: sc["rows"][i]["screen_cv_rms"])[:top]
+    if screen_gate is not None:
+        ranked = [i for i in ranked if sc["rows"][i]["screen_cv_rms"] < (1.0 - screen_gate) * sc["base"]]
+    best = None
+    for i in ranked:
+        row = sc["rows"][i]
+        cfg2 = lag_config(model.config, row["cand"], sc["coefs"](row["cand"]), sc["sensor"])
+        if cfg2 is None:
+            info["candidates"][i]["error"] = "more terms than the firmware's k7 sum holds"
+            continue
+        try:
+            model2, res2 = fit_logs(logs, cfg2, terms, cv_blocks=cv_blocks, blocks=True,
+                                    drop_unidentifiable=drop_unidentifiable, significance=significance,
+                                    min_gain=min_gain)
+        except ValueError as exc:
+            info["candidates"][i]["error"] = str(exc)
+            continue
+        info["candidates"][i]["refit_cv_rms"] = res2.cv["cv_rms"]
+        if best is None or res2.cv["cv_rms"] < best[0]:
+            best = (res2.cv["cv_rms"], row["block"], model2, res2)
+    if best is None:
         return model, res
-    cfg2 = lag_config(model.config, best["cand"], sc["coefs"](best["cand"]))
-    if cfg2 is None:
+    info["cv_rms"] = best[0]
+    if not best[0] < (1.0 - margin) * base_cv:
         return model, res
-    try:
-        model2, res2 = fit_logs(logs, cfg2, terms, cv_blocks=cv_blocks, blocks=True,
-                                drop_unidentifiable=drop_unidentifiable, significance=significance, min_gain=min_gain)
-    except ValueError as exc:
-        info["error"] = str(exc)
-        return model, res
-    info["cv_rms"] = res2.cv["cv_rms"]
-    if not res2.cv["cv_rms"] < (1.0 - margin) * base_cv:
-        return model, res
-    info["chosen"] = best["block"]
+    _, info["chosen"], model2, res2 = best
     if "rate_selection" in model.fit:
         model2.fit["rate_selection"] = model.fit["rate_selection"]
     model2.fit["lag_block"] = info

@@ -23,7 +23,10 @@ def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, c
     if lag_block not in ("auto", "off"):
         raise ValueError(f"lag_block must be 'auto' or 'off', not {lag_block!r}")
     lag = lag_block == "auto" and config_kw.get("aux") is None
-    if compensate.DEFAULT_RATE_SELECTION_MR == "auto" and logs and all(log.reversal for log in logs):
+    reversal = bool(logs) and all(log.reversal for log in logs)
+    selection = compensate.DEFAULT_RATE_SELECTION_MR if reversal else compensate.DEFAULT_RATE_SELECTION_FTR
+    rate_given = any(config_kw.get(k) is not None for k in ("rate_estimator", "n", "shift"))
+    if selection == "auto" and logs and not rate_given:
         model, res = fit_auto_rate(logs, terms, drop_unidentifiable=drop_unidentifiable is not False,
                                    cv_blocks=cv_blocks, **config_kw)
     else:

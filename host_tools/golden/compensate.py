@@ -77,8 +77,9 @@ DEFAULT_TERMS = "auto"
 DEFAULT_SIGNIFICANCE = 1.0   # of terms 'auto' in fit_logs: keep the smallest model within this many CV standard errors
 # `hdrg fit` on mode-reversal logs without --rate-estimator/--rate-n/--rate-shift: 'auto' (the
 # candidate of least cross-validated rms, host_tools.fitting.fit.fit_auto_rate) or 'fixed' (DEFAULT_RATE).
-# FTR logs always get DEFAULT_RATE (on the measured FTR logs 'auto' picks iir and extrapolates badly).
+# FTR logs: DEFAULT_RATE_SELECTION_FTR, kept "fixed" (on the measured FTR logs 'auto' picks iir and extrapolates badly).
 DEFAULT_RATE_SELECTION_MR = "auto"
+DEFAULT_RATE_SELECTION_FTR = "fixed"   # the same choice for FTR logs in fit_default ('auto' | 'fixed')
 DEFAULT_LAG_BLOCK = "auto"   # hdrg fit: lag-state block of the proxy as k7 when CV supports it (host_tools.fitting.fit_lag); "off"
 IMPLS = ("float", "fixed")
 
