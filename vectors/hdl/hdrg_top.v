@@ -131,13 +131,34 @@ module hdrg_top #(
         input kd;
         pval = kd ? {{32{w[31]}}, w} : {32'd0, w};
     endfunction
+    // clamps by bit tests (no 64-bit comparators): above / below the bound
+    function above30;                      // x > 2^30
+        input signed [63:0] x;
+        above30 = !x[63] && ((|x[62:31]) || (x[30] && (|x[29:0])));
+    endfunction
+    function below30;                      // x < -2^30
+        input signed [63:0] x;
+        below30 = x[63] && !(&x[62:30]);
+    endfunction
     function signed [31:0] clamp1;         // clamp to +-2^30 (the result fits 32 bits)
         input signed [63:0] x;
-        clamp1 = (x > ONE) ? 32'sd1073741824 : ((x < -ONE) ? -32'sd1073741824 : x[31:0]);
+        clamp1 = above30(x) ? 32'sd1073741824 : (below30(x) ? -32'sd1073741824 : x[31:0]);
+    endfunction
+    function above31;                      // x > 2^31 - 1
+        input signed [63:0] x;
+        above31 = !x[63] && (|x[62:31]);
+    endfunction
+    function below31;                      // x < -(2^31 - 1)
+        input signed [63:0] x;
+        below31 = x[63] && (!(&x[62:31]) || !(|x[30:0]));
     endfunction
     function signed [63:0] symsat32;
         input signed [63:0] x;
-        symsat32 = (x > I32) ? I32 : ((x < -I32) ? -I32 : x);
+        symsat32 = above31(x) ? I32 : (below31(x) ? -I32 : x);
+    endfunction
+    function sat32;                        // symsat32(x) != x
+        input signed [63:0] x;
+        sat32 = above31(x) || below31(x);
     endfunction
 
     // ---- sequencer: timer and state tables ----
@@ -166,6 +187,7 @@ module hdrg_top #(
     reg [31:0] f_q;
     reg signed [31:0] t_q, r_q, z_q, a0_q, a1_q, a2_q, a3_q;
     reg signed [63:0] k_q, kc;
+    wire signed [63:0] k_in = k_given ? kin : kc;
     reg [1:0] mode_q;
     reg self_q, restart_q;
     always @* begin
@@ -277,7 +299,7 @@ module hdrg_top #(
     wire signed [63:0] smax = (64'sd1 <<< sb) - 64'sd1;
     wire signed [63:0] s_cl = (s_w > smax) ? smax : ((s_w < -smax) ? -smax : s_w);
     wire signed [63:0] dpr = pv - pval(p_ref_w, kind);
-    wire signed [63:0] dpc = (dpr > I32) ? I32 : ((dpr < -I32) ? -I32 : dpr);
+    wire signed [63:0] dpc = symsat32(dpr);
     // combiner helpers
     wire [1:0] o_mode = 2'd3 - cur;
     wire [30:0] age_o = (o_mode == 2'd1) ? age1 : age2;
@@ -325,7 +347,7 @@ module hdrg_top #(
                         cph <= C_COMMIT;
                 end
                 C_DIV2: if (div_done) begin
-                    if (div_ovf || div_q > SLOPE_MAX || div_q < -SLOPE_MAX) begin
+                    if (div_ovf || (!div_q[63] && (|div_q[62:40])) || (div_q[63] && (!(&div_q[62:40]) || !(|div_q[39:0])))) begin   // |q| > SLOPE_MAX
                         sat_c <= 1'b1;
                         if (ccur == 2'd1) slope1 <= (div_ovf ? div_a < 0 : div_q < 0) ? -SLOPE_MAX : SLOPE_MAX;
                         else slope2 <= (div_ovf ? div_a < 0 : div_q < 0) ? -SLOPE_MAX : SLOPE_MAX;
@@ -352,9 +374,9 @@ module hdrg_top #(
                 end
                 C_TREND: if (ev_fin) begin
                     // the ALU (the evaluator's multiplier) is free once the evaluator is done
-                    if (d_raw > D_MAX) sat_c <= 1'b1;
+                    if (|d_raw[33:22]) sat_c <= 1'b1;                  // d_raw > D_MAX
                     alu_a <= slope_o;
-                    alu_w <= (d_raw > D_MAX) ? D_MAX[31:0] : d_raw[31:0];
+                    alu_w <= (|d_raw[33:22]) ? D_MAX[31:0] : d_raw[31:0];
                     alu_c <= 64'sd0;
                     alu_sh <= 6'd16;
                     alu_go <= 1'b1;
@@ -376,8 +398,8 @@ module hdrg_top #(
                         f_q <= f; t_q <= t; r_q <= r; z_q <= zin; mode_q <= mode; self_q <= self_timed;
                         a0_q <= a0; a1_q <= a1; a2_q <= a2; a3_q <= a3;
                         // K: given, or the internal count (kc = min(K + 1, 2^62) after each sample)
-                        k_q <= k_given ? kin : kc;
-                        kc <= ((k_given ? kin : kc) >= K_LIMIT) ? K_LIMIT : (k_given ? kin : kc) + 64'sd1;
+                        k_q <= k_in;
+                        kc <= (!k_in[63] && k_in[62]) ? K_LIMIT : k_in + 64'sd1;      // k_in >= 2^62
                         evo <= 1'b0;
                         restart_q <= restart;
                         busy <= 1'b1;
@@ -521,12 +543,12 @@ module hdrg_top #(
                         end
                         O_I: begin iy <= iy + alu_r; s_w <= iy + alu_r; op <= O_V; end
                         O_V: begin
-                            vc_q <= (s_w != s_cl) || alu_r > ONE || alu_r < -ONE;
+                            vc_q <= (s_w != s_cl) || above30(alu_r) || below30(alu_r);
                             v <= clamp1(alu_r);
                             op <= O_U;
                         end
                         default: begin          // O_U
-                            uc_q <= alu_r > ONE || alu_r < -ONE;
+                            uc_q <= above30(alu_r) || below30(alu_r);
                             u <= clamp1(alu_r);
                             op <= O_END;
                         end
@@ -545,7 +567,7 @@ module hdrg_top #(
                         y_hold <= {{32{r_q[31]}}, r_q} <<< 11;
                         valid <= 1'b1;
                     end else if (use_q && !(order && warm_q)) begin
-                        if (order && rx != c1) sat_c <= 1'b1;
+                        if (order && sat32(rx)) sat_c <= 1'b1;
                         if (cnt != CMAX) begin acc <= acc + cc; cnt <= cnt + 31'd1; end
                         else sat_c <= 1'b1;
                         if (order && combiner == 2'd3) begin
@@ -559,7 +581,7 @@ module hdrg_top #(
                     ph <= S_T2;
                 end
                 default: begin                  // S_T2: outputs, flags (valid holds cvalid here)
-                    flags <= {(sat_c || (valid && !warm_q && mode_o != 2'd3 && (yo != yo_s || bo != bo_s))),
+                    flags <= {(sat_c || (valid && !warm_q && mode_o != 2'd3 && (sat32(yo) || sat32(bo)))),
                               1'b0, aux_zc, !valid && mode_o != 2'd3, mode_o == 2'd3, warm_q, vc_q && !warm_q, uc_q};
                     if (valid && !warm_q && mode_o != 2'd3) begin
                         out_hold <= yo_s[31:0];
