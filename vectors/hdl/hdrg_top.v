@@ -177,9 +177,10 @@ module hdrg_top #(
         input [2:0] st;
         snext = (st == 3'd0) ? (ftr ? 3'd5 : 3'd1) : ((st == 3'd4) ? 3'd1 : st + 3'd1);
     endfunction
-    // the three passes of the timer (restart: from power-on)
-    reg [2:0] ts0, ts1, ts2, ts3;
-    reg [31:0] tc0, tc1, tc2, tc3;
+    // the timer's three passes, one per clock cycle (S_TM; restart: from power-on): tsr, tcr
+    reg [2:0] tsr;
+    reg [31:0] tcr;
+    reg [1:0] tpass;
     reg [1:0] last_window;
     reg [2:0] st_now;
     reg [1:0] m_now;
@@ -190,12 +191,12 @@ module hdrg_top #(
     wire signed [63:0] k_in = k_given ? kin : kc;
     reg [1:0] mode_q;
     reg self_q, restart_q;
+    wire [2:0] ts_in = (tpass == 2'd0) ? (restart_q ? 3'd0 : tstate) : tsr;
+    wire [31:0] tc_in = (tpass == 2'd0) ? (restart_q ? 32'd0 : tcnt) : tcr;
+    wire t_adv = ts_in != 3'd5 && tc_in >= slen(ts_in);
+    wire [2:0] ts3 = tsr;
+    wire [31:0] tc3 = tcr;
     always @* begin
-        ts0 = restart_q ? 3'd0 : tstate;
-        tc0 = restart_q ? 32'd0 : tcnt;
-        if (ts0 != 3'd5 && tc0 >= slen(ts0)) begin ts1 = snext(ts0); tc1 = 32'd0; end else begin ts1 = ts0; tc1 = tc0; end
-        if (ts1 != 3'd5 && tc1 >= slen(ts1)) begin ts2 = snext(ts1); tc2 = 32'd0; end else begin ts2 = ts1; tc2 = tc1; end
-        if (ts2 != 3'd5 && tc2 >= slen(ts2)) begin ts3 = snext(ts2); tc3 = 32'd0; end else begin ts3 = ts2; tc3 = tc2; end
         if (self_q) begin
             st_now = ts3;
             case (ts3)
@@ -281,7 +282,7 @@ module hdrg_top #(
 
     // ---- control ----
     localparam S_IDLE = 4'd0, S_T = 4'd1, S_F = 4'd2, S_ALU = 4'd3, S_EV = 4'd4, S_T1 = 4'd5, S_T2 = 4'd6,
-               S_EVO = 4'd7;
+               S_EVO = 4'd7, S_TM = 4'd12;
     localparam O_L1 = 3'd0, O_L2 = 3'd1, O_I = 3'd2, O_V = 3'd3, O_U = 3'd4, O_END = 3'd5;
     localparam C_IDLE = 3'd0, C_DIV1 = 3'd1, C_DIV2 = 3'd2, C_COMMIT = 3'd3, C_OTHER = 3'd4, C_TREND = 3'd5,
                C_READY = 3'd6;
@@ -403,7 +404,8 @@ module hdrg_top #(
                         evo <= 1'b0;
                         restart_q <= restart;
                         busy <= 1'b1;
-                        ph <= S_T;
+                        tpass <= 2'd0;
+                        ph <= S_TM;
                     end else if (eval_start) begin
                         ev_u <= eval_u; ev_v <= eval_v; ev_z <= zin; ev_bank <= eval_bank;
                         evo <= 1'b1;
@@ -411,6 +413,12 @@ module hdrg_top #(
                         busy <= 1'b1;
                         ph <= S_EVO;
                     end
+                end
+                S_TM: begin                     // one timer pass per cycle
+                    tsr <= t_adv ? snext(ts_in) : ts_in;
+                    tcr <= t_adv ? 32'd0 : tc_in;
+                    tpass <= tpass + 2'd1;
+                    if (tpass == 2'd2) ph <= S_T;
                 end
                 S_EVO: if (ev_done) begin
                     busy <= 1'b0;
