@@ -71,7 +71,7 @@ module hdrg_top #(
     output reg  signed [63:0] s,
     output reg  signed [63:0] acc,
     output reg  [30:0]        cnt,
-    output reg  signed [63:0] y_hold,
+    output wire signed [63:0] y_hold,     // |y| < 2^47 (FORMATS.md): a 49-bit register
     output wire signed [63:0] b,
     output reg  signed [31:0] out_hold,
     output reg  signed [31:0] bias_hold,
@@ -270,7 +270,12 @@ module hdrg_top #(
     reg [1:0] cur, ccur;
     reg [30:0] pos, age1, age2, span1, span2, sp_q;
     reg [1:0] nc1, nc2;
-    reg signed [63:0] w1, w2, slope1, slope2, mean_q, other;
+    // widths from FORMATS.md: |W| < 2^41 (the divider's quotient: |q| < 2^44, 45 bits), |slope| <= 2^40 - 1,
+    // |W + T| < 2^47, |y| < 2^47, |B| < 2^52
+    reg signed [44:0] w1, w2, mean_q;
+    reg signed [41:0] slope1, slope2;
+    reg signed [48:0] other, y_r;
+    assign y_hold = y_r;
     reg use_q, sat_c, have_other;
     reg div_go;
     reg signed [63:0] div_a;
@@ -306,15 +311,19 @@ module hdrg_top #(
     wire [30:0] age_o = (o_mode == 2'd1) ? age1 : age2;
     wire [30:0] span_o = (o_mode == 2'd1) ? span1 : span2;
     wire [1:0] nc_o = (o_mode == 2'd1) ? nc1 : nc2;
-    wire signed [63:0] w_o = (o_mode == 2'd1) ? w1 : w2;
-    wire signed [63:0] slope_o = (o_mode == 2'd1) ? slope1 : slope2;
+    wire signed [44:0] w_o = (o_mode == 2'd1) ? w1 : w2;
+    wire signed [41:0] slope_o = (o_mode == 2'd1) ? slope1 : slope2;
     wire [33:0] d_raw = {2'b0, age_o, 1'b0} + {3'b0, span_o};
-    wire signed [63:0] c0 = (cur == 2'd1) ? {{32{r_q[31]}}, r_q} : -{{32{r_q[31]}}, r_q};
-    wire signed [63:0] rx = ((c0 <<< 11) - b + 64'sd1024) >>> 11;
+    wire signed [55:0] bn = b[55:0];                              // |B| < 2^52
+    wire signed [32:0] r33 = {r_q[31], r_q};
+    wire signed [32:0] c0 = (cur == 2'd1) ? r33 : -r33;
+    wire signed [56:0] rxn = ((c0 <<< 11) - bn + 57'sd1024) >>> 11;
+    wire signed [63:0] rx = rxn;
     wire signed [63:0] c1 = symsat32(rx);
-    wire signed [63:0] cc = order ? c1 : c0;
-    wire signed [63:0] yo = ((order ? y_hold : y_hold - b) + 64'sd1024) >>> 11;
-    wire signed [63:0] bo = (b + 64'sd1024) >>> 11;
+    wire signed [32:0] cc = order ? c1[32:0] : c0;
+    wire signed [56:0] yon = ((order ? y_r : y_r - bn) + 57'sd1024) >>> 11;
+    wire signed [56:0] bon = (bn + 57'sd1024) >>> 11;
+    wire signed [63:0] yo = yon, bo = bon;
     wire signed [63:0] yo_s = symsat32(yo), bo_s = symsat32(bo);
 
     always @(posedge clk) begin
@@ -330,14 +339,14 @@ module hdrg_top #(
             kc <= 64'sd0; evo <= 1'b0;
             head <= {AW{1'b0}}; fill <= 13'd0; k <= 32'd0; iy <= 64'sd0; la <= 64'sd0; lq <= 64'sd0;
             cur <= 2'd0; acc <= 64'sd0; cnt <= 31'd0; pos <= 31'd0; nc1 <= 2'd0; nc2 <= 2'd0;
-            w1 <= 64'sd0; w2 <= 64'sd0; slope1 <= 64'sd0; slope2 <= 64'sd0;
+            w1 <= 45'sd0; w2 <= 45'sd0; slope1 <= 42'sd0; slope2 <= 42'sd0;
             span1 <= 31'd0; span2 <= 31'd0; age1 <= 31'd0; age2 <= 31'd0; last_window <= 2'd0;
-            y_hold <= 64'sd0; out_hold <= 32'sd0; bias_hold <= 32'sd0;
+            y_r <= 49'sd0; out_hold <= 32'sd0; bias_hold <= 32'sd0;
         end else begin
             // ---------------- the combiner's window commit (parallel to the front end and evaluator)
             case (cph)
                 C_DIV1: if (div_done) begin
-                    mean_q <= div_q;
+                    mean_q <= div_q[44:0];
                     if ((ccur == 2'd1 ? nc1 : nc2) != 2'd0) begin
                         div_a <= div_q - (ccur == 2'd1 ? w1 : w2);
                         div_b <= age_q_dc2(ccur == 2'd1 ? age1 : age2, sp_q, ccur == 2'd1 ? span1 : span2);
@@ -350,10 +359,10 @@ module hdrg_top #(
                 C_DIV2: if (div_done) begin
                     if (div_ovf || (!div_q[63] && (|div_q[62:40])) || (div_q[63] && (!(&div_q[62:40]) || !(|div_q[39:0])))) begin   // |q| > SLOPE_MAX
                         sat_c <= 1'b1;
-                        if (ccur == 2'd1) slope1 <= (div_ovf ? div_a < 0 : div_q < 0) ? -SLOPE_MAX : SLOPE_MAX;
-                        else slope2 <= (div_ovf ? div_a < 0 : div_q < 0) ? -SLOPE_MAX : SLOPE_MAX;
-                    end else if (ccur == 2'd1) slope1 <= div_q;
-                    else slope2 <= div_q;
+                        if (ccur == 2'd1) slope1 <= (div_ovf ? div_a[63] : div_q[63]) ? -SLOPE_MAX[41:0] : SLOPE_MAX[41:0];
+                        else slope2 <= (div_ovf ? div_a[63] : div_q[63]) ? -SLOPE_MAX[41:0] : SLOPE_MAX[41:0];
+                    end else if (ccur == 2'd1) slope1 <= div_q[41:0];
+                    else slope2 <= div_q[41:0];
                     cph <= C_COMMIT;
                 end
                 C_COMMIT: begin
@@ -384,7 +393,7 @@ module hdrg_top #(
                     cph <= C_IDLE + 3'd7;       // wait state (7)
                 end
                 3'd7: if (alu_done) begin
-                    other <= other + alu_r;
+                    other <= other + alu_r[48:0];
                     cph <= C_READY;
                 end
                 default: ;
@@ -459,7 +468,7 @@ module hdrg_top #(
                         age1 <= (age1 == CMAX) ? CMAX : age1 + 31'd1;
                         age2 <= (age2 == CMAX) ? CMAX : age2 + 31'd1;
                         if (restart_q) begin
-                            nc1 <= 2'd0; nc2 <= 2'd0; slope1 <= 64'sd0; slope2 <= 64'sd0;
+                            nc1 <= 2'd0; nc2 <= 2'd0; slope1 <= 42'sd0; slope2 <= 42'sd0;
                         end
                         if (m_now != (restart_q ? 2'd0 : cur)) begin
                             if (!restart_q && cur != 2'd0 && cnt != 31'd0) begin
@@ -572,17 +581,17 @@ module hdrg_top #(
                     // combiner tail (reads B): window sum, y
                     valid <= 1'b0;
                     if (ftr) begin
-                        y_hold <= {{32{r_q[31]}}, r_q} <<< 11;
+                        y_r <= {{6{r_q[31]}}, r_q, 11'd0};
                         valid <= 1'b1;
                     end else if (use_q && !(order && warm_q)) begin
                         if (order && sat32(rx)) sat_c <= 1'b1;
                         if (cnt != CMAX) begin acc <= acc + cc; cnt <= cnt + 31'd1; end
                         else sat_c <= 1'b1;
                         if (order && combiner == 2'd3) begin
-                            y_hold <= c1 <<< 11;
+                            y_r <= {c1[37:0], 11'd0};
                             valid <= 1'b1;
                         end else if (have_other) begin
-                            y_hold <= (cc <<< 10) + other;
+                            y_r <= (cc <<< 10) + other;
                             valid <= 1'b1;
                         end
                     end
