@@ -302,8 +302,12 @@ module hdrg_top #(
     wire signed [63:0] la_n = la - xout + pv;                     // A' (la, lq: previous, restart-cleared)
     wire signed [63:0] dd24 = (pv - xo) <<< 24;
     // S clamp for v
-    wire signed [63:0] smax = (64'sd1 <<< sb) - 64'sd1;
-    wire signed [63:0] s_cl = (s_w > smax) ? smax : ((s_w < -smax) ? -smax : s_w);
+    // smax = 2^SB - 1 as a mask; S > smax: a bit above SB; S < -smax: negative and not (the bits
+    // above SB all ones and the bits below not all zero)
+    wire [63:0] smask = ~({64{1'b1}} << sb);
+    wire s_hi = !s_w[63] && (|(s_w & ~smask));
+    wire s_lo = s_w[63] && ((|(~s_w & ~smask)) || !(|(s_w & smask)));
+    wire signed [63:0] s_cl = s_hi ? smask : (s_lo ? ((sb == 6'd0) ? 64'sd0 : {~smask[63:1], 1'b1}) : s_w);
     wire signed [63:0] dpr = pv - pval(p_ref_w, kind);
     wire signed [63:0] dpc = symsat32(dpr);
     // combiner helpers
@@ -560,7 +564,7 @@ module hdrg_top #(
                         end
                         O_I: begin iy <= iy + alu_r; s_w <= iy + alu_r; op <= O_V; end
                         O_V: begin
-                            vc_q <= (s_w != s_cl) || above30(alu_r) || below30(alu_r);
+                            vc_q <= s_hi || s_lo || above30(alu_r) || below30(alu_r);
                             v <= clamp1(alu_r);
                             op <= O_U;
                         end
