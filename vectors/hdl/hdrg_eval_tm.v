@@ -44,7 +44,10 @@
 // one that reads bank 1's mantissas for bank 2.
 //
 // Sharing (hdrg_top): while idle, the multiplier computes xp <= xa * xw every cycle for a client
-// (hdrg_top's front-end ALU), so the pipeline needs one 32 x 32 multiplier for both.  Z_LATE = 1:
+// (hdrg_top's front-end ALU), so the pipeline needs one 32 x 32 multiplier for both; and so do the
+// rounding adder and the shifter: xs <= RHU(xsum, xsh) two cycles after xsum, xsh (held stable
+// from the cycle before xsum: the rounding constant is registered from xsh).  HDRG_BREAK_ROUNDING
+// truncates there too.  Z_LATE = 1:
 // z is sampled at the Z operation instead of at start, and the evaluator waits there while `zhold`
 // is high (the aux generators of hdrg_top run in parallel with the Horner rows).
 `timescale 1ns / 1ns
@@ -68,6 +71,9 @@ module hdrg_eval_tm #(
     input  wire signed [31:0] xa,         // the shared multiplier while idle: xp <= xa * xw
     input  wire signed [31:0] xw,
     output wire signed [63:0] xp,
+    input  wire signed [63:0] xsum,       // the shared rounding shifter while idle: xs <= RHU(xsum, xsh)
+    input  wire [5:0]         xsh,
+    output wire signed [63:0] xs,
     input  wire               zhold       // Z_LATE: wait at the Z operation while high
 );
     localparam signed [31:0] ONE = 32'sd1073741824;   // 2^30
@@ -146,6 +152,7 @@ module hdrg_eval_tm #(
     reg [1:0]  dest;                    // 0 acc, 1 t, 2 b
     reg signed [63:0] p, p2, s;
     assign xp = p;
+    assign xs = s;
     reg signed [31:0] c_q;              // C held to cycle 4
     reg [1:0]  dest_q;
 
@@ -192,6 +199,15 @@ module hdrg_eval_tm #(
             pos <= 3'd0;
             phase <= 3'd0;
         end else if (!busy) begin
+            // the client's rounding shift (hdrg_top's ALU): half from xsh, then p2, then s
+            half <= (xsh == 6'd0) ? 64'sd0 : (64'sd1 <<< (xsh - 6'd1));
+`ifdef HDRG_BREAK_ROUNDING
+            p2 <= xsum;
+`else
+            p2 <= xsum + half;
+`endif
+            sh_q2 <= xsh;
+            s <= p2 >>> sh_q2;
             if (start) begin
                 busy <= 1'b1;
                 row <= 2'd3;

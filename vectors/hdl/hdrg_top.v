@@ -15,11 +15,13 @@
 // 0).  Outputs valid with `done` (held until the next sample).  `eval_start` evaluates
 // (eval_u, eval_v, zin, eval_bank) alone (the evaluator vectors): b, z_clamped with `done`.
 //
-// Schedule (clock cycles from `start`; one 32 x 32 multiplier in the evaluator, ONE more in the
-// front-end ALU hdrg_alu (6 cycles per operation: r = RHU(a w + c, sh), a up to 59 bits in two
-// passes), a 44-step restoring divider hdrg_div (no multiplier)):
-//   1      latch; 2 timer (3 state passes, combinational), ring write + read of the word n back,
-//          combiner restart / age / window switch; the divider starts the closing window's mean
+// Schedule (clock cycles from `start`; one 32 x 32 multiplier in the evaluator, shared with the
+// front-end ALU hdrg_alu, which also uses the evaluator's rounding adder and shifter while the
+// evaluator is idle (6 cycles per operation: r = RHU(a w + c, sh), a up to 59 bits in two passes);
+// the aux generators' own multiplier; a 44-step restoring divider hdrg_div (no multiplier)):
+//   1      latch; 3 timer (S_TM: its 3 state passes, one per cycle); 1 ring write + read of the
+//          word n back, combiner restart / age / window switch; the divider starts the closing
+//          window's mean
 //   ALU    [lsq: n x_out, (n - 1) A'] or [iir: RHU((d << 24) - y, shift)], then [v: RHU(S G_V, SH_V)]
 //          unless warm-up, then [u: RHU(dP G_U + U_OFF, SH_U)]: 1..4 operations x 6 cycles
 //   126    evaluator (hdrg_eval_tm: 25 operations x 5 cycles) on u, v, z, bank
@@ -81,8 +83,6 @@ module hdrg_top #(
     output reg                busy,
     output reg                done
 );
-    localparam signed [63:0] ONE = 64'sd1073741824;          // 2^30
-    localparam signed [63:0] I32 = 64'sd2147483647;          // 2^31 - 1
     localparam [30:0] CMAX = 31'h7fffffff;                    // COUNT_MAX
     localparam signed [63:0] SLOPE_MAX = 64'sd1099511627775;  // 2^40 - 1
     localparam [33:0] D_MAX = 34'd4194303;                    // 2^22 - 1
@@ -132,6 +132,7 @@ module hdrg_top #(
         pval = kd ? {{32{w[31]}}, w} : {32'd0, w};
     endfunction
     // clamps by bit tests (no 64-bit comparators): above / below the bound
+    /* verilator lint_off UNUSEDSIGNAL */
     function above30;                      // x > 2^30
         input signed [63:0] x;
         above30 = !x[63] && ((|x[62:31]) || (x[30] && (|x[29:0])));
@@ -152,9 +153,10 @@ module hdrg_top #(
         input signed [63:0] x;
         below31 = x[63] && (!(&x[62:31]) || !(|x[30:0]));
     endfunction
-    function signed [63:0] symsat32;
+    /* verilator lint_on UNUSEDSIGNAL */
+    function signed [31:0] symsat32;       // clamp to +-(2^31 - 1)
         input signed [63:0] x;
-        symsat32 = above31(x) ? I32 : (below31(x) ? -I32 : x);
+        symsat32 = above31(x) ? 32'sh7fffffff : (below31(x) ? -32'sh7fffffff : x[31:0]);
     endfunction
     function sat32;                        // symsat32(x) != x
         input signed [63:0] x;
@@ -241,8 +243,10 @@ module hdrg_top #(
     wire alu_done;
     wire signed [31:0] mul_a, mul_w;
     wire signed [63:0] mul_p;
+    wire signed [63:0] rnd_sum, rnd_s;
+    wire [5:0] rnd_sh;
     hdrg_alu alu (.clk(clk), .start(alu_go), .a(alu_a), .w(alu_w), .c(alu_c), .sh(alu_sh), .r(alu_r), .done(alu_done),
-                  .ma(mul_a), .mw(mul_w), .mp(mul_p));
+                  .ma(mul_a), .mw(mul_w), .mp(mul_p), .xsum(rnd_sum), .xsh(rnd_sh), .xs(rnd_s));
 
     // ---- evaluator ----
     reg ev_go, ev_bank;
@@ -264,7 +268,7 @@ module hdrg_top #(
 
     hdrg_eval_tm #(.Z_LATE(1)) ev (.clk(clk), .rst(rst), .we(we && waddr < 8'd72), .waddr(waddr[6:0]), .wdata(wdata), .start(ev_go),
                      .bank(ev_bank), .u(ev_u), .v(ev_v), .z(evo ? ev_z : aux_z), .b(b), .z_clamped(z_clamped), .busy(ev_busy),
-                     .done(ev_done), .xa(mul_a), .xw(mul_w), .xp(mul_p), .zhold(!evo && !aux_fin && !aux_done));
+                     .done(ev_done), .xa(mul_a), .xw(mul_w), .xp(mul_p), .xsum(rnd_sum), .xsh(rnd_sh), .xs(rnd_s), .zhold(!evo && !aux_fin && !aux_done));
 
     // ---- combiner state ----
     reg [1:0] cur, ccur;
@@ -275,7 +279,7 @@ module hdrg_top #(
     reg signed [44:0] w1, w2, mean_q;
     reg signed [41:0] slope1, slope2;
     reg signed [48:0] other, y_r;
-    assign y_hold = y_r;
+    assign y_hold = {{15{y_r[48]}}, y_r};
     reg use_q, sat_c, have_other;
     reg div_go;
     reg signed [63:0] div_a;
@@ -309,26 +313,28 @@ module hdrg_top #(
     wire s_lo = s_w[63] && ((|(~s_w & ~smask)) || !(|(s_w & smask)));
     wire signed [63:0] s_cl = s_hi ? smask : (s_lo ? ((sb == 6'd0) ? 64'sd0 : {~smask[63:1], 1'b1}) : s_w);
     wire signed [63:0] dpr = pv - pval(p_ref_w, kind);
-    wire signed [63:0] dpc = symsat32(dpr);
+    wire signed [31:0] dpc = symsat32(dpr);
     // combiner helpers
     wire [1:0] o_mode = 2'd3 - cur;
     wire [30:0] age_o = (o_mode == 2'd1) ? age1 : age2;
     wire [30:0] span_o = (o_mode == 2'd1) ? span1 : span2;
     wire [1:0] nc_o = (o_mode == 2'd1) ? nc1 : nc2;
     wire signed [44:0] w_o = (o_mode == 2'd1) ? w1 : w2;
+    wire signed [44:0] w_c = (ccur == 2'd1) ? w1 : w2;
     wire signed [41:0] slope_o = (o_mode == 2'd1) ? slope1 : slope2;
     wire [33:0] d_raw = {2'b0, age_o, 1'b0} + {3'b0, span_o};
     wire signed [55:0] bn = b[55:0];                              // |B| < 2^52
     wire signed [32:0] r33 = {r_q[31], r_q};
     wire signed [32:0] c0 = (cur == 2'd1) ? r33 : -r33;
-    wire signed [56:0] rxn = ((c0 <<< 11) - bn + 57'sd1024) >>> 11;
-    wire signed [63:0] rx = rxn;
-    wire signed [63:0] c1 = symsat32(rx);
-    wire signed [32:0] cc = order ? c1[32:0] : c0;
-    wire signed [56:0] yon = ((order ? y_r : y_r - bn) + 57'sd1024) >>> 11;
-    wire signed [56:0] bon = (bn + 57'sd1024) >>> 11;
-    wire signed [63:0] yo = yon, bo = bon;
-    wire signed [63:0] yo_s = symsat32(yo), bo_s = symsat32(bo);
+    wire signed [56:0] c57 = {{13{c0[32]}}, c0, 11'd0}, b57 = {bn[55], bn}, y57 = {{8{y_r[48]}}, y_r};
+    wire signed [56:0] rxn = (c57 - b57 + 57'sd1024) >>> 11;
+    wire signed [63:0] rx = {{7{rxn[56]}}, rxn};
+    wire signed [31:0] c1 = symsat32(rx);
+    wire signed [32:0] cc = order ? {c1[31], c1} : c0;
+    wire signed [56:0] yon = ((order ? y57 : y57 - b57) + 57'sd1024) >>> 11;
+    wire signed [56:0] bon = (b57 + 57'sd1024) >>> 11;
+    wire signed [63:0] yo = {{7{yon[56]}}, yon}, bo = {{7{bon[56]}}, bon};
+    wire signed [31:0] yo_s = symsat32(yo), bo_s = symsat32(bo);
 
     always @(posedge clk) begin
         done <= 1'b0;
@@ -352,7 +358,7 @@ module hdrg_top #(
                 C_DIV1: if (div_done) begin
                     mean_q <= div_q[44:0];
                     if ((ccur == 2'd1 ? nc1 : nc2) != 2'd0) begin
-                        div_a <= div_q - (ccur == 2'd1 ? w1 : w2);
+                        div_a <= div_q - {{19{w_c[44]}}, w_c};
                         div_b <= age_q_dc2(ccur == 2'd1 ? age1 : age2, sp_q, ccur == 2'd1 ? span1 : span2);
                         div_k <= 5'd16;
                         div_go <= 1'b1;
@@ -379,7 +385,7 @@ module hdrg_top #(
                 end
                 C_OTHER: begin
                     have_other <= nc_o != 2'd0 && {1'b0, age_o} <= max_stale_n;
-                    other <= w_o;
+                    other <= {{4{w_o[44]}}, w_o};
                     if (use_q && !ftr && combiner == 2'd2 && !(order && warm_q) && nc_o != 2'd0
                         && {1'b0, age_o} <= max_stale_n)
                         cph <= C_TREND;
@@ -389,7 +395,7 @@ module hdrg_top #(
                 C_TREND: if (ev_fin) begin
                     // the ALU (the evaluator's multiplier) is free once the evaluator is done
                     if (|d_raw[33:22]) sat_c <= 1'b1;                  // d_raw > D_MAX
-                    alu_a <= slope_o;
+                    alu_a <= {{22{slope_o[41]}}, slope_o};
                     alu_w <= (|d_raw[33:22]) ? D_MAX[31:0] : d_raw[31:0];
                     alu_c <= 64'sd0;
                     alu_sh <= 6'd16;
@@ -538,7 +544,7 @@ module hdrg_top #(
                             end
                         end
                         O_U: begin aux_go <= 1'b1;      // S and warm are final: start the aux generators
-                                   alu_a <= dpc; alu_w <= g_u; alu_c <= {{32{u_off[31]}}, u_off}; alu_sh <= sh_u;
+                                   alu_a <= {{32{dpc[31]}}, dpc}; alu_w <= g_u; alu_c <= {{32{u_off[31]}}, u_off}; alu_sh <= sh_u;
                                    alu_go <= 1'b1; end
                         default: begin
                             // front end done: start the evaluator
@@ -589,13 +595,13 @@ module hdrg_top #(
                         valid <= 1'b1;
                     end else if (use_q && !(order && warm_q)) begin
                         if (order && sat32(rx)) sat_c <= 1'b1;
-                        if (cnt != CMAX) begin acc <= acc + cc; cnt <= cnt + 31'd1; end
+                        if (cnt != CMAX) begin acc <= acc + {{31{cc[32]}}, cc}; cnt <= cnt + 31'd1; end
                         else sat_c <= 1'b1;
                         if (order && combiner == 2'd3) begin
-                            y_r <= {c1[37:0], 11'd0};
+                            y_r <= {{6{c1[31]}}, c1, 11'd0};
                             valid <= 1'b1;
                         end else if (have_other) begin
-                            y_r <= (cc <<< 10) + other;
+                            y_r <= {{6{cc[32]}}, cc, 10'd0} + other;
                             valid <= 1'b1;
                         end
                     end
@@ -605,8 +611,8 @@ module hdrg_top #(
                     flags <= {(sat_c || (valid && !warm_q && mode_o != 2'd3 && (sat32(yo) || sat32(bo)))),
                               1'b0, aux_zc, !valid && mode_o != 2'd3, mode_o == 2'd3, warm_q, vc_q && !warm_q, uc_q};
                     if (valid && !warm_q && mode_o != 2'd3) begin
-                        out_hold <= yo_s[31:0];
-                        bias_hold <= bo_s[31:0];
+                        out_hold <= yo_s;
+                        bias_hold <= bo_s;
                     end
                     valid <= valid && !warm_q && mode_o != 2'd3;
                     busy <= 1'b0;
