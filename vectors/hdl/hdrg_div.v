@@ -30,6 +30,7 @@ module hdrg_div (
     reg [5:0] i;
     reg signed [81:0] n_s;
     reg [38:0] trial;
+    wire signed [44:0] qs = neg ? -$signed({1'b0, quo}) : $signed({1'b0, quo});
     always @* begin
         n_s = ($signed({{18{a[63]}}, a}) <<< (k + 5'd1)) + $signed({46'd0, b});
         trial = {rem, nmag[QB-1]} - {2'b00, d};
@@ -61,7 +62,7 @@ module hdrg_div (
                 nmag <= {nmag[81:QB], nmag[QB-2:0], 1'b0};
                 i <= i + 6'd1;
             end else begin
-                q <= neg ? -$signed({20'd0, quo}) : $signed({20'd0, quo});
+                q <= {{19{qs[44]}}, qs};                 // |q| < 2^44: a 45-bit negation
                 busy <= 1'b0;
                 done <= 1'b1;
             end

@@ -77,6 +77,8 @@ module hdrg_eval_tm #(
     input  wire               zhold       // Z_LATE: wait at the Z operation while high
 );
     localparam signed [31:0] ONE = 32'sd1073741824;   // 2^30
+    wire z_hi = !z[31] && z[30] && (|z[29:0]);       // z > 2^30 (bit tests, no comparators)
+    wire z_lo = z[31] && !z[30];                      // z < -2^30
 
     // ---- table: exponents in registers, mantissas in a memory (bank 1 at 0..16, bank 2 at 32..48) ----
     reg [31:0] mant [0:63];
@@ -216,15 +218,15 @@ module hdrg_eval_tm #(
                 uq <= u;
                 bank_q <= bank;
                 vq <= v;
-                z_clamped <= (z > ONE) || (z < -ONE);
-                zq <= (z > ONE) ? ONE : ((z < -ONE) ? -ONE : z);
+                z_clamped <= z_hi || z_lo;
+                zq <= z_hi ? ONE : (z_lo ? -ONE : z);
             end
         end else begin
             case (phase)
                 3'd0: if (Z_LATE == 0 || pos != 3'd6 || !zhold) begin
                     if (Z_LATE != 0 && pos == 3'd6) begin
-                        z_clamped <= (z > ONE) || (z < -ONE);
-                        zq <= (z > ONE) ? ONE : ((z < -ONE) ? -ONE : z);
+                        z_clamped <= z_hi || z_lo;
+                        zq <= z_hi ? ONE : (z_lo ? -ONE : z);
                     end
 `ifdef HDRG_BREAK_BANK
                     mrd <= mant[{1'b0, midx}];          // wrong on purpose: bank 2's mantissas ignored
