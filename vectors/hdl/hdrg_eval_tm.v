@@ -186,6 +186,17 @@ module hdrg_eval_tm #(
     reg [5:0] sh_q, sh_q2;
     reg signed [63:0] half;             // 2^(sh-1), 0 when sh = 0 (registered with P)
 
+    // the one rounding adder and shifter: the program's in phases 1..3, the client's while idle
+    // (one decoder, adder and shifter: their operands selected by busy)
+    wire [5:0] h_sh = busy ? sh : xsh;
+    wire signed [63:0] h_dec = (h_sh == 6'd0) ? 64'sd0 : (64'sd1 <<< (h_sh - 6'd1));
+`ifdef HDRG_BREAK_ROUNDING
+    wire signed [63:0] p2_sum = busy ? p : xsum;
+`else
+    wire signed [63:0] p2_sum = (busy ? p : xsum) + half;
+`endif
+    wire [5:0] sh2_in = busy ? sh_q : xsh;
+
     // the one multiplier: the program's A W in phase 1, the client's xa xw while idle
     wire signed [31:0] ma = busy ? a_op : xa;
     wire signed [31:0] mw = busy ? w_op : xw;
@@ -202,13 +213,9 @@ module hdrg_eval_tm #(
             phase <= 3'd0;
         end else if (!busy) begin
             // the client's rounding shift (hdrg_top's ALU): half from xsh, then p2, then s
-            half <= (xsh == 6'd0) ? 64'sd0 : (64'sd1 <<< (xsh - 6'd1));
-`ifdef HDRG_BREAK_ROUNDING
-            p2 <= xsum;
-`else
-            p2 <= xsum + half;
-`endif
-            sh_q2 <= xsh;
+            half <= h_dec;
+            p2 <= p2_sum;
+            sh_q2 <= sh2_in;
             s <= p2 >>> sh_q2;
             if (start) begin
                 busy <= 1'b1;
@@ -238,17 +245,13 @@ module hdrg_eval_tm #(
                 3'd1: begin
                     c_q <= c_op;
                     sh_q <= sh;
-                    half <= (sh == 6'd0) ? 64'sd0 : (64'sd1 <<< (sh - 6'd1));
+                    half <= h_dec;
                     dest_q <= dest;
                     phase <= 3'd2;
                 end
                 3'd2: begin
-`ifdef HDRG_BREAK_ROUNDING
-                    p2 <= p;
-`else
-                    p2 <= p + half;
-`endif
-                    sh_q2 <= sh_q;
+                    p2 <= p2_sum;
+                    sh_q2 <= sh2_in;
                     phase <= 3'd3;
                 end
                 3'd3: begin
