@@ -262,7 +262,7 @@ module hdrg_eval_tm #(
                     case (dest_q)
                         2'd0: acc <= s[31:0] + c_q;
                         2'd1: t <= s[31:0] + c_q;
-                        default: b <= s + {{32{c_q[31]}}, c_q};
+                        default: b <= s;                // B: C = 0 (no 64-bit adder)
                     endcase
                     phase <= 3'd0;
                     // next op: row 3 ends after A; rows 2..0 after H; then Z, B
