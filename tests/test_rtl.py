@@ -48,6 +48,20 @@ def test_tm_evaluator_bit_exact_verilator(tmp_path):
     assert r["mismatches"] == 0 and r["vectors"] > 1000 and 25 <= r["cycles"] <= CYCLES_GOAL
 
 
+def test_once_computes_each_check_once_and_returns_copies():
+    """cost_rtl.once, the process memo of the RTL checks (hdrg_top's and the evaluator's alone)."""
+    calls, reused = [], []
+    key = ("test_once", id(calls))
+
+    def compute():
+        calls.append(1)
+        return {"x": [1]}
+    first = cost_rtl.once(key, compute, lambda: reused.append(1))
+    first["x"].append(2)                              # the caller's copy only
+    again = cost_rtl.once(key, compute, lambda: reused.append(1))
+    assert calls == [1] and reused == [1] and again == {"x": [1]}
+
+
 # -- the whole pipeline (vectors/hdl/hdrg_top.v) ------------------------------------------------------
 
 def _subset(cases_per_set=1, rows_per_case=120):

@@ -167,17 +167,11 @@ def pnr_ice40(work: Path, full: bool = True, seed: int = 1) -> dict:
     return {"fits": True, "fmax_mhz": float(fm[-1][1]), "utilisation": util, "seed": seed}
 
 
-_EVAL_CHECKED: dict = {}    # measure_evaluator's simulations, by cost_rtl.fingerprint()
-
-
 def measure_evaluator(family: str, work: Path, log=print) -> dict:
     """The evaluator alone (the secondary row): tb_eval_tm under Icarus and Verilator, a broken
     build, synthesis, and (iCE40) place-and-route."""
-    key = cost_rtl.fingerprint()        # the same RTL and vectors are simulated once per process
-    if key not in _EVAL_CHECKED:
-        _EVAL_CHECKED[key] = (rtl_check_icarus(work), rtl_check_verilator(work),
-                              rtl_check_icarus(work, ("HDRG_BREAK_ROUNDING",)))
-    ic, vl, broken = _EVAL_CHECKED[key]
+    ic, vl, broken = cost_rtl.once(("evaluator",), lambda: (rtl_check_icarus(work), rtl_check_verilator(work),
+                                                             rtl_check_icarus(work, ("HDRG_BREAK_ROUNDING",))))
     syn = synth(family, work, full=False)
     r = {"design": "vectors/hdl/hdrg_eval_tm.v (time-multiplexed evaluator)", "vectors": ic["vectors"],
          "bit_exact": ic["mismatches"] == 0 and vl["mismatches"] == 0 and ic["vectors"] > 0,

@@ -6,7 +6,8 @@ vector sets on the RTL (docs/COST.md, "The whole pipeline in RTL").
 ``check_top`` builds the testbench (``iverilog -g2001`` or ``verilator --binary``), runs
 check-impl set by set and reads the testbench's cycle file (``+cycles=``: clock cycles from
 ``start`` to ``done`` of every sample request; worst case and mean per set).  Within one process
-a check is run once per (simulator, sets, defines, content of the RTL, testbench and vector files):
+a check is run once per (simulator, sets, defines, content of the RTL, testbench and vector files;
+``once``, which cost_fpga's evaluator-alone simulations use too):
 `hdrg cost --target ice40` and `--target xc7` check the same RTL, so a test session that measures
 both (tests/test_cost.py, tests/test_rtl.py) simulates it once.
 """
@@ -62,14 +63,28 @@ def _cycles(path: Path) -> dict:
     return {"samples": n, "cycles_max": mx, "cycles_mean": round(total / n, 1) if n else None}
 
 
+def once(key: tuple, compute, reused=lambda: None):
+    """``compute()``, run once per process for ``key`` and the content of the RTL and vectors
+    (fingerprint()); a deep copy of the result (callers may change it). ``reused()`` is called when
+    an earlier result is returned."""
+    key = (*key, fingerprint())
+    if key in _CHECKED:
+        reused()
+    else:
+        _CHECKED[key] = compute()
+    return copy.deepcopy(_CHECKED[key])
+
+
 def check_top(sim: str, work: Path, sets=SETS, defines=(), log=print) -> dict:
     """check-impl of hdrg_top under ``sim`` on each of ``sets``: ``{set: {"vectors", "mismatches",
-    "first", "samples", "cycles_max", "cycles_mean"}}`` (cycles: sample requests only)."""
-    key = (sim, tuple(sets), tuple(defines), fingerprint())
-    if key in _CHECKED:
-        log(f"  {sim}{' ' + ' '.join(defines) if defines else ''}: the same RTL and vectors were checked in this "
-            f"process: reusing that result")
-        return copy.deepcopy(_CHECKED[key])
+    "first", "samples", "cycles_max", "cycles_mean"}}`` (cycles: sample requests only); once per
+    process (once())."""
+    tag = f"{sim}{' ' + ' '.join(defines) if defines else ''}"
+    return once(("check_top", sim, tuple(sets), tuple(defines)), lambda: _check_top(sim, work, sets, defines, log),
+                lambda: log(f"  {tag}: the same RTL and vectors were checked in this process: reusing that result"))
+
+
+def _check_top(sim: str, work: Path, sets, defines, log) -> dict:
     argv = build_top(sim, work, defines)
     out = {}
     for name in sets:
@@ -80,11 +95,10 @@ def check_top(sim: str, work: Path, sets=SETS, defines=(), log=print) -> dict:
         out[name] = {"vectors": r["rows"], "mismatches": r["mismatches"], "first": r["first"], **_cycles(cyc)}
         log(f"  {sim}{' ' + ' '.join(defines) if defines else ''} {name}: {r['rows']} vectors, "
             f"{r['mismatches']} mismatches, max {out[name]['cycles_max']} cycles/sample")
-    _CHECKED[key] = copy.deepcopy(out)
     return out
 
 
-_CHECKED: dict = {}     # check_top's results in this process, by (sim, sets, defines, fingerprint)
+_CHECKED: dict = {}     # once()'s results in this process, by (key..., fingerprint())
 
 
 def fingerprint() -> str:

@@ -9,7 +9,9 @@
 // a w = (a_hi w) 2^28 + a_lo w exactly; every product of the pipeline's front end is below 2^63
 // (FORMATS.md: dP G_U < 2^62, S G_V < 2^62, n x_out < 2^46, (n - 1) A < 2^58, slope d < 2^63).
 // Schedule (6 cycles from start to done): 0 latch, 1 a_hi w, 2 a_lo w, 3 sum + c, 4 + half,
-// 5 shift (done).  `define HDRG_BREAK_ROUNDING truncates instead of rounding.
+// 5 shift (done).  The rounding (+ half, shift) is the evaluator's, shared like the multiplier:
+// xsum (the sum, held from cycle 4 on) and xsh out, xs = RHU(xsum, xsh) back two cycles later; r is
+// xs, valid in the `done` cycle only (`define HDRG_BREAK_ROUNDING truncates there).
 `timescale 1ns / 1ns
 module hdrg_alu (
     input  wire               clk,
@@ -20,17 +22,23 @@ module hdrg_alu (
     input  wire signed [31:0] w,
     input  wire signed [63:0] c,
     input  wire [5:0]         sh,
-    output reg  signed [63:0] r,
+    output wire signed [63:0] r,        // valid with done
     output reg                done,
     output reg  signed [31:0] ma,       // the shared multiplier's operands ...
     output reg  signed [31:0] mw,
-    input  wire signed [63:0] mp        // ... and its registered product (ma mw of the previous cycle)
+    input  wire signed [63:0] mp,       // ... and its registered product (ma mw of the previous cycle)
+    output wire signed [63:0] xsum,     // the shared rounding shifter's operand ...
+    output wire [5:0]         xsh,
+    input  wire signed [63:0] xs        // ... and RHU(xsum, xsh) two cycles later
 );
     reg signed [31:0] a_hi_q, a_lo_q, w_q;
-    reg signed [63:0] c_q, p_hi, p, half;
+    reg signed [63:0] c_q, p_hi, p;
     reg [5:0] sh_q;
     reg [2:0] ph;
     reg busy = 1'b0;
+    assign xsum = p;
+    assign xsh = sh_q;
+    assign r = xs;
     always @* begin
         ma = (ph == 3'd1) ? a_hi_q : a_lo_q;
         mw = w_q;
@@ -43,7 +51,6 @@ module hdrg_alu (
             w_q <= w;
             c_q <= c;
             sh_q <= sh;
-            half <= (sh == 6'd0) ? 64'sd0 : (64'sd1 <<< (sh - 6'd1));
             ph <= 3'd1;
             busy <= 1'b1;
         end else if (busy) begin
@@ -51,16 +58,8 @@ module hdrg_alu (
                 3'd1: ph <= 3'd2;                       // mp <= a_hi w
                 3'd2: begin p_hi <= mp; ph <= 3'd3; end  // mp <= a_lo w
                 3'd3: begin p <= (p_hi <<< 28) + mp + c_q; ph <= 3'd4; end
-                3'd4: begin
-`ifdef HDRG_BREAK_ROUNDING
-                    p <= p;
-`else
-                    p <= p + half;
-`endif
-                    ph <= 3'd5;
-                end
-                default: begin
-                    r <= p >>> sh_q;
+                3'd4: ph <= 3'd5;                       // p2 <= p + half (the evaluator's)
+                default: begin                          // s <= p2 >>> sh: r in the next cycle
                     done <= 1'b1;
                     busy <= 1'b0;
                 end

@@ -15,7 +15,9 @@ module hdrg_div (
     input  wire               start,
     input  wire signed [63:0] a,
     input  wire [35:0]        b,          // b > 0, < 2^35
-    input  wire [4:0]         k,          // 10 or 16
+    /* verilator lint_off UNUSEDSIGNAL */
+    input  wire [4:0]         k,          // 10 or 16 (only these: a two-way shift, no barrel shifter)
+    /* verilator lint_on UNUSEDSIGNAL */
     output reg  signed [63:0] q,
     output reg                ovf,
     output reg                done
@@ -30,8 +32,9 @@ module hdrg_div (
     reg [5:0] i;
     reg signed [81:0] n_s;
     reg [38:0] trial;
+    wire signed [44:0] qs = neg ? -$signed({1'b0, quo}) : $signed({1'b0, quo});
     always @* begin
-        n_s = ($signed({{18{a[63]}}, a}) <<< (k + 5'd1)) + $signed({46'd0, b});
+        n_s = (k[4] ? $signed({{1{a[63]}}, a, 17'd0}) : $signed({{7{a[63]}}, a, 11'd0})) + $signed({46'd0, b});
         trial = {rem, nmag[QB-1]} - {2'b00, d};
     end
     always @(posedge clk) begin
@@ -61,7 +64,7 @@ module hdrg_div (
                 nmag <= {nmag[81:QB], nmag[QB-2:0], 1'b0};
                 i <= i + 6'd1;
             end else begin
-                q <= neg ? -$signed({20'd0, quo}) : $signed({20'd0, quo});
+                q <= {{19{qs[44]}}, qs};                 // |q| < 2^44: a 45-bit negation
                 busy <= 1'b0;
                 done <= 1'b1;
             end

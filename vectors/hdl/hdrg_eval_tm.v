@@ -44,7 +44,10 @@
 // one that reads bank 1's mantissas for bank 2.
 //
 // Sharing (hdrg_top): while idle, the multiplier computes xp <= xa * xw every cycle for a client
-// (hdrg_top's front-end ALU), so the pipeline needs one 32 x 32 multiplier for both.  Z_LATE = 1:
+// (hdrg_top's front-end ALU), so the pipeline needs one 32 x 32 multiplier for both; and so do the
+// rounding adder and the shifter: xs <= RHU(xsum, xsh) two cycles after xsum, xsh (held stable
+// from the cycle before xsum: the rounding constant is registered from xsh).  HDRG_BREAK_ROUNDING
+// truncates there too.  Z_LATE = 1:
 // z is sampled at the Z operation instead of at start, and the evaluator waits there while `zhold`
 // is high (the aux generators of hdrg_top run in parallel with the Horner rows).
 `timescale 1ns / 1ns
@@ -68,9 +71,14 @@ module hdrg_eval_tm #(
     input  wire signed [31:0] xa,         // the shared multiplier while idle: xp <= xa * xw
     input  wire signed [31:0] xw,
     output wire signed [63:0] xp,
+    input  wire signed [63:0] xsum,       // the shared rounding shifter while idle: xs <= RHU(xsum, xsh)
+    input  wire [5:0]         xsh,
+    output wire signed [63:0] xs,
     input  wire               zhold       // Z_LATE: wait at the Z operation while high
 );
     localparam signed [31:0] ONE = 32'sd1073741824;   // 2^30
+    wire z_hi = !z[31] && z[30] && (|z[29:0]);       // z > 2^30 (bit tests, no comparators)
+    wire z_lo = z[31] && !z[30];                      // z < -2^30
 
     // ---- table: exponents in registers, mantissas in a memory (bank 1 at 0..16, bank 2 at 32..48) ----
     reg [31:0] mant [0:63];
@@ -146,6 +154,7 @@ module hdrg_eval_tm #(
     reg [1:0]  dest;                    // 0 acc, 1 t, 2 b
     reg signed [63:0] p, p2, s;
     assign xp = p;
+    assign xs = s;
     reg signed [31:0] c_q;              // C held to cycle 4
     reg [1:0]  dest_q;
 
@@ -177,6 +186,17 @@ module hdrg_eval_tm #(
     reg [5:0] sh_q, sh_q2;
     reg signed [63:0] half;             // 2^(sh-1), 0 when sh = 0 (registered with P)
 
+    // the one rounding adder and shifter: the program's in phases 1..3, the client's while idle
+    // (one decoder, adder and shifter: their operands selected by busy)
+    wire [5:0] h_sh = busy ? sh : xsh;
+    wire signed [63:0] h_dec = (h_sh == 6'd0) ? 64'sd0 : (64'sd1 <<< (h_sh - 6'd1));
+`ifdef HDRG_BREAK_ROUNDING
+    wire signed [63:0] p2_sum = busy ? p : xsum;
+`else
+    wire signed [63:0] p2_sum = (busy ? p : xsum) + half;
+`endif
+    wire [5:0] sh2_in = busy ? sh_q : xsh;
+
     // the one multiplier: the program's A W in phase 1, the client's xa xw while idle
     wire signed [31:0] ma = busy ? a_op : xa;
     wire signed [31:0] mw = busy ? w_op : xw;
@@ -192,6 +212,11 @@ module hdrg_eval_tm #(
             pos <= 3'd0;
             phase <= 3'd0;
         end else if (!busy) begin
+            // the client's rounding shift (hdrg_top's ALU): half from xsh, then p2, then s
+            half <= h_dec;
+            p2 <= p2_sum;
+            sh_q2 <= sh2_in;
+            s <= p2 >>> sh_q2;
             if (start) begin
                 busy <= 1'b1;
                 row <= 2'd3;
@@ -200,15 +225,15 @@ module hdrg_eval_tm #(
                 uq <= u;
                 bank_q <= bank;
                 vq <= v;
-                z_clamped <= (z > ONE) || (z < -ONE);
-                zq <= (z > ONE) ? ONE : ((z < -ONE) ? -ONE : z);
+                z_clamped <= z_hi || z_lo;
+                zq <= z_hi ? ONE : (z_lo ? -ONE : z);
             end
         end else begin
             case (phase)
                 3'd0: if (Z_LATE == 0 || pos != 3'd6 || !zhold) begin
                     if (Z_LATE != 0 && pos == 3'd6) begin
-                        z_clamped <= (z > ONE) || (z < -ONE);
-                        zq <= (z > ONE) ? ONE : ((z < -ONE) ? -ONE : z);
+                        z_clamped <= z_hi || z_lo;
+                        zq <= z_hi ? ONE : (z_lo ? -ONE : z);
                     end
 `ifdef HDRG_BREAK_BANK
                     mrd <= mant[{1'b0, midx}];          // wrong on purpose: bank 2's mantissas ignored
@@ -220,17 +245,13 @@ module hdrg_eval_tm #(
                 3'd1: begin
                     c_q <= c_op;
                     sh_q <= sh;
-                    half <= (sh == 6'd0) ? 64'sd0 : (64'sd1 <<< (sh - 6'd1));
+                    half <= h_dec;
                     dest_q <= dest;
                     phase <= 3'd2;
                 end
                 3'd2: begin
-`ifdef HDRG_BREAK_ROUNDING
-                    p2 <= p;
-`else
-                    p2 <= p + half;
-`endif
-                    sh_q2 <= sh_q;
+                    p2 <= p2_sum;
+                    sh_q2 <= sh2_in;
                     phase <= 3'd3;
                 end
                 3'd3: begin
@@ -241,7 +262,7 @@ module hdrg_eval_tm #(
                     case (dest_q)
                         2'd0: acc <= s[31:0] + c_q;
                         2'd1: t <= s[31:0] + c_q;
-                        default: b <= s + {{32{c_q[31]}}, c_q};
+                        default: b <= s;                // B: C = 0 (no 64-bit adder)
                     endcase
                     phase <= 3'd0;
                     // next op: row 3 ends after A; rows 2..0 after H; then Z, B

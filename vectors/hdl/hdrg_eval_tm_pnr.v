@@ -21,6 +21,7 @@ module hdrg_eval_tm_pnr (
     wire zc, done;
     /* verilator lint_off UNUSEDSIGNAL */
     wire signed [63:0] xp_unused;       // the shared multiplier port: no client here
+    wire signed [63:0] xs_unused;       // the shared rounding shifter: no client here
     /* verilator lint_on UNUSEDSIGNAL */
     always @(posedge clk) begin
         if (shift) sr <= {sr[126:0], sdi};
@@ -31,5 +32,5 @@ module hdrg_eval_tm_pnr (
     assign sdo = so[63];
     hdrg_eval_tm ev (.clk(clk), .rst(rst), .we(we), .waddr(sr[38:32]), .wdata(sr[31:0]), .start(start), .bank(sr[39]),
                      .u(sr[127:96]), .v(sr[95:64]), .z(sr[63:32]), .b(b), .z_clamped(zc), .busy(busy), .done(done),
-                     .xa(32'sd0), .xw(32'sd0), .xp(xp_unused), .zhold(1'b0));
+                     .xa(32'sd0), .xw(32'sd0), .xp(xp_unused), .xsum(64'sd0), .xsh(6'd0), .xs(xs_unused), .zhold(1'b0));
 endmodule

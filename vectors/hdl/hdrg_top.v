@@ -15,11 +15,13 @@
 // 0).  Outputs valid with `done` (held until the next sample).  `eval_start` evaluates
 // (eval_u, eval_v, zin, eval_bank) alone (the evaluator vectors): b, z_clamped with `done`.
 //
-// Schedule (clock cycles from `start`; one 32 x 32 multiplier in the evaluator, ONE more in the
-// front-end ALU hdrg_alu (6 cycles per operation: r = RHU(a w + c, sh), a up to 59 bits in two
-// passes), a 44-step restoring divider hdrg_div (no multiplier)):
-//   1      latch; 2 timer (3 state passes, combinational), ring write + read of the word n back,
-//          combiner restart / age / window switch; the divider starts the closing window's mean
+// Schedule (clock cycles from `start`; one 32 x 32 multiplier in the evaluator, shared with the
+// front-end ALU hdrg_alu, which also uses the evaluator's rounding adder and shifter while the
+// evaluator is idle (6 cycles per operation: r = RHU(a w + c, sh), a up to 59 bits in two passes);
+// the aux generators' own multiplier; a 44-step restoring divider hdrg_div (no multiplier)):
+//   1      latch; 3 timer (S_TM: its 3 state passes, one per cycle); 1 ring write + read of the
+//          word n back, combiner restart / age / window switch; the divider starts the closing
+//          window's mean
 //   ALU    [lsq: n x_out, (n - 1) A'] or [iir: RHU((d << 24) - y, shift)], then [v: RHU(S G_V, SH_V)]
 //          unless warm-up, then [u: RHU(dP G_U + U_OFF, SH_U)]: 1..4 operations x 6 cycles
 //   126    evaluator (hdrg_eval_tm: 25 operations x 5 cycles) on u, v, z, bank
@@ -71,7 +73,7 @@ module hdrg_top #(
     output reg  signed [63:0] s,
     output reg  signed [63:0] acc,
     output reg  [30:0]        cnt,
-    output reg  signed [63:0] y_hold,
+    output wire signed [63:0] y_hold,     // |y| < 2^47 (FORMATS.md): a 49-bit register
     output wire signed [63:0] b,
     output reg  signed [31:0] out_hold,
     output reg  signed [31:0] bias_hold,
@@ -81,8 +83,6 @@ module hdrg_top #(
     output reg                busy,
     output reg                done
 );
-    localparam signed [63:0] ONE = 64'sd1073741824;          // 2^30
-    localparam signed [63:0] I32 = 64'sd2147483647;          // 2^31 - 1
     localparam [30:0] CMAX = 31'h7fffffff;                    // COUNT_MAX
     localparam signed [63:0] SLOPE_MAX = 64'sd1099511627775;  // 2^40 - 1
     localparam [33:0] D_MAX = 34'd4194303;                    // 2^22 - 1
@@ -131,13 +131,36 @@ module hdrg_top #(
         input kd;
         pval = kd ? {{32{w[31]}}, w} : {32'd0, w};
     endfunction
+    // clamps by bit tests (no 64-bit comparators): above / below the bound
+    /* verilator lint_off UNUSEDSIGNAL */
+    function above30;                      // x > 2^30
+        input signed [63:0] x;
+        above30 = !x[63] && ((|x[62:31]) || (x[30] && (|x[29:0])));
+    endfunction
+    function below30;                      // x < -2^30
+        input signed [63:0] x;
+        below30 = x[63] && !(&x[62:30]);
+    endfunction
     function signed [31:0] clamp1;         // clamp to +-2^30 (the result fits 32 bits)
         input signed [63:0] x;
-        clamp1 = (x > ONE) ? 32'sd1073741824 : ((x < -ONE) ? -32'sd1073741824 : x[31:0]);
+        clamp1 = above30(x) ? 32'sd1073741824 : (below30(x) ? -32'sd1073741824 : x[31:0]);
     endfunction
-    function signed [63:0] symsat32;
+    function above31;                      // x > 2^31 - 1
         input signed [63:0] x;
-        symsat32 = (x > I32) ? I32 : ((x < -I32) ? -I32 : x);
+        above31 = !x[63] && (|x[62:31]);
+    endfunction
+    function below31;                      // x < -(2^31 - 1)
+        input signed [63:0] x;
+        below31 = x[63] && (!(&x[62:31]) || !(|x[30:0]));
+    endfunction
+    /* verilator lint_on UNUSEDSIGNAL */
+    function signed [31:0] symsat32;       // clamp to +-(2^31 - 1)
+        input signed [63:0] x;
+        symsat32 = above31(x) ? 32'sh7fffffff : (below31(x) ? -32'sh7fffffff : x[31:0]);
+    endfunction
+    function sat32;                        // symsat32(x) != x
+        input signed [63:0] x;
+        sat32 = above31(x) || below31(x);
     endfunction
 
     // ---- sequencer: timer and state tables ----
@@ -156,9 +179,10 @@ module hdrg_top #(
         input [2:0] st;
         snext = (st == 3'd0) ? (ftr ? 3'd5 : 3'd1) : ((st == 3'd4) ? 3'd1 : st + 3'd1);
     endfunction
-    // the three passes of the timer (restart: from power-on)
-    reg [2:0] ts0, ts1, ts2, ts3;
-    reg [31:0] tc0, tc1, tc2, tc3;
+    // the timer's three passes, one per clock cycle (S_TM; restart: from power-on): tsr, tcr
+    reg [2:0] tsr;
+    reg [31:0] tcr;
+    reg [1:0] tpass;
     reg [1:0] last_window;
     reg [2:0] st_now;
     reg [1:0] m_now;
@@ -166,14 +190,15 @@ module hdrg_top #(
     reg [31:0] f_q;
     reg signed [31:0] t_q, r_q, z_q, a0_q, a1_q, a2_q, a3_q;
     reg signed [63:0] k_q, kc;
+    wire signed [63:0] k_in = k_given ? kin : kc;
     reg [1:0] mode_q;
     reg self_q, restart_q;
+    wire [2:0] ts_in = (tpass == 2'd0) ? (restart_q ? 3'd0 : tstate) : tsr;
+    wire [31:0] tc_in = (tpass == 2'd0) ? (restart_q ? 32'd0 : tcnt) : tcr;
+    wire t_adv = ts_in != 3'd5 && tc_in >= slen(ts_in);
+    wire [2:0] ts3 = tsr;
+    wire [31:0] tc3 = tcr;
     always @* begin
-        ts0 = restart_q ? 3'd0 : tstate;
-        tc0 = restart_q ? 32'd0 : tcnt;
-        if (ts0 != 3'd5 && tc0 >= slen(ts0)) begin ts1 = snext(ts0); tc1 = 32'd0; end else begin ts1 = ts0; tc1 = tc0; end
-        if (ts1 != 3'd5 && tc1 >= slen(ts1)) begin ts2 = snext(ts1); tc2 = 32'd0; end else begin ts2 = ts1; tc2 = tc1; end
-        if (ts2 != 3'd5 && tc2 >= slen(ts2)) begin ts3 = snext(ts2); tc3 = 32'd0; end else begin ts3 = ts2; tc3 = tc2; end
         if (self_q) begin
             st_now = ts3;
             case (ts3)
@@ -218,8 +243,10 @@ module hdrg_top #(
     wire alu_done;
     wire signed [31:0] mul_a, mul_w;
     wire signed [63:0] mul_p;
+    wire signed [63:0] rnd_sum, rnd_s;
+    wire [5:0] rnd_sh;
     hdrg_alu alu (.clk(clk), .start(alu_go), .a(alu_a), .w(alu_w), .c(alu_c), .sh(alu_sh), .r(alu_r), .done(alu_done),
-                  .ma(mul_a), .mw(mul_w), .mp(mul_p));
+                  .ma(mul_a), .mw(mul_w), .mp(mul_p), .xsum(rnd_sum), .xsh(rnd_sh), .xs(rnd_s));
 
     // ---- evaluator ----
     reg ev_go, ev_bank;
@@ -241,13 +268,18 @@ module hdrg_top #(
 
     hdrg_eval_tm #(.Z_LATE(1)) ev (.clk(clk), .rst(rst), .we(we && waddr < 8'd72), .waddr(waddr[6:0]), .wdata(wdata), .start(ev_go),
                      .bank(ev_bank), .u(ev_u), .v(ev_v), .z(evo ? ev_z : aux_z), .b(b), .z_clamped(z_clamped), .busy(ev_busy),
-                     .done(ev_done), .xa(mul_a), .xw(mul_w), .xp(mul_p), .zhold(!evo && !aux_fin && !aux_done));
+                     .done(ev_done), .xa(mul_a), .xw(mul_w), .xp(mul_p), .xsum(rnd_sum), .xsh(rnd_sh), .xs(rnd_s), .zhold(!evo && !aux_fin && !aux_done));
 
     // ---- combiner state ----
     reg [1:0] cur, ccur;
     reg [30:0] pos, age1, age2, span1, span2, sp_q;
     reg [1:0] nc1, nc2;
-    reg signed [63:0] w1, w2, slope1, slope2, mean_q, other;
+    // widths from FORMATS.md: |W| < 2^41 (the divider's quotient: |q| < 2^44, 45 bits), |slope| <= 2^40 - 1,
+    // |W + T| < 2^47, |y| < 2^47, |B| < 2^52
+    reg signed [44:0] w1, w2, mean_q;
+    reg signed [41:0] slope1, slope2;
+    reg signed [48:0] other, y_r;
+    assign y_hold = {{15{y_r[48]}}, y_r};
     reg use_q, sat_c, have_other;
     reg div_go;
     reg signed [63:0] div_a;
@@ -259,7 +291,7 @@ module hdrg_top #(
 
     // ---- control ----
     localparam S_IDLE = 4'd0, S_T = 4'd1, S_F = 4'd2, S_ALU = 4'd3, S_EV = 4'd4, S_T1 = 4'd5, S_T2 = 4'd6,
-               S_EVO = 4'd7;
+               S_EVO = 4'd7, S_TM = 4'd12;
     localparam O_L1 = 3'd0, O_L2 = 3'd1, O_I = 3'd2, O_V = 3'd3, O_U = 3'd4, O_END = 3'd5;
     localparam C_IDLE = 3'd0, C_DIV1 = 3'd1, C_DIV2 = 3'd2, C_COMMIT = 3'd3, C_OTHER = 3'd4, C_TREND = 3'd5,
                C_READY = 3'd6;
@@ -274,25 +306,35 @@ module hdrg_top #(
     wire signed [63:0] la_n = la - xout + pv;                     // A' (la, lq: previous, restart-cleared)
     wire signed [63:0] dd24 = (pv - xo) <<< 24;
     // S clamp for v
-    wire signed [63:0] smax = (64'sd1 <<< sb) - 64'sd1;
-    wire signed [63:0] s_cl = (s_w > smax) ? smax : ((s_w < -smax) ? -smax : s_w);
+    // smax = 2^SB - 1 as a mask; S > smax: a bit above SB; S < -smax: negative and not (the bits
+    // above SB all ones and the bits below not all zero)
+    wire [63:0] smask = ~({64{1'b1}} << sb);
+    wire s_hi = !s_w[63] && (|(s_w & ~smask));
+    wire s_lo = s_w[63] && ((|(~s_w & ~smask)) || !(|(s_w & smask)));
+    wire signed [63:0] s_cl = s_hi ? smask : (s_lo ? ((sb == 6'd0) ? 64'sd0 : {~smask[63:1], 1'b1}) : s_w);
     wire signed [63:0] dpr = pv - pval(p_ref_w, kind);
-    wire signed [63:0] dpc = (dpr > I32) ? I32 : ((dpr < -I32) ? -I32 : dpr);
+    wire signed [31:0] dpc = symsat32(dpr);
     // combiner helpers
     wire [1:0] o_mode = 2'd3 - cur;
     wire [30:0] age_o = (o_mode == 2'd1) ? age1 : age2;
     wire [30:0] span_o = (o_mode == 2'd1) ? span1 : span2;
     wire [1:0] nc_o = (o_mode == 2'd1) ? nc1 : nc2;
-    wire signed [63:0] w_o = (o_mode == 2'd1) ? w1 : w2;
-    wire signed [63:0] slope_o = (o_mode == 2'd1) ? slope1 : slope2;
+    wire signed [44:0] w_o = (o_mode == 2'd1) ? w1 : w2;
+    wire signed [44:0] w_c = (ccur == 2'd1) ? w1 : w2;
+    wire signed [41:0] slope_o = (o_mode == 2'd1) ? slope1 : slope2;
     wire [33:0] d_raw = {2'b0, age_o, 1'b0} + {3'b0, span_o};
-    wire signed [63:0] c0 = (cur == 2'd1) ? {{32{r_q[31]}}, r_q} : -{{32{r_q[31]}}, r_q};
-    wire signed [63:0] rx = ((c0 <<< 11) - b + 64'sd1024) >>> 11;
-    wire signed [63:0] c1 = symsat32(rx);
-    wire signed [63:0] cc = order ? c1 : c0;
-    wire signed [63:0] yo = ((order ? y_hold : y_hold - b) + 64'sd1024) >>> 11;
-    wire signed [63:0] bo = (b + 64'sd1024) >>> 11;
-    wire signed [63:0] yo_s = symsat32(yo), bo_s = symsat32(bo);
+    wire signed [55:0] bn = b[55:0];                              // |B| < 2^52
+    wire signed [32:0] r33 = {r_q[31], r_q};
+    wire signed [32:0] c0 = (cur == 2'd1) ? r33 : -r33;
+    wire signed [56:0] c57 = {{13{c0[32]}}, c0, 11'd0}, b57 = {bn[55], bn}, y57 = {{8{y_r[48]}}, y_r};
+    wire signed [56:0] rxn = (c57 - b57 + 57'sd1024) >>> 11;
+    wire signed [63:0] rx = {{7{rxn[56]}}, rxn};
+    wire signed [31:0] c1 = symsat32(rx);
+    wire signed [32:0] cc = order ? {c1[31], c1} : c0;
+    wire signed [56:0] yon = ((order ? y57 : y57 - b57) + 57'sd1024) >>> 11;
+    wire signed [56:0] bon = (b57 + 57'sd1024) >>> 11;
+    wire signed [63:0] yo = {{7{yon[56]}}, yon}, bo = {{7{bon[56]}}, bon};
+    wire signed [31:0] yo_s = symsat32(yo), bo_s = symsat32(bo);
 
     always @(posedge clk) begin
         done <= 1'b0;
@@ -307,16 +349,16 @@ module hdrg_top #(
             kc <= 64'sd0; evo <= 1'b0;
             head <= {AW{1'b0}}; fill <= 13'd0; k <= 32'd0; iy <= 64'sd0; la <= 64'sd0; lq <= 64'sd0;
             cur <= 2'd0; acc <= 64'sd0; cnt <= 31'd0; pos <= 31'd0; nc1 <= 2'd0; nc2 <= 2'd0;
-            w1 <= 64'sd0; w2 <= 64'sd0; slope1 <= 64'sd0; slope2 <= 64'sd0;
+            w1 <= 45'sd0; w2 <= 45'sd0; slope1 <= 42'sd0; slope2 <= 42'sd0;
             span1 <= 31'd0; span2 <= 31'd0; age1 <= 31'd0; age2 <= 31'd0; last_window <= 2'd0;
-            y_hold <= 64'sd0; out_hold <= 32'sd0; bias_hold <= 32'sd0;
+            y_r <= 49'sd0; out_hold <= 32'sd0; bias_hold <= 32'sd0;
         end else begin
             // ---------------- the combiner's window commit (parallel to the front end and evaluator)
             case (cph)
                 C_DIV1: if (div_done) begin
-                    mean_q <= div_q;
+                    mean_q <= div_q[44:0];
                     if ((ccur == 2'd1 ? nc1 : nc2) != 2'd0) begin
-                        div_a <= div_q - (ccur == 2'd1 ? w1 : w2);
+                        div_a <= div_q - {{19{w_c[44]}}, w_c};
                         div_b <= age_q_dc2(ccur == 2'd1 ? age1 : age2, sp_q, ccur == 2'd1 ? span1 : span2);
                         div_k <= 5'd16;
                         div_go <= 1'b1;
@@ -325,12 +367,12 @@ module hdrg_top #(
                         cph <= C_COMMIT;
                 end
                 C_DIV2: if (div_done) begin
-                    if (div_ovf || div_q > SLOPE_MAX || div_q < -SLOPE_MAX) begin
+                    if (div_ovf || (!div_q[63] && (|div_q[62:40])) || (div_q[63] && (!(&div_q[62:40]) || !(|div_q[39:0])))) begin   // |q| > SLOPE_MAX
                         sat_c <= 1'b1;
-                        if (ccur == 2'd1) slope1 <= (div_ovf ? div_a < 0 : div_q < 0) ? -SLOPE_MAX : SLOPE_MAX;
-                        else slope2 <= (div_ovf ? div_a < 0 : div_q < 0) ? -SLOPE_MAX : SLOPE_MAX;
-                    end else if (ccur == 2'd1) slope1 <= div_q;
-                    else slope2 <= div_q;
+                        if (ccur == 2'd1) slope1 <= (div_ovf ? div_a[63] : div_q[63]) ? -SLOPE_MAX[41:0] : SLOPE_MAX[41:0];
+                        else slope2 <= (div_ovf ? div_a[63] : div_q[63]) ? -SLOPE_MAX[41:0] : SLOPE_MAX[41:0];
+                    end else if (ccur == 2'd1) slope1 <= div_q[41:0];
+                    else slope2 <= div_q[41:0];
                     cph <= C_COMMIT;
                 end
                 C_COMMIT: begin
@@ -343,7 +385,7 @@ module hdrg_top #(
                 end
                 C_OTHER: begin
                     have_other <= nc_o != 2'd0 && {1'b0, age_o} <= max_stale_n;
-                    other <= w_o;
+                    other <= {{4{w_o[44]}}, w_o};
                     if (use_q && !ftr && combiner == 2'd2 && !(order && warm_q) && nc_o != 2'd0
                         && {1'b0, age_o} <= max_stale_n)
                         cph <= C_TREND;
@@ -352,16 +394,16 @@ module hdrg_top #(
                 end
                 C_TREND: if (ev_fin) begin
                     // the ALU (the evaluator's multiplier) is free once the evaluator is done
-                    if (d_raw > D_MAX) sat_c <= 1'b1;
-                    alu_a <= slope_o;
-                    alu_w <= (d_raw > D_MAX) ? D_MAX[31:0] : d_raw[31:0];
+                    if (|d_raw[33:22]) sat_c <= 1'b1;                  // d_raw > D_MAX
+                    alu_a <= {{22{slope_o[41]}}, slope_o};
+                    alu_w <= (|d_raw[33:22]) ? D_MAX[31:0] : d_raw[31:0];
                     alu_c <= 64'sd0;
                     alu_sh <= 6'd16;
                     alu_go <= 1'b1;
                     cph <= C_IDLE + 3'd7;       // wait state (7)
                 end
                 3'd7: if (alu_done) begin
-                    other <= other + alu_r;
+                    other <= other + alu_r[48:0];
                     cph <= C_READY;
                 end
                 default: ;
@@ -376,12 +418,13 @@ module hdrg_top #(
                         f_q <= f; t_q <= t; r_q <= r; z_q <= zin; mode_q <= mode; self_q <= self_timed;
                         a0_q <= a0; a1_q <= a1; a2_q <= a2; a3_q <= a3;
                         // K: given, or the internal count (kc = min(K + 1, 2^62) after each sample)
-                        k_q <= k_given ? kin : kc;
-                        kc <= ((k_given ? kin : kc) >= K_LIMIT) ? K_LIMIT : (k_given ? kin : kc) + 64'sd1;
+                        k_q <= k_in;
+                        kc <= (!k_in[63] && k_in[62]) ? K_LIMIT : k_in + 64'sd1;      // k_in >= 2^62
                         evo <= 1'b0;
                         restart_q <= restart;
                         busy <= 1'b1;
-                        ph <= S_T;
+                        tpass <= 2'd0;
+                        ph <= S_TM;
                     end else if (eval_start) begin
                         ev_u <= eval_u; ev_v <= eval_v; ev_z <= zin; ev_bank <= eval_bank;
                         evo <= 1'b1;
@@ -389,6 +432,12 @@ module hdrg_top #(
                         busy <= 1'b1;
                         ph <= S_EVO;
                     end
+                end
+                S_TM: begin                     // one timer pass per cycle
+                    tsr <= t_adv ? snext(ts_in) : ts_in;
+                    tcr <= t_adv ? 32'd0 : tc_in;
+                    tpass <= tpass + 2'd1;
+                    if (tpass == 2'd2) ph <= S_T;
                 end
                 S_EVO: if (ev_done) begin
                     busy <= 1'b0;
@@ -429,7 +478,7 @@ module hdrg_top #(
                         age1 <= (age1 == CMAX) ? CMAX : age1 + 31'd1;
                         age2 <= (age2 == CMAX) ? CMAX : age2 + 31'd1;
                         if (restart_q) begin
-                            nc1 <= 2'd0; nc2 <= 2'd0; slope1 <= 64'sd0; slope2 <= 64'sd0;
+                            nc1 <= 2'd0; nc2 <= 2'd0; slope1 <= 42'sd0; slope2 <= 42'sd0;
                         end
                         if (m_now != (restart_q ? 2'd0 : cur)) begin
                             if (!restart_q && cur != 2'd0 && cnt != 31'd0) begin
@@ -495,7 +544,7 @@ module hdrg_top #(
                             end
                         end
                         O_U: begin aux_go <= 1'b1;      // S and warm are final: start the aux generators
-                                   alu_a <= dpc; alu_w <= g_u; alu_c <= {{32{u_off[31]}}, u_off}; alu_sh <= sh_u;
+                                   alu_a <= {{32{dpc[31]}}, dpc}; alu_w <= g_u; alu_c <= {{32{u_off[31]}}, u_off}; alu_sh <= sh_u;
                                    alu_go <= 1'b1; end
                         default: begin
                             // front end done: start the evaluator
@@ -521,12 +570,12 @@ module hdrg_top #(
                         end
                         O_I: begin iy <= iy + alu_r; s_w <= iy + alu_r; op <= O_V; end
                         O_V: begin
-                            vc_q <= (s_w != s_cl) || alu_r > ONE || alu_r < -ONE;
+                            vc_q <= s_hi || s_lo || above30(alu_r) || below30(alu_r);
                             v <= clamp1(alu_r);
                             op <= O_U;
                         end
                         default: begin          // O_U
-                            uc_q <= alu_r > ONE || alu_r < -ONE;
+                            uc_q <= above30(alu_r) || below30(alu_r);
                             u <= clamp1(alu_r);
                             op <= O_END;
                         end
@@ -542,28 +591,28 @@ module hdrg_top #(
                     // combiner tail (reads B): window sum, y
                     valid <= 1'b0;
                     if (ftr) begin
-                        y_hold <= {{32{r_q[31]}}, r_q} <<< 11;
+                        y_r <= {{6{r_q[31]}}, r_q, 11'd0};
                         valid <= 1'b1;
                     end else if (use_q && !(order && warm_q)) begin
-                        if (order && rx != c1) sat_c <= 1'b1;
-                        if (cnt != CMAX) begin acc <= acc + cc; cnt <= cnt + 31'd1; end
+                        if (order && sat32(rx)) sat_c <= 1'b1;
+                        if (cnt != CMAX) begin acc <= acc + {{31{cc[32]}}, cc}; cnt <= cnt + 31'd1; end
                         else sat_c <= 1'b1;
                         if (order && combiner == 2'd3) begin
-                            y_hold <= c1 <<< 11;
+                            y_r <= {{6{c1[31]}}, c1, 11'd0};
                             valid <= 1'b1;
                         end else if (have_other) begin
-                            y_hold <= (cc <<< 10) + other;
+                            y_r <= {{6{cc[32]}}, cc, 10'd0} + other;
                             valid <= 1'b1;
                         end
                     end
                     ph <= S_T2;
                 end
                 default: begin                  // S_T2: outputs, flags (valid holds cvalid here)
-                    flags <= {(sat_c || (valid && !warm_q && mode_o != 2'd3 && (yo != yo_s || bo != bo_s))),
+                    flags <= {(sat_c || (valid && !warm_q && mode_o != 2'd3 && (sat32(yo) || sat32(bo)))),
                               1'b0, aux_zc, !valid && mode_o != 2'd3, mode_o == 2'd3, warm_q, vc_q && !warm_q, uc_q};
                     if (valid && !warm_q && mode_o != 2'd3) begin
-                        out_hold <= yo_s[31:0];
-                        bias_hold <= bo_s[31:0];
+                        out_hold <= yo_s;
+                        bias_hold <= bo_s;
                     end
                     valid <= valid && !warm_q && mode_o != 2'd3;
                     busy <= 1'b0;

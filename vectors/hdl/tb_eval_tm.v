@@ -38,7 +38,7 @@ module tb_eval_tm;
 
     hdrg_eval_tm dut (.clk(clk), .rst(rst), .we(we), .waddr(waddr), .wdata(wdata), .start(start), .bank(bank), .u(u), .v(v),
                       .z(z), .b(b), .z_clamped(zc), .busy(busy), .done(done),
-                     .xa(32'sd0), .xw(32'sd0), .xp(), .zhold(1'b0));
+                     .xa(32'sd0), .xw(32'sd0), .xp(), .xsum(64'sd0), .xsh(6'd0), .xs(), .zhold(1'b0));
 
     always #5 clk = ~clk;
 
