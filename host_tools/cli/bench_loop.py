@@ -77,11 +77,14 @@ def run(args) -> int:
                             progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     s = res["summary"]
     print(f"hdrg bench loop: {s['runs']} foreign runs (seed {args.seed}), {s['effect_runs']} with an undeclared effect")
+    print("  detection counts effect runs with effect_ratio >= 2 whose confirmed steps name the injected family: "
+          "'effect steps' only steps of kind effect, 'family named, either kind' also structure steps "
+          "(a thermal_lag as a lag of the proxy, board_temp as the second thermometer)")
     print(_line("  clean runs", {"k": s["runs"] - s["effect_runs"], "n": s["runs"], "rate": None}))
-    print(_line("detection (ratio >= 2)", s["detection"]))
+    print(_line("detection, effect steps", s["detection"]))
     for kind, f in s["detection_per_kind"].items():
         print(_line(f"  {kind}", f))
-    print(_line("detection, effect or structure", s["detection_or_structure"]))
+    print(_line("family named, either kind", s["detection_or_structure"]))
     for kind, f in s["detection_or_structure_per_kind"].items():
         print(_line(f"  {kind}", f))
     named = s.get("clean_runs_naming_family", {})
