@@ -40,10 +40,7 @@ Procedure (:func:`diagnose`)
    b. its CV gain >= the gain it needs under max-T: every candidate is rescored on
       ``n_surrogates`` (39) surrogate noise series per training run (:func:`noise_model`: white +
       flicker fitted to the residual's Allan variance at taus <= NOISE_TAU_MAX_S, where effects
-      are not, plus a rate random walk (:func:`with_random_walk`) fitted at long taus on the
-      residual WITHOUT the scan's best candidate (a pre-scan on the real target names it, so the
-      effect under test cannot inflate the noise), calibrated through the base fit's projection
-      and, for per-mode banks, on the means over reversal cycles of sign x residual;
+      are not;
       :func:`surrogates`: Gaussian, no wrap-around, through the model's combiner for
       mode-reversal logs, absolute level, never rescaled to the residual); each candidate's gain
       is standardized by its own null (median, 84th percentile - median); the 95 % level of the
@@ -116,7 +113,7 @@ from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE,
                                          _stats_one, _step_metric, confirmed_on_holdout, error_stats, leg_rms,
                                          noise_floor, offsets_hold, step_errors)
 from host_tools.fitting.diagnose_noise import (_allan_bridged, _noise_series, artifact_of, characterize,  # noqa: F401
-                                       combiner_lines, noise_model, spectral_lines, surrogates, with_random_walk)
+                                       combiner_lines, noise_model, spectral_lines, surrogates)
 from host_tools.fitting.diagnose_report import _verdict_detail, write_report
 from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, G_MIN, MAX_ITER, N_SURROGATES, NULL_QUANTILE,  # noqa: F401
                                       PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, _Accepted, _config, _explicit_weights,
@@ -132,8 +129,7 @@ RULE = ("accept the best candidate iff (a) its cross-validated gain (1 - held-ou
         "with it / without it, the base terms refitted with it in every fold; folds: runs, or "
         "contiguous blocks of one run) >= g_min, (b) that gain >= the gain it needs under max-T: "
         "the 95 % level of the scan's largest standardized gain on surrogate noise (white + flicker "
-        "fitted to the residual's Allan variance at short taus, a random walk fitted at long taus on the "
-        "residual without the best candidate; through the combiner), mapped back "
+        "fitted to the residual's Allan variance at short taus, through the combiner), mapped back "
         "through the candidate's own null, and (c) it lowers the held-out error in a strict "
         "majority of the folds; ties within 5 % prefer a regressor of the proxy alone; then refine "
         "its parameter; stop when no candidate passes or after max_iter iterations")

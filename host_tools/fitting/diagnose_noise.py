@@ -1,8 +1,7 @@
 """The residual's characterization for the closed loop (host_tools.fitting.diagnose, step 2 of its module
 doc): spectrum continuum and lines (:func:`spectral_lines`), the noise model fitted where effects
-are not (:func:`noise_model`: white + flicker from the Allan variance at taus <= NOISE_TAU_MAX_S;
-:func:`with_random_walk`: its rate random walk from the long taus of a residual without the best
-candidate, calibrated through the base projection) and its surrogates (:func:`surrogates`, through the combiner for mode-reversal logs), the
+are not (:func:`noise_model`: white + flicker from the Allan variance at taus <= NOISE_TAU_MAX_S)
+and its surrogates (:func:`surrogates`, through the combiner for mode-reversal logs), the
 combiner's own lines (:func:`combiner_lines`: reversal cycle, harmonics, chamber sidebands;
 reported as artifacts, never fitted) and :func:`characterize` (Allan deviation, lines, binned
 correlations per run).  Residuals in deg/h, times in s, frequencies in Hz."""
@@ -140,9 +139,9 @@ def noise_model(resid, t_s, valid, fs, reversal=False) -> dict:
     effect in the residual (power at long taus only) does not enter it.  The random-walk and
     drift terms are fitted but NOT kept: at taus <= 64 s a rate random walk cannot be told from
     the start of a slow effect (on the foreign devices with an undeclared effect the fitted C was
-    50x the true random walk), so keeping it would let the noise swallow the effect.  The random
-    walk is added by :func:`with_random_walk`, fitted at long taus on a residual the scan's best
-    candidate has been removed from.
+    50x the true random walk), so keeping it would let the noise swallow the effect.  A real
+    random walk does not repeat from run to run or block to block: the cross-validation and the
+    held-out confirmation are what stand against it.
 
     For a mode-reversal residual (``reversal``) the combined output within a window is half the
     raw output plus a deterministic part of the other window, so the raw noise is twice the
@@ -168,95 +167,6 @@ def noise_model(resid, t_s, valid, fs, reversal=False) -> dict:
             "rw_dph_per_sqrt_s": float(math.sqrt(3.0 * C)), "slow_dropped": bool(len(coef) > 2 and np.any(coef[2:] > 0)),
             "taus_s": taus.tolist(), "fs": float(fs), "raw_scale": scale,
             "_psd": (2.0 * A, B / (2.0 * math.log(2.0)), 3.0 * C / (2.0 * math.pi ** 2))}
-
-
-SLOW_TAU_MIN_S = 64.0        # the random-walk term: Allan taus from this ...
-SLOW_TAU_FRACTION = 0.2      # ... up to this x the record (enough independent averages)
-
-
-RW_DRAWS = 8                 # surrogate draws that calibrate the random-walk term through the base projection
-
-
-def with_random_walk(nm, resid, t_s, valid, fs, sign=None, project=None, rng=None) -> dict:
-    """The noise model ``nm`` (:func:`noise_model`) with its rate-random-walk term, fitted on a
-    residual that the scan's best candidate has ALREADY been removed from (host_tools.fitting.
-    diagnose_scan._scan: the base plus the best candidate refitted), so the effect under test
-    cannot inflate it.  The base fit absorbs part of a slow noise (its polynomial in temperature
-    is slow too), so the level is calibrated THROUGH the base projection ``project`` (the
-    surrogates' own, :func:`surrogates`): with E0(tau) the mean Allan variance of RW_DRAWS projected
-    draws of the white + flicker model and R(tau) that of a unit random walk (AVAR = tau before
-    the projection), ``AVAR_resid(tau) = E0(tau) + C R(tau)`` is solved for C >= 0 (least squares
-    of the logarithms, C on a log grid) at the taus SLOW_TAU_MIN_S .. SLOW_TAU_FRACTION x the record of the bridged
-    residual (:func:`_slow_allan`).  ``sign``: the mode sign of a regress_first residual (its
-    target is sign * rate, so the non-flipping noise appears times the sign; the product is the
-    noise through the banked projection, plus sign x whatever flipping structure is left, which
-    averages out over whole reversal cycles: the Allan variance is then taken of the means over
-    reversal cycles).  No drift term: slow structure left after the best
-    candidate counts as noise (conservative: the threshold then stands against the clean device's
-    own random walk and unmodelled dynamics).  Returns a copy with rw_dph_per_sqrt_s = sqrt(3 C)
-    (K in deg/h/sqrt(s)), rw_taus_s, and the PSD term h_-2 = 3 C / (2 pi^2); ``nm`` itself when no
-    tau is in range."""
-    if nm is None:
-        return None
-    rng = np.random.default_rng(0) if rng is None else rng
-    valid = np.asarray(valid, bool)
-    r = np.asarray(resid, np.float64) * (1.0 if sign is None else np.asarray(sign, np.float64))
-    cycle = None if sign is None else _cycle_samples(sign)
-    a = _slow_allan(r, t_s, valid, fs, cycle)
-    taus = np.asarray(a["tau_s"], np.float64)
-    avar = np.asarray(a["adev_dph"], np.float64) ** 2
-    dur = float(t_s[-1] - t_s[0]) if len(t_s) > 1 else 0.0
-    keep = (taus >= SLOW_TAU_MIN_S) & (taus <= SLOW_TAU_FRACTION * dur) & (avar > 0)
-    if not keep.any():
-        return nm
-    scale2 = nm["raw_scale"] ** 2
-    h0, h1, _ = nm["_psd"]
-
-    def projected_avar(psd):
-        w = _noise_series({"_psd": psd, "fs": fs}, len(r), RW_DRAWS, rng)
-        if project is not None:
-            w = w - project(w)
-        out = np.zeros(len(taus))
-        for j in range(RW_DRAWS):
-            aj = _slow_allan(w[:, j], t_s, valid, fs, cycle)
-            tj = np.asarray(aj["tau_s"], np.float64)
-            out += np.interp(taus, tj, np.asarray(aj["adev_dph"], np.float64) ** 2) if len(tj) else 0.0
-        return out[keep] / RW_DRAWS
-
-    e0 = projected_avar((h0 / scale2, h1 / scale2, 0.0))
-    unit = projected_avar((0.0, 0.0, 3.0 / (2.0 * math.pi ** 2)))
-    obs = avar[keep]
-    ok = (e0 > 0) & (unit > 0)
-    C = 0.0
-    if ok.any():        # log-domain least squares over a grid of C (Allan variances are log-normal-ish)
-        cmax = 10.0 * float(np.max(obs[ok] / unit[ok]))
-        grid = np.concatenate([[0.0], cmax * 10.0 ** -np.linspace(0.0, 8.0, 161)])
-        cost = [float(np.sum((np.log(obs[ok]) - np.log(e0[ok] + c * unit[ok])) ** 2)) for c in grid]
-        C = float(grid[int(np.argmin(cost))]) * scale2
-    return {**nm, "rw_dph_per_sqrt_s": float(math.sqrt(3.0 * C)), "rw_taus_s": taus[keep].tolist(),
-            "_psd": (h0, h1, 3.0 * C / (2.0 * math.pi ** 2))}
-
-
-def _cycle_samples(sign):
-    """The reversal cycle of a mode-sign series [samples]: the median spacing of the starts of the
-    +1 dwells; None with fewer than 3 starts."""
-    sg = np.asarray(sign)
-    st = np.flatnonzero((sg[1:] > 0) & (sg[:-1] <= 0)) + 1
-    return int(np.median(np.diff(st))) if len(st) >= 3 else None
-
-
-def _slow_allan(x, t_s, valid, fs, cycle=None) -> dict:
-    """:func:`_allan_bridged` of ``x``; with ``cycle`` (samples) that of its means over consecutive
-    whole cycles (invalid samples bridged first), at the rate fs / cycle."""
-    if not cycle or cycle <= 1:
-        return _allan_bridged(x, t_s, valid, fs)
-    f = _filled(x, valid)
-    nb = len(f) // cycle
-    if nb < 3:
-        return {"tau_s": [], "adev_dph": []}
-    means = f[:nb * cycle].reshape(nb, cycle).mean(axis=1)
-    t = np.asarray(t_s, np.float64)[:nb * cycle].reshape(nb, cycle).mean(axis=1)
-    return metrics.allan(means, t, np.ones(nb, bool), fs / cycle)
 
 
 def _noise_series(nm, n, count, rng) -> np.ndarray:

@@ -21,8 +21,7 @@ from host_tools.golden.compensate import fit_config_from_logs, prepare
 from host_tools.fitting.cv import fold_ids, heldout_sse
 from host_tools.fitting.diagnose_confirm import fmt_value
 from host_tools.fitting.diagnose_noise import (MAX_LINES, _artifact_entry, _combined, artifact_of, characterize,
-                                       combiner_lines, noise_model, spectral_lines, surrogates,
-                                       with_random_walk)
+                                       combiner_lines, noise_model, spectral_lines, surrogates)
 from host_tools.golden.regressors import AuxConfig, generator_values, regressor_matrix
 
 
@@ -39,9 +38,6 @@ RATE_ALTERNATIVES_S = (16.0, 64.0)   # rate_estimator candidates: lsq windows [s
 RATE_IIR_TAUS_S = (8.0, 32.0, 128.0, 512.0)   # ... and iir time constants 2^shift / fs [s]
 TOP_RANKING = 12
 SCORE_TAU_S = 1.0            # the CV scores bin means of this many seconds (the report's shortest tau)
-RANDOM_WALK = True           # FTR: the surrogates carry a random walk fitted without the best candidate
-# (mode reversal: tried and not kept: on the reversal-cycle means of sign x residual the fitted level was 10x the
-# simulators' random walk (flat excess, not a walk) and cost 2 of 8 detections on the calibration seed, aging and aux)
 TIE_TOLERANCE = 0.05         # gains within 5 % (relative) of the best are a tie: prefer the proxy
 
 
@@ -335,8 +331,28 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
                 artifacts.append(_artifact_entry(ln, clines, why))
     periods = _pooled_periods([[ln for ln in c["lines"] if not artifact_of(ln["period_s"], clines)]
                                for c in charac]) if gapfree else []
+    Y_logs = []
+    sur_resids = []
+    noise_models = []
+    for log, X, pr, f, r, v in zip(train, X_logs, preps, fitted, resid, valid):
+        Xs = X[v] / norms
+        Qv = np.linalg.qr(Xs)[0]
+
+        def project(W, Qv=Qv, v=v):
+            out = np.zeros_like(W)
+            out[v] = Qv @ (Qv.T @ W[v])
+            return out
+
+        nm = noise_model(r, log.t_s, v, fs, reversal=_combined(cfg))
+        noise_models.append(nm)
+        sur, sur_resid = surrogates(nm, log, cfg, n_sur, rng, project)
+        Y_logs.append(np.column_stack([pr.y, f[:, None] + sur]))
+        sur_resids.append(sur_resid)
     binners = [_Binner(log, v, fs) for log, v in zip(train, valid)]
     groups = cv_groups([np.ones(b.n, bool) for b in binners], cv_blocks, cv_folds)
+    scanner = _Scanner([b.mean(X) for b, X in zip(binners, X_logs)], [b.mean(Y) for b, Y in zip(binners, Y_logs)],
+                       groups)
+    e0 = scanner.e0
     nfold = len(groups)
     majority = nfold // 2 + 1
     cands = effects.library(train, cfg, periods=periods, families=families)
@@ -361,49 +377,11 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
         return min(cap, c.extra.get("max_tau_s", cap))
 
     cands = [c for c in cands if c.params.get("tau_s", 0.0) <= tau_cap(c)]
-    colcache = {}
-
-    def binned_columns(c):
-        if id(c) not in colcache:
-            colcache[id(c)] = (c, [b.mean(_cand_columns(c, log, pr, fs)) for b, log, pr in zip(binners, train, preps)])
-        return colcache[id(c)][1]
-
-    # the noise model's random-walk term is fitted on the residual WITHOUT the best candidate
-    # (diagnose_noise.with_random_walk): a pre-scan on the real target alone names it
-    Xb = [b.mean(X) for b, X in zip(binners, X_logs)]
-    slow_resid = resid
-    with_rw = RANDOM_WALK and cfg.reversal is None
-    if with_rw and cands:
-        pre = _Scanner(Xb, [b.mean(pr.y[:, None]) for b, pr in zip(binners, preps)], groups)
-        top = max(cands, key=lambda c: float(_gain(pre.score(binned_columns(c)), pre.e0)[0]))
-        slow_resid = _refit_residuals(X_logs, preps, valid, [_cand_columns(top, log, pr, fs)
-                                                             for log, pr in zip(train, preps)])
-    Y_logs = []
-    sur_resids = []
-    noise_models = []
-    for log, X, pr, f, r, v, r2 in zip(train, X_logs, preps, fitted, resid, valid, slow_resid):
-        Xs = X[v] / norms
-        Qv = np.linalg.qr(Xs)[0]
-
-        def project(W, Qv=Qv, v=v):
-            out = np.zeros_like(W)
-            out[v] = Qv @ (Qv.T @ W[v])
-            return out
-
-        nm = noise_model(r, log.t_s, v, fs, reversal=_combined(cfg))
-        if with_rw:
-            nm = with_random_walk(nm, r2, log.t_s, v, fs, None, project, rng)
-        noise_models.append(nm)
-        sur, sur_resid = surrogates(nm, log, cfg, n_sur, rng, project)
-        Y_logs.append(np.column_stack([pr.y, f[:, None] + sur]))
-        sur_resids.append(sur_resid)
-    scanner = _Scanner(Xb, [b.mean(Y) for b, Y in zip(binners, Y_logs)], groups)
-    e0 = scanner.e0
     rows = []
     nsur = Y_logs[0].shape[1] - 1
 
     def evaluate(c):
-        e1 = scanner.score(binned_columns(c))
+        e1 = scanner.score([b.mean(_cand_columns(c, log, pr, fs)) for b, log, pr in zip(binners, train, preps)])
         g = _gain(e1, e0)
         return {"family": c.family, "label": c.label, "params": dict(c.params), "terms": list(c.terms),
                 "gain": float(g[0]), "folds_improved": int(np.sum(e1[:, 0] < e0[:, 0])), "folds": nfold,
@@ -508,21 +486,9 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
 
 def _cand_columns(c, log, pr, fs):
     """A candidate's design columns on one log: banked by mode for a regress_first model unless the
-    candidate has one coefficient for both banks (``extra['shared']``)."""
+    candidate has one coefficient for both banks (``extra['shared']``: exchange_settling)."""
     cols = c.columns(log, fs)
     return cols if c.extra.get("shared") else _banked(pr, cols)
-
-
-def _refit_residuals(X_logs, preps, valid, extra) -> list:
-    """Per log the residual (0 off the fit samples) of the base design plus the ``extra`` columns
-    (one (n, m) design array per log, :func:`_cand_columns`) refitted jointly on the training runs."""
-    Xs = [np.column_stack([X, c]) for X, c in zip(X_logs, extra)]
-    A = np.concatenate([X[v] for X, v in zip(Xs, valid)])
-    y = np.concatenate([pr.y[v] for pr, v in zip(preps, valid)])
-    norms = np.sqrt(np.einsum("ij,ij->j", A, A))
-    norms[norms == 0] = 1.0
-    coef = np.linalg.lstsq(A / norms, y, rcond=None)[0] / norms
-    return [np.where(v, pr.y - X @ coef, 0.0) for X, pr, v in zip(Xs, preps, valid)]
 
 
 def _tier(family) -> int:
