@@ -40,8 +40,7 @@ Procedure (:func:`diagnose`)
    b. its CV gain >= the gain it needs under max-T: every candidate is rescored on
       ``n_surrogates`` (39) surrogate noise series per training run (:func:`noise_model`: white +
       flicker fitted to the residual's Allan variance at taus <= NOISE_TAU_MAX_S, where effects
-      are not;
-      :func:`surrogates`: Gaussian, no wrap-around, through the model's combiner for
+      are not; :func:`surrogates`: Gaussian, no wrap-around, through the model's combiner for
       mode-reversal logs, absolute level, never rescaled to the residual); each candidate's gain
       is standardized by its own null (median, 84th percentile - median); the 95 % level of the
       scan's LARGEST standardized null gain over the surrogates, mapped back through each
@@ -69,7 +68,8 @@ Procedure (:func:`diagnose`)
    reported ``confirmed: false`` and reverted, its family is not offered again.  Iterate while a
    candidate passes the rule, at most ``max_iter`` (3) times per phase.  **Structure first**
    (:data:`PHASES`): phase 1 offers only the structural candidates (:func:`kind_of`: the rate
-   estimator, the lag-state block of the proxy, board_temp = the second thermometer, lags <=
+   estimator, the lag-state block of the proxy, the higher powers of the proxy (u^4, u^5: the
+   order of the model's own polynomial), board_temp = the second thermometer, lags <=
    STRUCT_TAU_FRACTION of the run; for per-mode banks the exchange settling: a decay after each
    exchange with ONE coefficient for both banks, i.e. a transient that follows the mode sign like
    the rate, tau <= 2 x the settle window), then for mode-reversal logs the order/combiner

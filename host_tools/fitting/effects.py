@@ -64,8 +64,8 @@ MAX_TAU_FRACTION = 0.5     # thermal_lag / board_temp / aux lags: tau <= this x 
 LAG_BLOCK_ORDER = 3          # thermal_lag block: lag(u, tau)^1..3, three columns
 MAX_TURN_ON_FRACTION = 0.25  # turn_on: tau <= this x the longest training run (it must have decayed)
 SETTLING_TAU_FACTOR = 2.0    # exchange_settling: tau <= this x the settle window (a longer window would remove it)
-FAMILIES = ("thermal_lag", "turn_on", "exchange_transient", "exchange_settling", "imperfect_reversal", "proxy_high_order",
-            "board_temp", "aux", "aging", "periodic")
+FAMILIES = ("thermal_lag", "turn_on", "exchange_transient", "exchange_settling", "imperfect_reversal",
+            "proxy_high_order", "board_temp", "aux", "aging", "periodic")
 
 
 @dataclass
