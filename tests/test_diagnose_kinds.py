@@ -6,7 +6,7 @@ import warnings
 import numpy as np
 
 from host_tools.fitting import effects
-from host_tools.fitting.diagnose_scan import _cand_columns, kind_of
+from host_tools.fitting.diagnose_scan import _cand_columns, kind_of, phase_of
 
 
 def _mr_log(seconds=3000):
@@ -26,6 +26,9 @@ def test_exchange_settling_is_offered_only_for_per_mode_banks_with_a_settle_wind
     assert kind_of("exchange_settling", cands[0].params) == "structure"
     assert kind_of("exchange_transient", {"tau_s": 4.0}) == "effect"
     assert kind_of("proxy_high_order", {"power": 4}) == "structure"
+    # reported as structure, scanned with the effects (the search order kept tofupilot x's accelerometer step)
+    assert phase_of("proxy_high_order", {"power": 4}) == "effect"
+    assert phase_of("exchange_settling", {"tau_s": 4.0}) == "structure" and phase_of("aging", {}) == "effect"
     for rev in ({"order": "regress_first", "combiner": "pair", "settle_s": 0.0},
                 {"order": "combine_first", "combiner": "pair", "settle_s": 5.0}):
         cfg = fit_config_from_logs([log], reversal=rev)
