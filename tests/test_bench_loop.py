@@ -73,3 +73,25 @@ def test_measured_splits_are_disjoint_and_cover_both_legs():
     temp = np.asarray(log["temp_c"])
     cool, heat = sp["cool->heat"]
     assert temp[heat].max() > 70 and temp[cool].min() < -15
+
+
+def test_summary_counts_a_family_named_by_a_structure_step_separately():
+    """A thermal_lag found as a lag of the proxy (kind structure) names the family: it counts in
+    detection_or_structure, not in detection; the same naming on a clean run is counted as its
+    false-positive side (clean_runs_naming_family)."""
+    def rec(i, effect, steps, verdict, ratio=3.0):
+        return {"i": i, "effect": effect, "reversal": False, "effect_ratio": ratio if effect else None,
+                "verdict": verdict, "base": 1.0, "final": 0.5, "third_base": 1.0, "third_final": 0.9,
+                "steps": [{"effect": f, "kind": k, "confirmed": True, "before": 1.0, "after": 0.5} for f, k in steps],
+                "named": bool(effect and any(k == "effect" and bl._named(effect, f) for f, k in steps)),
+                "named_or_structure": bool(effect and any(bl._named(effect, f) for f, _ in steps))}
+    recs = [rec(0, None, [("thermal_lag", "structure")], "model structure improved"),
+            rec(1, "thermal_lag", [("thermal_lag", "structure")], "model structure improved"),
+            rec(2, "aux", [("aux_vdd", "effect")], "effect found"),
+            rec(3, None, [], "no significant missing effect")]
+    s = bl.summarize(recs)
+    assert s["detection"]["k"] == 1 and s["detection"]["n"] == 2
+    assert s["detection_or_structure"]["k"] == 2
+    assert s["clean_runs_naming_family"]["n"] == 2 and s["clean_runs_naming_family"]["thermal_lag"] == 1
+    assert s["clean_runs_naming_family"]["aux"] == 0 and s["false_discovery"]["k"] == 0
+    assert "structure" in s["detection_rule"]

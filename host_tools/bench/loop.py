@@ -51,12 +51,18 @@ import warnings
 import numpy as np
 from pathlib import Path
 
+from host_tools.atomic import atomic_open, atomic_path
 from host_tools.fitting.diagnose import _score, base_model, base_options, diagnose, error_stats
 from host_tools.simulation.sim_foreign import EFFECTS, EFFECT_KINDS, foreign_device, simulate_foreign
 
 SEED_STRIDE = 100000
 STRENGTH_LO, STRENGTH_HI = 1.0, 10.0
 MATTERS_RATIO = 2.0
+DETECTION_RULE = ("detection: effect runs with effect_ratio >= 2 whose CONFIRMED steps of kind 'effect' name the "
+                  "injected family (aux: any aux_* column); detection_or_structure: ... whose confirmed steps of "
+                  "either kind name it (the report names the family in both cases: a thermal_lag found as a lag "
+                  "of the proxy, board_temp as the second thermometer); clean_runs_naming_family: clean runs whose "
+                  "confirmed steps (either kind) name the family, the false-positive side of the same count")
 
 
 def plan(n_runs: int, seed: int = 0) -> list:
@@ -140,7 +146,12 @@ def summarize(records: list) -> dict:
         rs = [r for r in matters if r["effect"] == kind]
         per_kind[kind] = _frac(sum(r["named"] for r in rs), len(rs))
         per_kind_s[kind] = _frac(sum(r.get("named_or_structure", r["named"]) for r in rs), len(rs))
+    # the specificity of naming a family: clean runs whose confirmed steps (any kind) name it
+    clean_named = {kind: sum(1 for r in clean if any(s["confirmed"] and _named(kind, s["effect"]) for s in r["steps"]))
+                   for kind in EFFECT_KINDS}
     return {"runs": len(records), "effect_runs": sum(1 for r in records if r["effect"]),
+            "detection_rule": DETECTION_RULE,
+            "clean_runs_naming_family": {"n": len(clean), **clean_named},
             "detection": _frac(sum(r["named"] for r in matters), len(matters)), "detection_per_kind": per_kind,
             "detection_or_structure": _frac(sum(r.get("named_or_structure", r["named"]) for r in matters), len(matters)),
             "detection_or_structure_per_kind": per_kind_s,
@@ -171,7 +182,7 @@ def run_benchmark(n_runs: int, seed: int = 0, duration_s=None, n_surrogates=None
         rec = run_one(spec, duration_s, n_surrogates)
         records.append(rec)
         if json_path:
-            with open(json_path, "w", encoding="utf-8") as fh:
+            with atomic_open(json_path, "w", encoding="utf-8") as fh:
                 json.dump({"summary": summarize(records), "records": records}, fh, indent=1)
         if progress:
             progress(f"[{len(records)}/{len(specs)}] device {rec['device']} {rec['effect'] or 'clean'} "
@@ -357,6 +368,7 @@ def _measured_figure(key, hold, base_model, final_model, out_dir) -> str:
     fig.suptitle(f"{key}: held-out samples", fontsize=10)
     fig.tight_layout()
     name = key.replace(" ", "_").replace(">", "").replace("-", "_") + ".png"
-    fig.savefig(os.path.join(out_dir, name), dpi=90)
+    with atomic_path(os.path.join(out_dir, name)) as tmp:
+        fig.savefig(tmp, dpi=90)
     plt.close(fig)
     return name

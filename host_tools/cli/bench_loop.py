@@ -47,12 +47,12 @@ def run(args) -> int:
         print(f"hdrg-sim clean runs: {len(rows)}, 'effect found' {fd} ({100 * fd / len(rows):.1f} %), "
               f"'model structure improved' {st}")
         if args.json:
-            with open(args.json, "w", encoding="utf-8") as fh:
+            with atomic_open(args.json, "w", encoding="utf-8") as fh:
                 json.dump(rows, fh, indent=1)
         return 0
     if args.measured:
         res = measured_study(args.measured, progress=lambda m: print(m, file=sys.stderr, flush=True))
-        with open(os.path.join(args.measured, "measured.json"), "w", encoding="utf-8") as fh:
+        with atomic_open(os.path.join(args.measured, "measured.json"), "w", encoding="utf-8") as fh:
             json.dump(res, fh, indent=1, default=float)
             fh.write("\n")
         for key, r in res.items():
@@ -77,13 +77,19 @@ def run(args) -> int:
                             progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     s = res["summary"]
     print(f"hdrg bench loop: {s['runs']} foreign runs (seed {args.seed}), {s['effect_runs']} with an undeclared effect")
+    print("  detection counts effect runs with effect_ratio >= 2 whose confirmed steps name the injected family: "
+          "'effect steps' only steps of kind effect, 'family named, either kind' also structure steps "
+          "(a thermal_lag as a lag of the proxy, board_temp as the second thermometer)")
     print(_line("  clean runs", {"k": s["runs"] - s["effect_runs"], "n": s["runs"], "rate": None}))
-    print(_line("detection (ratio >= 2)", s["detection"]))
+    print(_line("detection, effect steps", s["detection"]))
     for kind, f in s["detection_per_kind"].items():
         print(_line(f"  {kind}", f))
-    print(_line("detection, effect or structure", s["detection_or_structure"]))
+    print(_line("family named, either kind", s["detection_or_structure"]))
     for kind, f in s["detection_or_structure_per_kind"].items():
         print(_line(f"  {kind}", f))
+    named = s.get("clean_runs_naming_family", {})
+    print(f"  clean runs naming each family in a confirmed step (either kind), of {named.get('n')}: "
+          + ", ".join(f"{k} {v}" for k, v in named.items() if k != "n"))
     print(_line("false discovery (clean)", s["false_discovery"]))
     print(_line("  FTR clean", s["false_discovery_ftr"]))
     print(_line("  MR control", s["mr_control"]))
@@ -94,7 +100,7 @@ def run(args) -> int:
     print(f"  confirmed steps {s['confirmed_steps']}, held-out-worse confirmed {s['worse_confirmed']}, "
           f"'effect found' without a held-out drop {s['found_without_drop']}, never worse: {s['never_worse']}")
     if args.json:
-        with open(args.json, "w", encoding="utf-8") as fh:
+        with atomic_open(args.json, "w", encoding="utf-8") as fh:
             json.dump(res, fh, indent=1)
             fh.write("\n")
     return 0

@@ -69,9 +69,13 @@ Procedure (:func:`diagnose`)
    candidate passes the rule, at most ``max_iter`` (3) times per phase.  **Structure first**
    (:data:`PHASES`): phase 1 offers only the structural candidates (:func:`kind_of`: the rate
    estimator, the lag-state block of the proxy, board_temp = the second thermometer, lags <=
-   STRUCT_TAU_FRACTION of the run), then for mode-reversal logs the order/combiner
+   STRUCT_TAU_FRACTION of the run; for per-mode banks the exchange settling: a decay after each
+   exchange with ONE coefficient for both banks, i.e. a transient that follows the mode sign like
+   the rate, tau <= 2 x the settle window), then for mode-reversal logs the order/combiner
    (:func:`_order_step`: regress_first with each other combiner, whole-model CV), confirmed the
-   same way; phase 2 offers the effect families on the residual of the structured base.  Steps
+   same way; phase 2 offers the effect families on the residual of the structured base, and the
+   higher powers of the proxy (u^4, u^5: reported as structure, the order of the model's own
+   polynomial, but scanned here: ``SCANNED_WITH_EFFECTS``).  Steps
    carry ``kind`` 'structure' / 'effect'; the verdict is "effect found" only for a kept effect
    step.  The confirmation (:data:`CONFIRM_RULE`) also counts the mean offset: per held-out run,
    the quadratic mean over its legs (gap-free segments) of their rms with the mean may rise by at

@@ -20,6 +20,12 @@ exchange_transient   decay since the end of the last mode exchange; or s      ta
                      times it together with s (2 columns): a transient that   EXCHANGE_TAUS_S,
                      does not flip leaves s * (decay - its mean over the      sign
                      other window) after the combiner  (mode-reversal logs)
+exchange_settling    decay since the end of the last mode exchange, ONE        tau_s <= SETTLING_
+                     coefficient for both mode banks (regress_first: in the    TAU_FACTOR x the
+                     target s * rate it is the same in both modes, i.e. the    settle window
+                     raw output's transient follows the mode sign like the
+                     rate): the readout still settling after the window
+                     (structure of the mode-reversal pipeline, not an effect)
 imperfect_reversal   s, s*u, s*v: terms that follow the mode sign             which
                      (mode-reversal logs)
 proxy_high_order     u^4, u^5                                                 power
@@ -57,8 +63,9 @@ RAMP_MARGIN = 0.1
 MAX_TAU_FRACTION = 0.5     # thermal_lag / board_temp / aux lags: tau <= this x the longest training run
 LAG_BLOCK_ORDER = 3          # thermal_lag block: lag(u, tau)^1..3, three columns
 MAX_TURN_ON_FRACTION = 0.25  # turn_on: tau <= this x the longest training run (it must have decayed)
-FAMILIES = ("thermal_lag", "turn_on", "exchange_transient", "imperfect_reversal", "proxy_high_order",
-            "board_temp", "aux", "aging", "periodic")
+SETTLING_TAU_FACTOR = 2.0    # exchange_settling: tau <= this x the settle window (a longer window would remove it)
+FAMILIES = ("thermal_lag", "turn_on", "exchange_transient", "exchange_settling", "imperfect_reversal",
+            "proxy_high_order", "board_temp", "aux", "aging", "periodic")
 
 
 @dataclass
@@ -66,7 +73,9 @@ class Candidate:
     """One candidate regressor: ``family`` (the effect name; aux columns 'aux_<name>'), ``params``
     (the scanned parameters, for the report: tau_s, power, which, sign, period_s, column),
     ``terms`` (generator term dicts of host_tools.golden.regressors, weight 1.0 each: 1 column, or 2 for
-    periodic), ``scan`` (the name of the continuous parameter :func:`refine` may refine, or '')."""
+    periodic), ``scan`` (the name of the continuous parameter :func:`refine` may refine, or ''),
+    ``extra`` (scan hints: ``shared`` -- one coefficient for both mode banks of a regress_first
+    model; ``max_tau_s`` -- the largest tau refinement may reach; ``line`` -- a spectral line)."""
 
     family: str
     params: dict
@@ -152,6 +161,12 @@ def library(train_logs, config, *, tau_grid=TAU_GRID_S, exchange_taus=EXCHANGE_T
                 if sign:   # the combiner leaves s * (transient - its mean over the other window)
                     terms += (_term("one", "exchange_transient", sign=True),)
                 out.append(Candidate("exchange_transient", {"tau_s": tau, "sign": sign}, terms, "tau_s"))
+    settle = config.reversal.settle_s if reversal else 0.0
+    if reversal and "exchange_settling" in want and config.reversal.order == "regress_first" and settle > 0:
+        for tau in (t for t in exchange_taus if t <= SETTLING_TAU_FACTOR * settle):
+            out.append(Candidate("exchange_settling", {"tau_s": tau},
+                                 (_term("decay_exchange", "exchange_settling", tau_s=tau),), "tau_s",
+                                 {"shared": True, "max_tau_s": SETTLING_TAU_FACTOR * settle}))
     if reversal and "imperfect_reversal" in want:
         r = config.rate
         for which, term in (("s", _term("one", "imperfect_reversal", sign=True)),
