@@ -9,8 +9,8 @@ from host_tools.fitting import fit_lag as FL
 from host_tools.fitting.fit import fit_logs
 from host_tools.fitting.fit_pipeline import fit_default
 from host_tools.golden.compensate import compensate, prepare
-from host_tools.bench.accuracy import floor_of, SEED_STRIDE
-from host_tools.simulation.sim_foreign import foreign_device, simulate_foreign, damping_bias
+from host_tools.bench.accuracy import damping_change_dph, device_runs, SEED_STRIDE
+from host_tools.simulation.sim_foreign import foreign_device
 
 S, a, b, outp = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
 C.DEFAULT_LAG_BLOCK = "off"
@@ -72,13 +72,10 @@ fo = open(outp, "w")
 for i in range(a, b):
     seed = S * SEED_STRIDE + i
     dev = foreign_device(seed)
-    sc0, _ = dev.damping_change(0); sc1, _ = dev.damping_change(1)
-    rec = {"seed": seed, "dc": float(abs(sc1 - sc0) * np.std(damping_bias(dev, 2.0, None)))}
+    rec = {"seed": seed, "dc": damping_change_dph(dev)}
     for rev in (False, True):
         key = "mr" if rev else "ftr"
-        tr = simulate_foreign(dev, 4.0, rev, 0, 0, None)
-        ho = simulate_foreign(dev, 2.0, rev, 1, 1, None)
-        fl = floor_of(simulate_foreign(dev, 2.0, rev, 1, 1, None, thermal=False))
+        tr, ho, fl = device_runs(dev, rev)
         m, r = fit_default([tr])
         if r.cv is None:
             m, r = fit_logs([tr], m.config, None, blocks=True)

@@ -5,11 +5,11 @@ import time, sys, json
 import numpy as np
 import host_tools.golden.compensate as C
 from host_tools.fitting import fit_lag as FL
-from host_tools.simulation.sim_foreign import foreign_device, simulate_foreign, damping_bias
+from host_tools.simulation.sim_foreign import foreign_device
 from host_tools.fitting.fit import fit_logs
 from host_tools.fitting.fit_pipeline import fit_default
 from host_tools.golden.compensate import compensate
-from host_tools.bench.accuracy import floor_of
+from host_tools.bench.accuracy import damping_change_dph, device_runs
 a, b, outp = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
 C.DEFAULT_LAG_BLOCK = "off"
 def ratio(m, ho, fl):
@@ -18,13 +18,10 @@ def ratio(m, ho, fl):
 fo = open(outp, "w")
 for seed in range(a, b):
     dev = foreign_device(seed)
-    sc0, _ = dev.damping_change(0); sc1, _ = dev.damping_change(1)
-    rec = {"seed": seed, "dc": float(abs(sc1 - sc0) * np.std(damping_bias(dev, 2.0, None)))}
+    rec = {"seed": seed, "dc": damping_change_dph(dev)}
     for rev in (False, True):
         key = "mr" if rev else "ftr"
-        tr = simulate_foreign(dev, 4.0, rev, 0, 0, None)
-        ho = simulate_foreign(dev, 2.0, rev, 1, 1, None)
-        fl = floor_of(simulate_foreign(dev, 2.0, rev, 1, 1, None, thermal=False))
+        tr, ho, fl = device_runs(dev, rev)
         t = time.time()
         m, r = fit_default([tr])
         if r.cv is None:

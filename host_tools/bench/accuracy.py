@@ -165,22 +165,36 @@ def evaluate_option(opt: Option, train, holdout) -> tuple[float, str]:
         return float("nan"), f"{type(exc).__name__}: {exc}"
 
 
+def damping_change_dph(dev, holdout_rate=2.0, duration_s=None) -> float:
+    """Size of device ``dev``'s non-repeatable damping change between power-ons 0 and 1 [deg/h]:
+    |scale change| x std of its damping bias on the held-out run."""
+    sc0, _ = dev.damping_change(0)
+    sc1, _ = dev.damping_change(1)
+    return float(abs(sc1 - sc0) * np.std(damping_bias(dev, holdout_rate, duration_s)))
+
+
+def device_runs(dev, reversal: bool, train_rate=4.0, holdout_rate=2.0, duration_s=None):
+    """The benchmark's runs of device ``dev``: (training run at ``train_rate`` [degC/min], power-on 0;
+    held-out run at ``holdout_rate``, power-on 1; the held-out run's white-noise floor [deg/h],
+    from the same run without thermal terms)."""
+    train = simulate_foreign(dev, train_rate, reversal, 0, 0, duration_s)
+    hold = simulate_foreign(dev, holdout_rate, reversal, 1, 1, duration_s)
+    floor = floor_of(simulate_foreign(dev, holdout_rate, reversal, 1, 1, duration_s, thermal=False))
+    return train, hold, floor
+
+
 def evaluate_device(seed, options, train_rate=4.0, holdout_rate=2.0, duration_s=None) -> dict:
     """Every option on device ``seed`` (a seed or a ForeignDevice): {'seed', 'device', 'damping_change_dph', 'floor': {ftr, mr},
     'std': {option: deg/h}, 'ratio': {option: std/floor}, 'errors': {option: text}}."""
     dev = seed if isinstance(seed, ForeignDevice) else foreign_device(seed)
     seed = dev.seed
     rec = {"seed": seed, "device": dev.describe(), "floor": {}, "std": {}, "ratio": {}, "errors": {}}
-    sc0, _ = dev.damping_change(0)
-    sc1, _ = dev.damping_change(1)
-    rec["damping_change_dph"] = float(abs(sc1 - sc0) * np.std(damping_bias(dev, holdout_rate, duration_s)))
+    rec["damping_change_dph"] = damping_change_dph(dev, holdout_rate, duration_s)
     for reversal in (False, True):
         opts = [o for o in options if o.reversal == reversal]
         if not opts:
             continue
-        train = simulate_foreign(dev, train_rate, reversal, 0, 0, duration_s)
-        hold = simulate_foreign(dev, holdout_rate, reversal, 1, 1, duration_s)
-        floor = floor_of(simulate_foreign(dev, holdout_rate, reversal, 1, 1, duration_s, thermal=False))
+        train, hold, floor = device_runs(dev, reversal, train_rate, holdout_rate, duration_s)
         rec["floor"]["mr" if reversal else "ftr"] = floor
         for opt in opts:
             std, err = evaluate_option(opt, train, hold)
