@@ -620,9 +620,13 @@ def test_cli_device_on_pty_capture_and_ctrl_c(tmp_path):
             "from host_tools.cli import device\n"
             "p = argparse.ArgumentParser(prog='hdrg device'); device.configure(p)\n"
             "sys.exit(device.run(p.parse_args(sys.argv[1:])))\n")
+    # Ctrl-C must reach the child even when the tests run as a background job (a shell without
+    # job control starts them with SIGINT ignored, the child inherits that and Python then installs
+    # no KeyboardInterrupt handler): the child starts with SIGINT's default disposition
     proc = subprocess.Popen([sys.executable, "-c", code, "--pty", "--scenario", "static", "--duration", "600",
                              "--speed", "0", "--name", "cli-gyro"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         import select
         ready, _, _ = select.select([proc.stdout], [], [], 60)
