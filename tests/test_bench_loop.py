@@ -8,6 +8,8 @@ import pytest
 from host_tools.bench import loop as bl
 from host_tools import cli
 from host_tools.cli import bench
+from host_tools.fitting.diagnose_confirm import EFFECT_MIN_DROP
+from host_tools.fitting.diagnose_report import VERDICTS
 from host_tools.simulation.sim_foreign import EFFECT_KINDS
 
 
@@ -33,12 +35,14 @@ def test_fast_subset_structure_and_never_worse(result):
     recs, s = result["records"], result["summary"]
     assert [r["i"] for r in recs] == [0, 1, 2] and recs[0]["effect"] is None
     for r in recs:
-        assert r["verdict"] in ("effect found", "model structure improved", "no confirmed effect",
-                                "no significant missing effect")
+        assert r["verdict"] in VERDICTS
         assert r["final"] <= r["base"] * (1 + 1e-12)          # never worse on the held-out run
         for st in r["steps"]:
             if st["confirmed"]:
                 assert st["after"] <= 0.95 * st["before"]
+                assert st["material"] == (st["after"] <= (1 - EFFECT_MIN_DROP) * st["before"])
+            else:
+                assert st["material"] is False
         if r["effect"]:
             assert r["effect_ratio"] > 0
     assert s["runs"] == 3 and s["worse_confirmed"] == 0 and s["found_without_drop"] == 0 and s["never_worse"]
@@ -95,3 +99,27 @@ def test_summary_counts_a_family_named_by_a_structure_step_separately():
     assert s["clean_runs_naming_family"]["n"] == 2 and s["clean_runs_naming_family"]["thermal_lag"] == 1
     assert s["clean_runs_naming_family"]["aux"] == 0 and s["false_discovery"]["k"] == 0
     assert "structure" in s["detection_rule"]
+
+
+def test_a_minor_effect_step_is_neither_a_detection_nor_a_false_discovery():
+    """EFFECT_RULE: a confirmed effect step whose held-out drop is below 20 % stays in the model but
+    names nothing: it does not count as a detection, and on a clean run it is not "effect found"
+    (counted under minor_only / minor_effect_steps_clean instead)."""
+    def rec(i, effect, step, verdict):
+        st = {"effect": step[0], "kind": "effect", "confirmed": True, "material": step[1], "before": 1.0,
+              "after": 0.7 if step[1] else 0.9}
+        return {"i": i, "effect": effect, "reversal": True, "effect_ratio": 3.0 if effect else None,
+                "verdict": verdict, "base": 1.0, "final": st["after"], "third_base": 1.0, "third_final": 0.9,
+                "steps": [st], "named": bool(effect and bl._names_effect(st) and bl._named(effect, st["effect"])),
+                "named_or_structure": bool(effect and bl._named(effect, st["effect"]))}
+    recs = [rec(0, None, ("turn_on", False), "minor improvement confirmed"),
+            rec(1, "periodic", ("periodic", False), "minor improvement confirmed"),
+            rec(2, "aux", ("aux_vdd", True), "effect found"),
+            rec(3, None, ("aux_vdd", True), "effect found")]
+    s = bl.summarize(recs)
+    assert s["detection"] == {"n": 2, "k": 1, "rate": 0.5}
+    assert s["false_discovery"]["k"] == 1 and s["mr_control"]["k"] == 1
+    assert s["minor_only"] == 1 and s["minor_effect_steps_clean"] == 1
+    assert "MATERIAL" in s["detection_rule"]
+    old = {k: v for k, v in recs[2]["steps"][0].items() if k != "material"}      # records before the rule
+    assert bl._names_effect(old) and not bl._names_effect({**old, "material": False})

@@ -24,6 +24,8 @@ from host_tools.simulation import sim
 from host_tools.cli import main
 from host_tools.golden.compensate import compensate
 from host_tools.fitting.diagnose import RULE, diagnose
+from host_tools.fitting.diagnose_confirm import material_on_holdout
+from host_tools.fitting.diagnose_report import VERDICTS, verdict_of
 from host_tools.golden.model import BiasModel
 
 OFF = ["turn_on", "electronics", "damping_asym"]
@@ -339,8 +341,7 @@ def test_measured_data_runs_and_records_its_verdict(axis, measured_x, measured_y
     burst = np.searchsorted(log.segments, np.arange(len(log)), side="right") - 1
     train, hold = log.select(burst % 2 == 0), log.select(burst % 2 == 1)
     rep, model = diagnose([train], [hold], out_dir=tmp_path, plots=False)
-    assert rep["verdict"] in ("effect found", "model structure improved", "no confirmed effect",
-                              "no significant missing effect")
+    assert rep["verdict"] in VERDICTS
     assert model.config.proxy.kind == "temp"
     base = rep["baseline"]["holdout"]
     assert base["std_dph"] > rep["noise_floor"]["std_dph"] > 0        # structure above white noise at 1 s
@@ -536,3 +537,23 @@ def test_steps_keep_the_rate_estimator_hdrg_fit_chose():
     assert steps and start.config.rate.estimator != "diff"
     for it in steps:
         assert it["rate"] == start.config.rate.to_dict()
+
+
+def test_the_verdict_names_an_effect_only_for_a_material_kept_step():
+    """EFFECT_RULE: 'effect found' needs a kept effect step with a held-out drop >= 20 %; a kept
+    minor effect step alone gives 'minor improvement confirmed', a kept structure step outranks it;
+    without held-out runs (material None) an accepted effect step is named."""
+    def st(kind, confirmed, material):
+        return {"kind": kind, "confirmed": confirmed, "material": material}
+    assert verdict_of([st("effect", True, True)]) == "effect found"
+    assert verdict_of([st("effect", True, False)]) == "minor improvement confirmed"
+    assert verdict_of([st("effect", True, False), st("structure", True, True)]) == "model structure improved"
+    assert verdict_of([st("effect", False, False), st("effect", True, False)]) == "minor improvement confirmed"
+    assert verdict_of([st("effect", False, False)]) == "no confirmed effect"
+    assert verdict_of([]) == "no significant missing effect"
+    assert verdict_of([st("effect", None, None)]) == "effect found"
+    assert verdict_of([st("effect", True, True), st("effect", True, False)]) == "effect found"
+    row = lambda x: {"std100_dph": x, "std_dph": 1.0}                      # noqa: E731
+    assert material_on_holdout(row(1.0), row(0.8)) and material_on_holdout(row(1.0), row(0.5))
+    assert not material_on_holdout(row(1.0), row(0.81)) and not material_on_holdout(row(1.0), row(1.2))
+    assert not material_on_holdout({"std100_dph": None, "std_dph": None}, row(0.5))

@@ -22,15 +22,18 @@ output (diagnose.error_stats).
 
 Summary (the targets of issue #11):
 
-* ``detection``: among effect runs with effect_ratio >= 2, the fraction whose CONFIRMED EFFECT
-  steps name the true family (aux: any aux_* column); ``detection_or_structure`` also counts a
+* ``detection``: among effect runs with effect_ratio >= 2, the fraction whose CONFIRMED, MATERIAL
+  EFFECT steps (diagnose.EFFECT_RULE: held-out error down by >= 18 %, the steps that make the verdict
+  "effect found") name the true family (``detection_incl_minor``: minor effect steps counted too) (aux: any aux_* column); ``detection_or_structure`` also counts a
   confirmed STRUCTURE step of the same family (the lag-state block of the proxy for thermal_lag,
   the second thermometer for board_temp: the structure phase of diagnose runs first and may
   take the injected effect as the device's structure);
 * ``false_discovery``: among clean runs, the fraction with verdict "effect found"; also split by
   run type (``mr_control``: clean MR runs) and ``structural_only`` (clean runs whose confirmed
   steps are all structural, verdict "model structure improved": another rate estimator or
-  the lag-state block, the second thermometer or the combiner, not an effect);
+  the lag-state block, the second thermometer or the combiner, not an effect), ``minor_only``
+  (clean runs whose only kept steps are minor effect steps, verdict "minor improvement confirmed")
+  and ``minor_effect_steps_clean`` (minor effect steps kept on clean runs);
 * ``clean_found_not_generalizing``: clean runs with "effect found" whose final model is not
   better than the base model on an independent THIRD run (3 degC/min, power-on 2, noise 2):
   a found "effect" that does not generalize is a false discovery in the strict sense; one that
@@ -58,8 +61,8 @@ from host_tools.simulation.sim_foreign import EFFECTS, EFFECT_KINDS, foreign_dev
 SEED_STRIDE = 100000
 STRENGTH_LO, STRENGTH_HI = 1.0, 10.0
 MATTERS_RATIO = 2.0
-DETECTION_RULE = ("detection: effect runs with effect_ratio >= 2 whose CONFIRMED steps of kind 'effect' name the "
-                  "injected family (aux: any aux_* column); detection_or_structure: ... whose confirmed steps of "
+DETECTION_RULE = ("detection: effect runs with effect_ratio >= 2 whose CONFIRMED, MATERIAL steps of kind 'effect' "
+                  "(diagnose.EFFECT_RULE: the ones that make the verdict 'effect found') name the injected family (aux: any aux_* column); detection_or_structure: ... whose confirmed steps of "
                   "either kind name it (the report names the family in both cases: a thermal_lag found as a lag "
                   "of the proxy, board_temp as the second thermometer); clean_runs_naming_family: clean runs whose "
                   "confirmed steps (either kind) name the family, the false-positive side of the same count")
@@ -116,17 +119,23 @@ def run_one(spec: dict, duration_s=None, n_surrogates=None) -> dict:
             chold = simulate_foreign(dev, 2.0, rev, 1, 1, duration_s=duration_s)
             ratio = _score(rep["baseline"]["holdout"])[0] / _base_error(ctrain, chold)
     steps = [{"effect": it["effect"], "params": it["params"], "kind": it["kind"], "confirmed": it["confirmed"],
+              "material": it["material"],
               "before": it["heldout_error"]["before"], "after": it["heldout_error"]["after"]}
              for it in rep["iterations"]]
     return {**spec, "verdict": rep["verdict"], "steps": steps,
             "base": _score(rep["baseline"]["holdout"])[0], "final": _score(rep["final"])[0],
             "third_base": base3, "third_final": final3,
             "effect_ratio": ratio,
-            "named": bool(eff and any(s["confirmed"] and s["kind"] == "effect" and _named(eff, s["effect"])
-                                      for s in steps)),
+            "named": bool(eff and any(_names_effect(s) and _named(eff, s["effect"]) for s in steps)),
             "named_or_structure": bool(eff and any(s["confirmed"] and _named(eff, s["effect"]) for s in steps)),
             "artifacts": [a["period_s"] for a in (rep["artifacts"] or {}).get("lines", [])],
             "seconds": round(time.time() - t0, 2)}
+
+
+def _names_effect(step) -> bool:
+    """A step that names an effect: confirmed, kind 'effect' and material (diagnose.EFFECT_RULE;
+    records written before that rule have no ``material`` and count as material)."""
+    return bool(step["confirmed"] and step["kind"] == "effect" and step.get("material", True) is not False)
 
 
 def _frac(num, den):
@@ -138,7 +147,7 @@ def summarize(records: list) -> dict:
     matters = [r for r in records if r["effect"] and r["effect_ratio"] is not None and r["effect_ratio"] >= MATTERS_RATIO]
     clean = [r for r in records if not r["effect"]]
     found = [r for r in records if r["verdict"] == "effect found"]
-    structural = [r for r in records if r["verdict"] == "model structure improved"]
+    structural = [r for r in records if r["verdict"] in ("model structure improved", "minor improvement confirmed")]
     confirmed = [s for r in records for s in r["steps"] if s["confirmed"]]
     struct = [r for r in clean if r["verdict"] == "model structure improved"]
     per_kind, per_kind_s = {}, {}
@@ -153,6 +162,9 @@ def summarize(records: list) -> dict:
             "detection_rule": DETECTION_RULE,
             "clean_runs_naming_family": {"n": len(clean), **clean_named},
             "detection": _frac(sum(r["named"] for r in matters), len(matters)), "detection_per_kind": per_kind,
+            "detection_incl_minor": _frac(sum(1 for r in matters if any(
+                s["confirmed"] and s["kind"] == "effect" and _named(r["effect"], s["effect"]) for s in r["steps"])),
+                len(matters)),
             "detection_or_structure": _frac(sum(r.get("named_or_structure", r["named"]) for r in matters), len(matters)),
             "detection_or_structure_per_kind": per_kind_s,
             "false_discovery": _frac(sum(r["verdict"] == "effect found" for r in clean), len(clean)),
@@ -161,6 +173,9 @@ def summarize(records: list) -> dict:
             "mr_control": _frac(sum(r["verdict"] == "effect found" for r in clean if r["reversal"]),
                                 sum(1 for r in clean if r["reversal"])),
             "structural_only": len(struct),
+            "minor_only": sum(1 for r in clean if r["verdict"] == "minor improvement confirmed"),
+            "minor_effect_steps_clean": sum(1 for r in clean for s in r["steps"]
+                                            if s["confirmed"] and s["kind"] == "effect" and s.get("material") is False),
             "clean_found_not_generalizing": sum(1 for r in clean if r["verdict"] == "effect found"
                                                 and not r["third_final"] < r["third_base"]),
             "clean_found_third_run_gain": [round(r["third_base"] / r["third_final"], 3) for r in clean

@@ -29,6 +29,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from host_tools.bench.loop import calibration_study, hdrg_clean_study, measured_study, run_benchmark, summarize
+    from host_tools.fitting.diagnose_confirm import EFFECT_MIN_DROP
 
     if args.calibrate:
         res = calibration_study(progress=lambda m: print(m, file=sys.stderr, flush=True))
@@ -78,12 +79,15 @@ def run(args) -> int:
     s = res["summary"]
     print(f"hdrg bench loop: {s['runs']} foreign runs (seed {args.seed}), {s['effect_runs']} with an undeclared effect")
     print("  detection counts effect runs with effect_ratio >= 2 whose confirmed steps name the injected family: "
-          "'effect steps' only steps of kind effect, 'family named, either kind' also structure steps "
+          "'effect steps' only material steps of kind effect (held-out error down >= "
+          f"{EFFECT_MIN_DROP:.0%}: 'effect found'), 'family named, either kind' also structure steps "
           "(a thermal_lag as a lag of the proxy, board_temp as the second thermometer)")
     print(_line("  clean runs", {"k": s["runs"] - s["effect_runs"], "n": s["runs"], "rate": None}))
     print(_line("detection, effect steps", s["detection"]))
     for kind, f in s["detection_per_kind"].items():
         print(_line(f"  {kind}", f))
+    if "detection_incl_minor" in s:
+        print(_line("  ... minor effect steps too", s["detection_incl_minor"]))
     print(_line("family named, either kind", s["detection_or_structure"]))
     for kind, f in s["detection_or_structure_per_kind"].items():
         print(_line(f"  {kind}", f))
@@ -94,6 +98,9 @@ def run(args) -> int:
     print(_line("  FTR clean", s["false_discovery_ftr"]))
     print(_line("  MR control", s["mr_control"]))
     print(f"  clean runs with 'model structure improved' (rate estimator, lag block, board_temp, combiner): {s['structural_only']}")
+    if "minor_only" in s:
+        print(f"  clean runs with 'minor improvement confirmed': {s['minor_only']}; minor effect steps kept on clean "
+              f"runs (confirmed, held-out drop < {EFFECT_MIN_DROP:.0%}, not named): {s['minor_effect_steps_clean']}")
     print(f"  clean runs with 'effect found' that do NOT improve an independent third run: "
           f"{s['clean_found_not_generalizing']}; their third-run gains (base/final): {s['clean_found_third_run_gain']}")
     print(f"  'effect found' runs worse on the third run: {s['found_third_run_worse']}")

@@ -77,7 +77,9 @@ Procedure (:func:`diagnose`)
    higher powers of the proxy (u^4, u^5: reported as structure, the order of the model's own
    polynomial, but scanned here: ``SCANNED_WITH_EFFECTS``).  Steps
    carry ``kind`` 'structure' / 'effect'; the verdict is "effect found" only for a kept effect
-   step.  The confirmation (:data:`CONFIRM_RULE`) also counts the mean offset: per held-out run,
+   step that is material (:data:`EFFECT_RULE`: held-out error down by >= EFFECT_MIN_DROP; a smaller
+   confirmed effect step stays in the model, ``material: false``, verdict "minor improvement
+   confirmed" when nothing else held).  The confirmation (:data:`CONFIRM_RULE`) also counts the mean offset: per held-out run,
    the quadratic mean over its legs (gap-free segments) of their rms with the mean may rise by at
    most CONFIRM_TOL_RMS (:func:`offsets_hold`).
 6. **Report**: per iteration the effect, its parameters, the evidence (CV gain, threshold, folds,
@@ -110,12 +112,13 @@ import numpy as np
 
 from firmware_ref.terms import K_AUX
 from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE, CONFIRM_TOL_1S, CONFIRM_TOL_RMS,  # noqa: F401
+                                                EFFECT_MIN_DROP, EFFECT_RULE, material_on_holdout,
                                          HELDOUT_METRIC, REPORT_TAUS, STAT_KEYS, _clean, fmt_value, _residuals, _score,
                                          _stats_one, _step_metric, confirmed_on_holdout, error_stats, leg_rms,
                                          noise_floor, offsets_hold, step_errors)
 from host_tools.fitting.diagnose_noise import (_allan_bridged, _noise_series, artifact_of, characterize,  # noqa: F401
                                        combiner_lines, noise_model, spectral_lines, surrogates)
-from host_tools.fitting.diagnose_report import _verdict_detail, write_report
+from host_tools.fitting.diagnose_report import _verdict_detail, verdict_of, write_report
 from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, G_MIN, MAX_ITER, N_SURROGATES, NULL_QUANTILE,  # noqa: F401
                                       PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, _Accepted, _config, _explicit_weights,
                                       _poly_terms, _scan, _step_key, kind_of)
@@ -206,6 +209,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     report = {"train": [log.source for log in train], "holdout": [log.source for log in hold],
               "evaluated_on": "holdout" if hold else "train", "rule": RULE,
               "confirm_rule": CONFIRM_RULE if hold else "no held-out runs: steps are not confirmed",
+              "effect_rule": EFFECT_RULE if hold else "no held-out runs: every accepted effect step is named",
               "settings": {"g_min": g_min, "n_surrogates": n_surrogates, "null_quantile": NULL_QUANTILE,
                            "cv": "runs" if len(train) >= 2 else f"{cv_blocks} blocks round-robin in {cv_folds} folds",
                            "max_iter": max_iter, "seed": seed, "terms": [int(k) for k in poly]},
@@ -272,8 +276,9 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
             after = error_stats(evals, model)
             cb, ca = step_errors(evals, before_model, model)     # the one metric (HELDOUT_METRIC)
             confirmed = confirmed_on_holdout(cb, ca) if hold else None
+            material = (confirmed and material_on_holdout(cb, ca)) if hold else None
             entry = {"effect": acc.family, "params": acc.params, "kind": kind_of(acc.family, acc.params),
-                     "before": _clean(before), "after": _clean(after), "confirmed": confirmed,
+                     "before": _clean(before), "after": _clean(after), "confirmed": confirmed, "material": material,
                      "heldout_error": _step_metric(cb, ca),
                      "train_before": _clean(error_stats(train, before_model)) if hold else _clean(before),
                      "train_after": _clean(error_stats(train, model)) if hold else _clean(after),
@@ -292,6 +297,10 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                 excluded.add(_step_key(acc.family, acc.params))
             else:
                 entry["status"] = "confirmed on held-out" if confirmed else "accepted (no held-out runs)"
+                if confirmed and not material and entry["kind"] == "effect":
+                    p0, p1 = _score(cb)[0], _score(ca)[0]
+                    entry["status"] += (f" (minor: held-out error down {1 - p1 / p0:.0%} only; kept, "
+                                        f"not named as an effect)")
                 accepted.append(acc)
         else:
             if max_iter > 0:
@@ -316,15 +325,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
         stops[phase] = stopped
     stopped = stops.get("effect") or stops.get("structure")
     final = error_stats(evals, model)
-    kept = [e for e in iterations if e["confirmed"] is not False]
-    if any(e["kind"] == "effect" for e in kept):
-        verdict = "effect found"
-    elif kept:
-        verdict = "model structure improved"
-    elif iterations:
-        verdict = "no confirmed effect"
-    else:
-        verdict = "no significant missing effect"
+    verdict = verdict_of(iterations)
     report.update({"iterations": iterations, "final": _clean(final), "final_runs": final["runs"],
                    "final_train": _clean(error_stats(train, model)) if hold else _clean(final),
                    "verdict": verdict, "verdict_detail": _verdict_detail(iterations, hold),

@@ -2,7 +2,8 @@
 its module doc): :func:`error_stats` (std / peak-to-peak of 1-s and 100-s averages of the
 compensated output, rms with the mean, per leg; deg/h), THE held-out error of a step
 (:func:`step_errors`, :data:`HELDOUT_METRIC`: the one function the loop confirms a step by and
-host_tools.bench.loop scores it by), :func:`confirmed_on_holdout` (:data:`CONFIRM_RULE`) and
+host_tools.bench.loop scores it by), :func:`confirmed_on_holdout` (:data:`CONFIRM_RULE`), :func:`material_on_holdout`
+(:data:`EFFECT_RULE`: when a confirmed effect step is named as an effect) and
 :func:`noise_floor`."""
 from __future__ import annotations
 
@@ -23,6 +24,13 @@ CONFIRM_RULE = ("a step is confirmed iff, on the held-out runs, the std of 100-s
                 "held-out run, the leg rms (quadratic mean over its gap-free segments of each segment's rms, "
                 "mean offset included) rises by at most 5 %; an unconfirmed step is reverted and its family "
                 "not offered again")
+EFFECT_MIN_DROP = 0.18       # an effect is NAMED ("effect found") only when its step lowers the held-out error >= 18 %
+EFFECT_RULE = ("a confirmed step of kind 'effect' names an effect (verdict \"effect found\") only when it lowers the "
+               "held-out error by >= 18 % (material); a confirmed effect step with a smaller drop stays in the "
+               "model and is reported as minor (\"material\": false; verdict \"minor improvement confirmed\" when "
+               "nothing else held): on clean devices such steps pick up slow features of the device that one "
+               "training run cannot tell from an undeclared effect (docs/LOOP.md: chosen on the loop bench's seeds 0 "
+               "and 1, checked on seed 2)")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -135,6 +143,12 @@ def confirmed_on_holdout(before, after) -> bool:
     return bool(p1 <= p0 * (1.0 - CONFIRM_MIN_DROP)
                 and (s0 is None or s1 is None or s1 <= s0 * (1.0 + CONFIRM_TOL_1S))
                 and offsets_hold(before, after))
+
+
+def material_on_holdout(before, after) -> bool:
+    """EFFECT_RULE: the held-out error (``_score(...)[0]``) drops by at least EFFECT_MIN_DROP."""
+    p0, p1 = _score(before)[0], _score(after)[0]
+    return bool(p0 is not None and p1 is not None and p1 <= p0 * (1.0 - EFFECT_MIN_DROP))
 
 
 def _leg_rms(run) -> float | None:

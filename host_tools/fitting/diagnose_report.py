@@ -17,6 +17,26 @@ from host_tools.golden.model import jsonable
 from host_tools.golden.regressors import generator_values
 
 
+VERDICTS = ("effect found", "model structure improved", "minor improvement confirmed", "no confirmed effect",
+            "no significant missing effect")
+
+
+def verdict_of(iterations) -> str:
+    """The loop's verdict (:data:`VERDICTS`, strongest first) from its steps: "effect found" when a
+    kept step of kind 'effect' is material (diagnose_confirm.EFFECT_RULE; ``material`` None = no
+    held-out runs, counts), "model structure improved" when a structure step was kept, "minor
+    improvement confirmed" when only minor effect steps were kept, "no confirmed effect" when
+    steps were tried and none kept, "no significant missing effect" when none passed."""
+    kept = [e for e in iterations if e["confirmed"] is not False]
+    if any(e["kind"] == "effect" and e.get("material") is not False for e in kept):
+        return VERDICTS[0]
+    if any(e["kind"] == "structure" for e in kept):
+        return VERDICTS[1]
+    if kept:
+        return VERDICTS[2]
+    return VERDICTS[3] if iterations else VERDICTS[4]
+
+
 def _verdict_detail(iterations, hold) -> str:
     if not iterations:
         return "no candidate passed the selection rule on the training runs"
@@ -24,6 +44,8 @@ def _verdict_detail(iterations, hold) -> str:
     for k, e in enumerate(iterations, 1):
         tag = {True: "confirmed on held-out", False: "not confirmed on held-out (reverted)",
                None: "not confirmed (no held-out runs)"}[e["confirmed"]]
+        if e["confirmed"] and e.get("kind") == "effect" and e.get("material") is False:
+            tag += " (minor: kept, not named as an effect)"
         parts.append(f"step {k} {e['effect']}: {tag}")
     kept = [k for k, e in enumerate(iterations, 1) if e["confirmed"] is not False]
     final = f"final model: after step {kept[-1]}" if kept else "final model: the base model"

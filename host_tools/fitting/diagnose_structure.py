@@ -11,7 +11,7 @@ import numpy as np
 
 from host_tools.fitting.cv import fold_ids
 from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, _clean, _score, _step_metric, confirmed_on_holdout,
-                                         error_stats, step_errors)
+                                         error_stats, material_on_holdout, step_errors)
 from host_tools.fitting.fit import fit_logs
 
 
@@ -104,6 +104,7 @@ def _whole_model_step(family, alts, train, hold, evals, cfg, model, cv_blocks, c
     confirmed = confirmed_on_holdout(cb, ca) if hold else None
     entry = {"effect": family, "params": dict(best["params"]), "kind": "structure",
              "before": _clean(before), "after": _clean(after), "confirmed": confirmed,
+             "material": (confirmed and material_on_holdout(cb, ca)) if hold else None,
              "heldout_error": _step_metric(cb, ca),
              "train_before": _clean(error_stats(train, model)), "train_after": _clean(error_stats(train, alt_model)),
              "cv_gain": best["gain"], "threshold": CONFIRM_MIN_DROP, "refined_from": None,
