@@ -13,7 +13,9 @@ non-regular file (a terminal, ``/dev/stdout``, a FIFO) is written in place.
 * :func:`atomic_path` ``(path)``: a context manager yielding the temporary path (same suffix as
   ``path``, for writers that take a path, e.g. matplotlib's savefig);
 * :func:`refuse_overwrite` ``(outputs, inputs)``: ValueError when an output resolves to one of
-  the inputs (``-o`` equal to an input would destroy it).
+  the inputs (``-o`` equal to an input would destroy it);
+* :data:`COMPLETED`: the destinations renamed into place by this process, in order (the CLI names
+  them when a command is interrupted after some outputs were already complete).
 
 The run-log capture (host_tools.link.capture) keeps its incremental fsync'ed file instead and
 marks an unfinished capture in its metadata (docs/RUN_LOG.md).
@@ -41,6 +43,9 @@ def _tmp_in_dir(path: str) -> tuple[int, str]:
     return tempfile.mkstemp(prefix=f".{base}.", suffix=".tmp" + suffix, dir=directory)
 
 
+COMPLETED: list = []
+
+
 def _finish(tmp: str, path: str) -> None:
     try:
         mode = os.stat(path).st_mode & 0o7777 if os.path.exists(path) else 0o666 & ~_umask()
@@ -48,6 +53,7 @@ def _finish(tmp: str, path: str) -> None:
     except OSError:  # pragma: no cover - permissions are a nicety
         pass
     os.replace(tmp, path)
+    COMPLETED.append(os.fspath(path))
 
 
 def _umask() -> int:

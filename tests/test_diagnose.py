@@ -24,7 +24,7 @@ from host_tools.simulation import sim
 from host_tools.cli import main
 from host_tools.golden.compensate import compensate
 from host_tools.fitting.diagnose import RULE, diagnose
-from host_tools.fitting.diagnose_confirm import material_on_holdout
+from host_tools.fitting.diagnose_confirm import EFFECT_MIN_DROP, material_on_holdout
 from host_tools.fitting.diagnose_report import VERDICTS, verdict_of
 from host_tools.golden.model import BiasModel
 
@@ -554,6 +554,7 @@ def test_the_verdict_names_an_effect_only_for_a_material_kept_step():
     assert verdict_of([st("effect", None, None)]) == "effect found"
     assert verdict_of([st("effect", True, True), st("effect", True, False)]) == "effect found"
     row = lambda x: {"std100_dph": x, "std_dph": 1.0}                      # noqa: E731
-    assert material_on_holdout(row(1.0), row(0.8)) and material_on_holdout(row(1.0), row(0.5))
-    assert not material_on_holdout(row(1.0), row(0.81)) and not material_on_holdout(row(1.0), row(1.2))
+    edge = 1.0 - EFFECT_MIN_DROP
+    assert material_on_holdout(row(1.0), row(edge)) and material_on_holdout(row(1.0), row(0.5))
+    assert not material_on_holdout(row(1.0), row(edge + 0.01)) and not material_on_holdout(row(1.0), row(1.2))
     assert not material_on_holdout({"std100_dph": None, "std_dph": None}, row(0.5))

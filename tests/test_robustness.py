@@ -190,10 +190,44 @@ def test_sigterm_during_compensate_leaves_no_output(runs, tmp_path):
     # handler (-SIGTERM) after the command had restored it, i.e. after the output was complete
     assert rc in (0, 128 + signal.SIGTERM, -signal.SIGTERM)
     if rc == 128 + signal.SIGTERM:
-        assert not out.exists() and b"terminated" in p.stderr.read()
+        err = p.stderr.read().decode()
+        assert "terminated" in err
+        if out.exists():        # the stop came after the rename: complete, and the message says so
+            assert f"written complete before the stop: {out}" in err and len(runlog.read(out)) == 6000
+        else:
+            assert "(no output written)" in err
     else:
         assert len(runlog.read(out)) == 6000                    # complete, never truncated
     assert [f.name for f in tmp_path.iterdir() if f.name != "c.csv"] == []   # no temporary file left
+
+
+def test_a_stop_names_the_outputs_already_complete(tmp_path, monkeypatch, capsys):
+    """SIGTERM / Ctrl-C inside a command: the message says which outputs were renamed into place
+    (complete) before the stop, or that none was; the one being written is absent."""
+    import types
+
+    from host_tools import atomic
+    monkeypatch.setattr(atomic, "COMPLETED", [])
+    done, half = tmp_path / "done.csv", tmp_path / "half.csv"
+
+    def run(args):
+        with atomic.atomic_open(done, "w") as fh:
+            fh.write("complete\n")
+        with atomic.atomic_open(half, "w") as fh:
+            fh.write("part")
+            raise args.stop()
+
+    for stop, rc, word in ((cli._Terminated, 128 + signal.SIGTERM, "terminated"), (KeyboardInterrupt, 130, "interrupted")):
+        atomic.COMPLETED.clear()
+        assert cli._run(types.SimpleNamespace(command="x", debug=False, stop=stop), types.SimpleNamespace(run=run)) == rc
+        err = capsys.readouterr().err
+        assert f"hdrg x: {word}; written complete before the stop: {done}" in err
+        assert done.read_text() == "complete\n" and not half.exists()
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["done.csv"]          # no temporary file
+    atomic.COMPLETED.clear()
+    none = types.SimpleNamespace(run=lambda args: (_ for _ in ()).throw(cli._Terminated()))
+    assert cli._run(types.SimpleNamespace(command="x", debug=False), none) == 128 + signal.SIGTERM
+    assert "hdrg x: terminated (no output written)" in capsys.readouterr().err
 
 
 def test_unfinished_capture_is_marked_and_warned(tmp_path):

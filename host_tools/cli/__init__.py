@@ -111,6 +111,15 @@ def main(argv=None) -> int:
             signal.signal(signal.SIGTERM, old_term)
 
 
+def _completed_note() -> str:
+    """For an interrupted command: the outputs it had already written complete (atomic writers:
+    every other output is absent), so a stop after the last rename is not read as a lost file."""
+    from host_tools.atomic import COMPLETED
+    if not COMPLETED:
+        return " (no output written)"
+    return "; written complete before the stop: " + ", ".join(COMPLETED)
+
+
 def _run(args, mod) -> int:
     try:
         with warnings.catch_warnings():     # restores the warning machinery after the command
@@ -126,10 +135,10 @@ def _run(args, mod) -> int:
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 128 + signal.SIGPIPE
     except KeyboardInterrupt:
-        print(f"hdrg {args.command}: interrupted", file=sys.stderr)
+        print(f"hdrg {args.command}: interrupted{_completed_note()}", file=sys.stderr)
         return 130
     except _Terminated:
-        print(f"hdrg {args.command}: terminated", file=sys.stderr)
+        print(f"hdrg {args.command}: terminated{_completed_note()}", file=sys.stderr)
         return 128 + signal.SIGTERM
     except (ValueError, OSError, LookupError) as exc:
         if args.debug:
