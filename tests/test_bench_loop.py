@@ -102,7 +102,7 @@ def test_summary_counts_a_family_named_by_a_structure_step_separately():
 
 
 def test_a_minor_effect_step_is_neither_a_detection_nor_a_false_discovery():
-    """EFFECT_RULE: a confirmed effect step whose held-out drop is below 20 % stays in the model but
+    """EFFECT_RULE: a confirmed effect step whose held-out drop is below EFFECT_MIN_DROP stays in the model but
     names nothing: it does not count as a detection, and on a clean run it is not "effect found"
     (counted under minor_only / minor_effect_steps_clean instead)."""
     def rec(i, effect, step, verdict):

@@ -540,7 +540,7 @@ def test_steps_keep_the_rate_estimator_hdrg_fit_chose():
 
 
 def test_the_verdict_names_an_effect_only_for_a_material_kept_step():
-    """EFFECT_RULE: 'effect found' needs a kept effect step with a held-out drop >= 20 %; a kept
+    """EFFECT_RULE: 'effect found' needs a kept effect step with a held-out drop >= EFFECT_MIN_DROP; a kept
     minor effect step alone gives 'minor improvement confirmed', a kept structure step outranks it;
     without held-out runs (material None) an accepted effect step is named."""
     def st(kind, confirmed, material):

@@ -224,7 +224,7 @@ def test_a_stop_names_the_outputs_already_complete(tmp_path, monkeypatch, capsys
         assert f"hdrg x: {word}; written complete before the stop: {done}" in err
         assert done.read_text() == "complete\n" and not half.exists()
         assert sorted(p.name for p in tmp_path.iterdir()) == ["done.csv"]          # no temporary file
-    atomic.COMPLETED.clear()
+    atomic.COMPLETED.append(str(tmp_path / "earlier.csv"))     # written by an earlier command in this process
     none = types.SimpleNamespace(run=lambda args: (_ for _ in ()).throw(cli._Terminated()))
     assert cli._run(types.SimpleNamespace(command="x", debug=False), none) == 128 + signal.SIGTERM
     assert "hdrg x: terminated (no output written)" in capsys.readouterr().err

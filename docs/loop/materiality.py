@@ -11,7 +11,7 @@ the effect runs detected by a material effect step."""
 import json
 import sys
 
-from host_tools.bench.loop import MATTERS_RATIO, _named
+from host_tools.bench.loop import MATTERS_RATIO, _confirmed_effect, _named
 
 
 def drop(step):
@@ -19,8 +19,7 @@ def drop(step):
 
 
 def effect_steps(run, named=None):
-    return [s for s in run["steps"] if s["confirmed"] and s["kind"] == "effect"
-            and (named is None or _named(named, s["effect"]))]
+    return [s for s in run["steps"] if _confirmed_effect(s) and (named is None or _named(named, s["effect"]))]
 
 
 def main(paths):

@@ -24,7 +24,8 @@ Summary (the targets of issue #11):
 
 * ``detection``: among effect runs with effect_ratio >= 2, the fraction whose CONFIRMED, MATERIAL
   EFFECT steps (diagnose.EFFECT_RULE: held-out error down by >= 18 %, the steps that make the verdict
-  "effect found") name the true family (``detection_incl_minor``: minor effect steps counted too) (aux: any aux_* column); ``detection_or_structure`` also counts a
+  "effect found") name the true family (aux: any aux_* column; ``detection_incl_minor``: minor
+  effect steps counted too); ``detection_or_structure`` also counts a
   confirmed STRUCTURE step of the same family (the lag-state block of the proxy for thermal_lag,
   the second thermometer for board_temp: the structure phase of diagnose runs first and may
   take the injected effect as the device's structure);
@@ -56,14 +57,15 @@ from pathlib import Path
 
 from host_tools.atomic import atomic_open, atomic_path
 from host_tools.fitting.diagnose import _score, base_model, base_options, diagnose, error_stats
+from host_tools.fitting.diagnose_report import is_minor
 from host_tools.simulation.sim_foreign import EFFECTS, EFFECT_KINDS, foreign_device, simulate_foreign
 
 SEED_STRIDE = 100000
 STRENGTH_LO, STRENGTH_HI = 1.0, 10.0
 MATTERS_RATIO = 2.0
 DETECTION_RULE = ("detection: effect runs with effect_ratio >= 2 whose CONFIRMED, MATERIAL steps of kind 'effect' "
-                  "(diagnose.EFFECT_RULE: the ones that make the verdict 'effect found') name the injected family (aux: any aux_* column); detection_or_structure: ... whose confirmed steps of "
-                  "either kind name it (the report names the family in both cases: a thermal_lag found as a lag "
+                  "(diagnose.EFFECT_RULE: the ones that make the verdict 'effect found') name the injected family "
+                  "(aux: any aux_* column); detection_or_structure: ... whose confirmed steps of either kind name it (the report names the family in both cases: a thermal_lag found as a lag "
                   "of the proxy, board_temp as the second thermometer); clean_runs_naming_family: clean runs whose "
                   "confirmed steps (either kind) name the family, the false-positive side of the same count")
 
@@ -132,10 +134,14 @@ def run_one(spec: dict, duration_s=None, n_surrogates=None) -> dict:
             "seconds": round(time.time() - t0, 2)}
 
 
+def _confirmed_effect(step) -> bool:
+    return bool(step["confirmed"] and step["kind"] == "effect")
+
+
 def _names_effect(step) -> bool:
     """A step that names an effect: confirmed, kind 'effect' and material (diagnose.EFFECT_RULE;
     records written before that rule have no ``material`` and count as material)."""
-    return bool(step["confirmed"] and step["kind"] == "effect" and step.get("material", True) is not False)
+    return _confirmed_effect(step) and not is_minor(step)
 
 
 def _frac(num, den):
@@ -162,9 +168,8 @@ def summarize(records: list) -> dict:
             "detection_rule": DETECTION_RULE,
             "clean_runs_naming_family": {"n": len(clean), **clean_named},
             "detection": _frac(sum(r["named"] for r in matters), len(matters)), "detection_per_kind": per_kind,
-            "detection_incl_minor": _frac(sum(1 for r in matters if any(
-                s["confirmed"] and s["kind"] == "effect" and _named(r["effect"], s["effect"]) for s in r["steps"])),
-                len(matters)),
+            "detection_incl_minor": _frac(sum(any(_confirmed_effect(s) and _named(r["effect"], s["effect"])
+                                                  for s in r["steps"]) for r in matters), len(matters)),
             "detection_or_structure": _frac(sum(r.get("named_or_structure", r["named"]) for r in matters), len(matters)),
             "detection_or_structure_per_kind": per_kind_s,
             "false_discovery": _frac(sum(r["verdict"] == "effect found" for r in clean), len(clean)),
@@ -174,8 +179,7 @@ def summarize(records: list) -> dict:
                                 sum(1 for r in clean if r["reversal"])),
             "structural_only": len(struct),
             "minor_only": sum(1 for r in clean if r["verdict"] == "minor improvement confirmed"),
-            "minor_effect_steps_clean": sum(1 for r in clean for s in r["steps"]
-                                            if s["confirmed"] and s["kind"] == "effect" and s.get("material") is False),
+            "minor_effect_steps_clean": sum(is_minor(s) for r in clean for s in r["steps"]),
             "clean_found_not_generalizing": sum(1 for r in clean if r["verdict"] == "effect found"
                                                 and not r["third_final"] < r["third_base"]),
             "clean_found_third_run_gain": [round(r["third_base"] / r["third_final"], 3) for r in clean

@@ -111,16 +111,20 @@ def main(argv=None) -> int:
             signal.signal(signal.SIGTERM, old_term)
 
 
-def _completed_note() -> str:
+def _completed_note(first: int) -> str:
     """For an interrupted command: the outputs it had already written complete (atomic writers:
-    every other output is absent), so a stop after the last rename is not read as a lost file."""
-    from host_tools.atomic import COMPLETED
-    if not COMPLETED:
+    every other output is absent), so a stop after the last rename is not read as a lost file.
+    ``first``: the length of atomic.COMPLETED when the command started."""
+    from host_tools import atomic
+    done = atomic.COMPLETED[first:]
+    if not done:
         return " (no output written)"
-    return "; written complete before the stop: " + ", ".join(COMPLETED)
+    return "; written complete before the stop: " + ", ".join(done)
 
 
 def _run(args, mod) -> int:
+    from host_tools import atomic
+    first = len(atomic.COMPLETED)
     try:
         with warnings.catch_warnings():     # restores the warning machinery after the command
             warnings.simplefilter("default")
@@ -135,10 +139,10 @@ def _run(args, mod) -> int:
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 128 + signal.SIGPIPE
     except KeyboardInterrupt:
-        print(f"hdrg {args.command}: interrupted{_completed_note()}", file=sys.stderr)
+        print(f"hdrg {args.command}: interrupted{_completed_note(first)}", file=sys.stderr)
         return 130
     except _Terminated:
-        print(f"hdrg {args.command}: terminated{_completed_note()}", file=sys.stderr)
+        print(f"hdrg {args.command}: terminated{_completed_note(first)}", file=sys.stderr)
         return 128 + signal.SIGTERM
     except (ValueError, OSError, LookupError) as exc:
         if args.debug:

@@ -77,10 +77,10 @@ Procedure (:func:`diagnose`)
    higher powers of the proxy (u^4, u^5: reported as structure, the order of the model's own
    polynomial, but scanned here: ``SCANNED_WITH_EFFECTS``).  Steps
    carry ``kind`` 'structure' / 'effect'; the verdict is "effect found" only for a kept effect
-   step that is material (:data:`EFFECT_RULE`: held-out error down by >= EFFECT_MIN_DROP; a smaller
-   confirmed effect step stays in the model, ``material: false``, verdict "minor improvement
-   confirmed" when nothing else held).  The confirmation (:data:`CONFIRM_RULE`) also counts the mean offset: per held-out run,
-   the quadratic mean over its legs (gap-free segments) of their rms with the mean may rise by at
+   step that is material (:data:`EFFECT_RULE`: held-out error down by >= EFFECT_MIN_DROP; a
+   smaller confirmed effect step stays in the model, ``material: false``, verdict "minor
+   improvement confirmed" when nothing else held).  The confirmation (:data:`CONFIRM_RULE`) also
+   counts the mean offset: per held-out run, the quadratic mean over its legs (gap-free segments) of their rms with the mean may rise by at
    most CONFIRM_TOL_RMS (:func:`offsets_hold`).
 6. **Report**: per iteration the effect, its parameters, the evidence (CV gain, threshold, folds,
    ranking; PNG: residual vs the candidate, Allan deviation and spectrum before/after) and the
@@ -112,13 +112,12 @@ import numpy as np
 
 from firmware_ref.terms import K_AUX
 from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE, CONFIRM_TOL_1S, CONFIRM_TOL_RMS,  # noqa: F401
-                                                EFFECT_MIN_DROP, EFFECT_RULE, material_on_holdout,
-                                         HELDOUT_METRIC, REPORT_TAUS, STAT_KEYS, _clean, fmt_value, _residuals, _score,
+                                         EFFECT_RULE, HELDOUT_METRIC, REPORT_TAUS, STAT_KEYS, _clean, fmt_value, _residuals, _score,
                                          _stats_one, _step_metric, confirmed_on_holdout, error_stats, leg_rms,
-                                         noise_floor, offsets_hold, step_errors)
+                                         material_on_holdout, noise_floor, offsets_hold, step_errors)
 from host_tools.fitting.diagnose_noise import (_allan_bridged, _noise_series, artifact_of, characterize,  # noqa: F401
                                        combiner_lines, noise_model, spectral_lines, surrogates)
-from host_tools.fitting.diagnose_report import _verdict_detail, verdict_of, write_report
+from host_tools.fitting.diagnose_report import _verdict_detail, is_minor, verdict_of, write_report
 from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, G_MIN, MAX_ITER, N_SURROGATES, NULL_QUANTILE,  # noqa: F401
                                       PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, _Accepted, _config, _explicit_weights,
                                       _poly_terms, _scan, _step_key, kind_of)
@@ -297,9 +296,9 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                 excluded.add(_step_key(acc.family, acc.params))
             else:
                 entry["status"] = "confirmed on held-out" if confirmed else "accepted (no held-out runs)"
-                if confirmed and not material and entry["kind"] == "effect":
-                    p0, p1 = _score(cb)[0], _score(ca)[0]
-                    entry["status"] += (f" (minor: held-out error down {1 - p1 / p0:.0%} only; kept, "
+                if is_minor(entry):
+                    h = entry["heldout_error"]
+                    entry["status"] += (f" (minor: held-out error down {1 - h['after'] / h['before']:.0%} only; kept, "
                                         f"not named as an effect)")
                 accepted.append(acc)
         else:

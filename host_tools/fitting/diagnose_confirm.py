@@ -2,8 +2,9 @@
 its module doc): :func:`error_stats` (std / peak-to-peak of 1-s and 100-s averages of the
 compensated output, rms with the mean, per leg; deg/h), THE held-out error of a step
 (:func:`step_errors`, :data:`HELDOUT_METRIC`: the one function the loop confirms a step by and
-host_tools.bench.loop scores it by), :func:`confirmed_on_holdout` (:data:`CONFIRM_RULE`), :func:`material_on_holdout`
-(:data:`EFFECT_RULE`: when a confirmed effect step is named as an effect) and
+host_tools.bench.loop scores it by), :func:`confirmed_on_holdout` (:data:`CONFIRM_RULE`),
+:func:`material_on_holdout` (:data:`EFFECT_RULE`: when a confirmed effect step is named as an
+effect) and
 :func:`noise_floor`."""
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ CONFIRM_RULE = ("a step is confirmed iff, on the held-out runs, the std of 100-s
                 "not offered again")
 EFFECT_MIN_DROP = 0.18       # an effect is NAMED ("effect found") only when its step lowers the held-out error >= 18 %
 EFFECT_RULE = ("a confirmed step of kind 'effect' names an effect (verdict \"effect found\") only when it lowers the "
-               "held-out error by >= 18 % (material); a confirmed effect step with a smaller drop stays in the "
+               f"held-out error by >= {100 * EFFECT_MIN_DROP:.0f} % (material); a confirmed effect step with a smaller drop stays in the "
                "model and is reported as minor (\"material\": false; verdict \"minor improvement confirmed\" when "
                "nothing else held): on clean devices such steps pick up slow features of the device that one "
                "training run cannot tell from an undeclared effect (docs/LOOP.md: chosen on the loop bench's seeds 0 "

@@ -21,6 +21,11 @@ VERDICTS = ("effect found", "model structure improved", "minor improvement confi
             "no significant missing effect")
 
 
+def is_minor(step) -> bool:
+    """A kept effect step below EFFECT_RULE's bar: confirmed on held-out, kind 'effect', not material."""
+    return bool(step["confirmed"] and step["kind"] == "effect" and step.get("material") is False)
+
+
 def verdict_of(iterations) -> str:
     """The loop's verdict (:data:`VERDICTS`, strongest first) from its steps: "effect found" when a
     kept step of kind 'effect' is material (diagnose_confirm.EFFECT_RULE; ``material`` None = no
@@ -44,7 +49,7 @@ def _verdict_detail(iterations, hold) -> str:
     for k, e in enumerate(iterations, 1):
         tag = {True: "confirmed on held-out", False: "not confirmed on held-out (reverted)",
                None: "not confirmed (no held-out runs)"}[e["confirmed"]]
-        if e["confirmed"] and e.get("kind") == "effect" and e.get("material") is False:
+        if is_minor(e):
             tag += " (minor: kept, not named as an effect)"
         parts.append(f"step {k} {e['effect']}: {tag}")
     kept = [k for k, e in enumerate(iterations, 1) if e["confirmed"] is not False]
