@@ -15,7 +15,8 @@ non-regular file (a terminal, ``/dev/stdout``, a FIFO) is written in place.
 * :func:`refuse_overwrite` ``(outputs, inputs)``: ValueError when an output resolves to one of
   the inputs (``-o`` equal to an input would destroy it);
 * :data:`COMPLETED`: the destinations renamed into place by this process, in order (the CLI names
-  them when a command is interrupted after some outputs were already complete).
+  them when a command is interrupted after some outputs were already complete); the rename and
+  its record happen with SIGINT / SIGTERM held, so a stop cannot fall between them.
 
 The run-log capture (host_tools.link.capture) keeps its incremental fsync'ed file instead and
 marks an unfinished capture in its metadata (docs/RUN_LOG.md).
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import tempfile
 
 
@@ -52,8 +54,24 @@ def _finish(tmp: str, path: str) -> None:
         os.chmod(tmp, mode)
     except OSError:  # pragma: no cover - permissions are a nicety
         pass
-    os.replace(tmp, path)
-    COMPLETED.append(os.fspath(path))
+    with _stops_held():     # a stop between the rename and the record would hide a complete output
+        os.replace(tmp, path)
+        COMPLETED.append(os.fspath(path))
+
+
+@contextlib.contextmanager
+def _stops_held():
+    """SIGINT and SIGTERM held (pending, delivered on exit) for the duration, where the platform
+    can (POSIX ``pthread_sigmask``); elsewhere nothing is held."""
+    held = {signal.SIGINT, signal.SIGTERM}
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def _umask() -> int:

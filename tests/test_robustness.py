@@ -451,3 +451,33 @@ def test_atomic_writes_keep_symlinks_and_special_files(tmp_path):
     with pytest.raises(IsADirectoryError):
         with atomic_open(tmp_path, "w"):
             pass
+
+
+def test_a_stop_during_the_rename_is_held_until_it_is_recorded(tmp_path, monkeypatch):
+    """A SIGTERM that arrives while the destination is renamed into place is delivered only after
+    the rename is recorded in atomic.COMPLETED (the window CI hit: the file complete, the message
+    "(no output written)")."""
+    from host_tools import atomic
+    monkeypatch.setattr(atomic, "COMPLETED", [])
+    out = tmp_path / "o.txt"
+    real_replace = os.replace
+    seen = []
+
+    def replace_then_signal(src, dst):
+        real_replace(src, dst)
+        os.kill(os.getpid(), signal.SIGTERM)          # arrives between the rename and the record
+        seen.append(list(atomic.COMPLETED))
+
+    def handler(signum, frame):
+        raise cli._Terminated()
+
+    old = signal.signal(signal.SIGTERM, handler)
+    try:
+        monkeypatch.setattr(atomic.os, "replace", replace_then_signal)
+        with pytest.raises(cli._Terminated):
+            with atomic.atomic_open(out, "w") as fh:
+                fh.write("x\n")
+    finally:
+        signal.signal(signal.SIGTERM, old)
+    assert seen == [[]]                                   # the signal was pending during the rename ...
+    assert atomic.COMPLETED == [os.path.realpath(out)] and out.read_text() == "x\n"    # ... and came after the record
