@@ -295,6 +295,36 @@ def test_bench_fit_time_rate_auto_vs_fixed(benchmark, how):
     benchmark.extra_info.update({"samples": len(log), "rate": model.config.rate.estimator})
 
 
+def test_rate_auto_keeps_the_preferred_candidate_unless_another_beats_it_by_the_margin():
+    """fit_auto_rate's rule: the preferred candidate (RATE_PREFERRED, iir shift 9, by default) unless
+    the least-CV candidate's CV rms is below (1 - margin) x the preferred one's.  The preferred one
+    here is the worse of two in CV; a margin on either side of their ratio flips the choice, and the
+    rule is written in model.json."""
+    from host_tools.fitting.fit import RATE_CANDIDATES, RATE_PREFER_MARGIN, RATE_PREFERRED, fit_auto_rate
+    from host_tools.simulation.sim_foreign import foreign_device, simulate_foreign
+
+    assert RATE_PREFERRED in RATE_CANDIDATES and 0.0 < RATE_PREFER_MARGIN < 1.0
+    log = simulate_foreign(foreign_device(3), 4.0, True, 0, 0, 3000.0)
+    cands = (RATE_CANDIDATES[0], RATE_CANDIDATES[-1])          # diff, iir 9
+    terms = (0, 1, 4, 5)
+    sel = fit_auto_rate([log], terms, candidates=cands, prefer=None)[0].fit["rate_selection"]
+    cv = {r["estimator"]: r["cv_rms"] for r in sel["candidates"]}
+    (best, cv_best), (worse, cv_worse) = sorted(cv.items(), key=lambda kv: kv[1])
+    assert sel["chosen"] == best and cv_best < cv_worse
+    worse_c = cands[["diff", "iir shift=9"].index(worse)]
+    ratio = cv_best / cv_worse
+    for margin, want in ((0.5 * (1.0 - ratio), best), (1.0 - 0.5 * ratio, worse)):
+        model, res = fit_auto_rate([log], terms, candidates=cands, prefer=worse_c, prefer_margin=margin)
+        got = model.fit["rate_selection"]
+        assert got["chosen"] == want and got["preferred"] == worse and got["prefer_margin"] == margin
+        assert res.cv["cv_rms"] == pytest.approx(cv[want], rel=1e-12)
+        assert got["chosen"].split()[0] == model.config.rate.estimator
+    # the default prefers iir shift 9
+    got = fit_auto_rate([log], terms, candidates=cands)[0].fit["rate_selection"]
+    want = "diff" if cv["diff"] < (1.0 - RATE_PREFER_MARGIN) * cv["iir shift=9"] else "iir shift=9"
+    assert got["preferred"] == "iir shift=9" and got["chosen"] == want
+
+
 def test_rate_auto_on_common_samples_scores_every_candidate_on_the_same_samples():
     """fit_auto_rate(samples='common'): each candidate's reported CV rms is its fit on the samples
     used by every candidate (fit_logs masks), the least one is chosen and then refitted on all its
@@ -314,7 +344,7 @@ def test_rate_auto_on_common_samples_scores_every_candidate_on_the_same_samples(
     com = [fit_logs([log], c, terms, blocks=True, masks=[common])[1] for c in cfgs]
     assert com[0].n == common.sum() == com[1].n and own[0].n == used[0].sum()
     for samples, want in (("own", own), ("common", com)):
-        model, res = fit_auto_rate([log], terms, candidates=cands, samples=samples)
+        model, res = fit_auto_rate([log], terms, candidates=cands, samples=samples, prefer=None)
         sel = model.fit["rate_selection"]
         assert [r["cv_rms"] for r in sel["candidates"]] == pytest.approx([r.cv["cv_rms"] for r in want], rel=1e-12)
         k = int(np.argmin([r.cv["cv_rms"] for r in want]))
@@ -323,5 +353,7 @@ def test_rate_auto_on_common_samples_scores_every_candidate_on_the_same_samples(
         assert res.cv["cv_rms"] == pytest.approx(own[k].cv["cv_rms"], rel=1e-12)
     with pytest.raises(ValueError, match="samples"):
         fit_auto_rate([log], terms, candidates=cands, samples="all")
+    with pytest.raises(ValueError, match="prefer_margin"):
+        fit_auto_rate([log], terms, candidates=cands, prefer_margin=1.0)
     with pytest.raises(ValueError, match="mask"):
         fit_logs([log], cfgs[0], terms, masks=[common[:-1]])

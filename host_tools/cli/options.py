@@ -21,8 +21,8 @@ def add_model_options(parser: argparse.ArgumentParser, what: str = "the model") 
                         help=f"proxy-rate estimator of {what} (default: {DEFAULT_RATE['estimator']}"
                              + ("; hdrg fit on mode-reversal logs: auto" if DEFAULT_RATE_SELECTION_MR == "auto" else "")
                              + f"; diff is the "
-                             f"paper's consecutive difference; auto (hdrg fit only): the candidate of least "
-                             f"cross-validated rms among diff, diffn 16, lsq 32, iir 7, iir 9, reported in model.json)")
+                             f"paper's consecutive difference; auto (hdrg fit only): iir 9 unless another of diff, diffn 16, "
+                             f"lsq 32, iir 7 has a cross-validated rms below half of iir 9's, reported in model.json)")
     parser.add_argument("--rate-n", type=int, default=None,
                         help=f"window length n of diffn/lsq [samples] (default: {DEFAULT_RATE['n']})")
     parser.add_argument("--rate-shift", type=int, default=None,

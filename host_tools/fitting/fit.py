@@ -607,6 +607,14 @@ def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8
 
 # candidates of the rate estimator 'auto' (estimator, n, shift), host_tools.golden.rate
 RATE_CANDIDATES = (("diff", 8, 4), ("diffn", 16, 4), ("lsq", 32, 4), ("iir", 8, 7), ("iir", 8, 9))
+# Selection rule of 'auto': the PREFERRED candidate (iir shift 9: the smoothest rate, a first-order
+# lag of 2^9 s, which extrapolates to another chamber rate best) unless another candidate's
+# cross-validated rms is below (1 - RATE_PREFER_MARGIN) x the preferred one's.  In-run CV hardly
+# tells the candidates apart (their CV rms are within a few % on most devices) while their held-out
+# errors differ by 2-5x; chosen on foreign sets 1 and 2 (80 devices; docs/ACCURACY.md "Rate
+# preference"), never on the benchmark's set 0.  None: plain least CV rms (the rule before).
+RATE_PREFERRED = ("iir", 8, 9)
+RATE_PREFER_MARGIN = 0.5
 
 
 def _rate_label(est, n, shift):
@@ -614,11 +622,14 @@ def _rate_label(est, n, shift):
 
 
 def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, significance=None, min_gain=0.02,
-                  drop_unidentifiable=True, samples="own", **config_kw):
+                  drop_unidentifiable=True, samples="own", prefer="default", prefer_margin=None, **config_kw):
     """Rate estimator 'auto': for every candidate (estimator, n, shift) build the config
     (host_tools.golden.compensate.fit_config_from_logs with ``config_kw``), fit ``terms`` with
     cross-validation over the runs (one run: ``cv_blocks`` time blocks, see :func:`fit_logs`), and
-    keep the candidate of least cross-validated rms.
+    keep the ``prefer`` candidate ('default': RATE_PREFERRED; None: no preference) unless the
+    candidate of least cross-validated rms beats it by ``prefer_margin`` (None: RATE_PREFER_MARGIN),
+    i.e. has a CV rms < (1 - margin) x the preferred one's; then that one.  A preferred candidate
+    that is not among ``candidates`` or cannot be fitted leaves the plain least-CV choice.
 
     ``samples`` 'own' (default): each candidate is fitted and scored on its own used samples (an
     estimator with a longer warm-up is scored on fewer, later samples: iir 9 skips 1024 samples,
@@ -636,6 +647,11 @@ def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, 
 
     if samples not in ("common", "own"):
         raise ValueError(f"samples must be 'common' or 'own', not {samples!r}")
+    prefer = RATE_PREFERRED if prefer == "default" else prefer
+    prefer_margin = RATE_PREFER_MARGIN if prefer_margin is None else prefer_margin
+    if not 0.0 <= prefer_margin < 1.0:
+        raise ValueError(f"prefer_margin must be in [0, 1), not {prefer_margin!r}")
+    preferred = None if prefer is None else _rate_label(*prefer)
     logs = list(logs)
     kw = dict(cv_blocks=cv_blocks, blocks=True, drop_unidentifiable=drop_unidentifiable,
               significance=significance, min_gain=min_gain)
@@ -652,7 +668,7 @@ def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, 
         masks = [np.logical_and.reduce([m[i] for m in own.values()]) for i in range(len(logs))]
         if not all(m.any() for m in masks):   # no common sample: fall back to each candidate's own
             masks = None
-    best = None
+    best = pref = None
     for label, cfg in cfgs.items():
         try:
             model, res = fit_logs(logs, cfg, terms, masks=masks, **kw)
@@ -663,16 +679,23 @@ def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, 
         rows[label] = {"estimator": label, "cv_rms": res.cv["cv_rms"]}
         if best is None or res.cv["cv_rms"] < best[0]:
             best = (res.cv["cv_rms"], model, res, label)
+        if label == preferred:
+            pref = (res.cv["cv_rms"], model, res, label)
     if best is None and unidentifiable is not None:
         raise unidentifiable   # (drop_unidentifiable=False) the caller can name the remedy
     if best is None:
         raise ValueError("rate estimator 'auto': no candidate could be fitted: "
                          + "; ".join(f"{r['estimator']}: {r['error']}" for r in rows.values()))
     rows = [rows[_rate_label(*c)] for c in candidates]
+    if pref is not None and not best[0] < (1.0 - prefer_margin) * pref[0]:
+        best = pref
     _, model, res, label = best
     if masks is not None and any((o != m).any() for o, m in zip(own[label], masks)):
         model, res = fit_logs(logs, cfgs[label], terms, **kw)   # the chosen one on all its samples
-    model.fit["rate_selection"] = {"method": "least cross-validated rms (time blocks of one run, or runs)",
+    method = ("least cross-validated rms (time blocks of one run, or runs)" if pref is None else
+              f"{preferred} unless another candidate's cross-validated rms (time blocks of one run, or runs) "
+              f"is below {1.0 - prefer_margin:g} x its own")
+    model.fit["rate_selection"] = {"method": method, "preferred": preferred, "prefer_margin": prefer_margin,
                                    "samples": "common" if masks is not None else "own",
                                    "chosen": label, "candidates": rows}
     return model, res

@@ -75,8 +75,9 @@ DEFAULT_SETTLE_S = _reversal.DEFAULT_SETTLE_S  # defined in host_tools.golden.re
 DEFAULT_RATE = {"estimator": "diff", "n": 8, "shift": 4}   # robust: no long warm-up, any fs, bursty logs
 DEFAULT_TERMS = "auto"
 DEFAULT_SIGNIFICANCE = 1.0   # of terms 'auto' in fit_logs: keep the smallest model within this many CV standard errors
-# `hdrg fit` on mode-reversal logs without --rate-estimator/--rate-n/--rate-shift: 'auto' (the
-# candidate of least cross-validated rms, host_tools.fitting.fit.fit_auto_rate) or 'fixed' (DEFAULT_RATE).
+# `hdrg fit` on mode-reversal logs without --rate-estimator/--rate-n/--rate-shift: 'auto'
+# (host_tools.fitting.fit.fit_auto_rate: iir shift 9 unless another candidate's cross-validated rms
+# is below half of its own) or 'fixed' (DEFAULT_RATE).
 # FTR logs: DEFAULT_RATE_SELECTION_FTR, kept "fixed" (on the measured FTR logs 'auto' picks iir and extrapolates badly).
 DEFAULT_RATE_SELECTION_MR = "auto"
 DEFAULT_RATE_SELECTION_FTR = "fixed"   # the same choice for FTR logs in fit_default ('auto' | 'fixed')
