@@ -607,12 +607,8 @@ def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8
 
 # candidates of the rate estimator 'auto' (estimator, n, shift), host_tools.golden.rate
 RATE_CANDIDATES = (("diff", 8, 4), ("diffn", 16, 4), ("lsq", 32, 4), ("iir", 8, 7), ("iir", 8, 9))
-# Selection rule of 'auto': the PREFERRED candidate (iir shift 9: the smoothest rate, a first-order
-# lag of 2^9 s, which extrapolates to another chamber rate best) unless another candidate's
-# cross-validated rms is below (1 - RATE_PREFER_MARGIN) x the preferred one's.  In-run CV hardly
-# tells the candidates apart (their CV rms are within a few % on most devices) while their held-out
-# errors differ by 2-5x; chosen on foreign sets 1 and 2 (80 devices; docs/ACCURACY.md "Rate
-# preference"), never on the benchmark's set 0.  None: plain least CV rms (the rule before).
+# 'auto' keeps RATE_PREFERRED (iir 9, the smoothest rate) unless another candidate's CV rms is below
+# (1 - RATE_PREFER_MARGIN) x its own: in-run CV hardly tells them apart (docs/ACCURACY.md "Rate preference").
 RATE_PREFERRED = ("iir", 8, 9)
 RATE_PREFER_MARGIN = 0.5
 
