@@ -78,6 +78,8 @@ def _close_the_loop(out_dir: str, duration_s: float) -> None:
         after = " / ".join(f"{it['after'][key]:.3f}" for key in keys)
         print(f"| {k} | {it['effect']} ({it.get('kind', 'effect')}) | {params} | {before} | {after} | {it['status']} |")
     print(f"   {rep['verdict_detail']}")
+    if (rep.get("generalization") or {}).get("warning"):
+        print(f"   warning: {rep['generalization']['warning']}")
     print(f"   verdict: {rep['verdict']}; final held-out: "
           + ", ".join(f"{key} {rep['final'][key]:.3f}" for key in keys) + " deg/h")
     print(f"   report, figures and the extended model: {out_dir}")

@@ -565,3 +565,37 @@ def test_the_verdict_names_an_effect_only_for_a_material_kept_step():
     assert material_on_holdout(row(1.0), row(edge)) and material_on_holdout(row(1.0), row(0.5))
     assert not material_on_holdout(row(1.0), row(edge + 0.01)) and not material_on_holdout(row(1.0), row(1.2))
     assert not material_on_holdout({"std100_dph": None, "std_dph": None}, row(0.5))
+
+
+def test_the_report_warns_when_the_held_out_error_is_far_above_the_training_error(tmp_path):
+    """generalization(): the final held-out error against the training error; >= GAP_WARN x gives a
+    warning in diagnose.json, diagnose.md and on the console.  Foreign device 101 with an undeclared
+    u^4 at 3.9x (loop bench seed 0, run 101): the 17 terms absorb it at 4 degC/min (training error at
+    the floor) and miss it at 2 degC/min by ~30x; the same run as its own held-out gives ratio 1."""
+    from host_tools.fitting.diagnose_report import GAP_WARN, generalization
+    from host_tools.simulation.sim_foreign import simulate_foreign
+
+    assert generalization(0.1, 0.1 * GAP_WARN)["warning"] and not generalization(0.1, 0.099 * GAP_WARN)["warning"]
+    assert generalization(0.0, 1.0)["ratio"] == float("inf")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tr = simulate_foreign(101, 4.0, True, 0, 0, effect="proxy_high_order", strength=3.9)
+        ho = simulate_foreign(101, 2.0, True, 1, 1, effect="proxy_high_order", strength=3.9)
+    rep, _ = diagnose([tr], [ho], plots=False, max_iter=0, out_dir=str(tmp_path / "d"))
+    g = rep["generalization"]
+    assert g["ratio"] >= GAP_WARN and "x the training error" in g["warning"]
+    assert g["holdout_dph"] == pytest.approx(rep["final"]["std100_dph"])
+    assert "**Warning:**" in (tmp_path / "d" / "diagnose.md").read_text()
+    assert json.loads((tmp_path / "d" / "diagnose.json").read_text())["generalization"]["warning"] == g["warning"]
+    same, _ = diagnose([tr], [tr], plots=False, max_iter=0)
+    assert same["generalization"]["ratio"] == pytest.approx(1.0) and same["generalization"]["warning"] is None
+    assert diagnose([tr], plots=False, max_iter=0)[0]["generalization"] is None   # no held-out runs
+    tr_p, ho_p = tmp_path / "tr.csv", tmp_path / "ho.csv"
+    runlog.write(tr, str(tr_p))
+    runlog.write(ho, str(ho_p))
+    import contextlib, io
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(io.StringIO()):
+        assert main(["diagnose", str(tr_p), "--holdout", str(ho_p), "--out", str(tmp_path / "c"), "--max-iter", "0",
+                     "--no-plots"]) == 0
+    assert "warning: the held-out error" in buf.getvalue()

@@ -61,6 +61,8 @@ def run(args) -> int:
         print(f"  {k}. {it['effect']} ({params}): {fmt_value(it['after']['std_dph'])} / {fmt_value(it['after']['std100_dph'])}"
               f"  [CV gain {it['cv_gain']:.3f} >= {it['threshold']:.3f}; {it['status']}]")
     print(f"  {report['verdict_detail']}")
+    if (report.get("generalization") or {}).get("warning"):
+        print(f"  warning: {report['generalization']['warning']}")
     for a in (report.get("artifacts") or {}).get("lines", []):
         print(f"  line at {a['period_s']:.4g} s ({a['at']}): {a['cause']}; fix: {a['structural_fix']}")
     if report.get("stopped"):

@@ -117,7 +117,7 @@ from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE,
                                          material_on_holdout, noise_floor, offsets_hold, step_errors)
 from host_tools.fitting.diagnose_noise import (_allan_bridged, _noise_series, artifact_of, characterize,  # noqa: F401
                                        combiner_lines, noise_model, spectral_lines, surrogates)
-from host_tools.fitting.diagnose_report import _verdict_detail, is_minor, verdict_of, write_report
+from host_tools.fitting.diagnose_report import _verdict_detail, generalization, is_minor, verdict_of, write_report
 from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, G_MIN, MAX_ITER, N_SURROGATES, NULL_QUANTILE,  # noqa: F401
                                       PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, _Accepted, _config, _explicit_weights,
                                       _poly_terms, _scan, _step_key, kind_of)
@@ -330,8 +330,10 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     stopped = stops.get("effect") or stops.get("structure")
     final = error_stats(evals, model)
     verdict = verdict_of(iterations)
+    final_train = error_stats(train, model) if hold else final
     report.update({"iterations": iterations, "final": _clean(final), "final_runs": final["runs"],
-                   "final_train": _clean(error_stats(train, model)) if hold else _clean(final),
+                   "final_train": _clean(final_train),
+                   "generalization": generalization(_score(final_train)[0], _score(final)[0]) if hold else None,
                    "verdict": verdict, "verdict_detail": _verdict_detail(iterations, hold),
                    "artifacts": artifacts, "stopped": stopped, "characterization": characterization})
     model.fit["diagnose"] = {"effects": [{"effect": a.family, "params": a.params} for a in accepted],

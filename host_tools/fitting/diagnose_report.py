@@ -42,6 +42,25 @@ def verdict_of(iterations) -> str:
     return VERDICTS[3] if iterations else VERDICTS[4]
 
 
+GAP_WARN = 10.0   # the report warns when the final held-out error is >= this x its training error
+
+
+def generalization(train_dph: float, holdout_dph: float) -> dict:
+    """The final model's held-out error against its training error (the loop's metric, deg/h):
+    {"train_dph", "holdout_dph", "ratio", "warning": text or None}.  A ratio >= GAP_WARN means the
+    model fits its training runs far better than a run it has not seen, and the cause is not in the
+    training residual, which is all the loop selects on.  Chosen on the loop bench's calibration
+    seed 1 (base models: clean FTR runs 4/20 at >= 10 x, clean MR 0/20; docs/LOOP.md)."""
+    ratio = holdout_dph / train_dph if train_dph > 0 else float("inf")
+    warning = None
+    if ratio >= GAP_WARN:
+        warning = (f"the held-out error ({holdout_dph:.3g} deg/h) is {ratio:.1f} x the training error "
+                   f"({train_dph:.3g} deg/h): the model fits its training runs far better than a run it "
+                   f"has not seen, and what limits it there is not in the training residual, which is all "
+                   f"the loop selects on; train on more runs (another chamber rate, another power-on)")
+    return {"train_dph": train_dph, "holdout_dph": holdout_dph, "ratio": ratio, "warning": warning}
+
+
 def _verdict_detail(iterations, hold) -> str:
     if not iterations:
         return "no candidate passed the selection rule on the training runs"
@@ -99,6 +118,8 @@ def markdown(doc, model) -> str:
         lines.append(f"| {k} | {it['effect']} | {params} | {_stats_line(it['after'])} | "
                      f"{fmt_value(it['cv_gain'])} | {fmt_value(it['threshold'])} | {it['status']} |")
     lines += ["", f"{doc['verdict_detail']}.  Confirmation: {doc['confirm_rule']}."]
+    if (doc.get("generalization") or {}).get("warning"):
+        lines += ["", f"**Warning:** {doc['generalization']['warning']}."]
     for a in (doc.get("artifacts") or {}).get("lines", []):
         lines += ["", f"Line at {a['period_s']:.4g} s ({a['at']}, {a['amp_dph']:.3g} deg/h): {a['cause']}.  "
                       f"Structural fix: {a['structural_fix']}."]
