@@ -8,7 +8,7 @@ import sys, numpy as np
 from host_tools.fitting import fit_lag as FL, fit_pipeline as FP
 from host_tools.golden.compensate import compensate
 from host_tools.golden.runlog import RunLog
-from host_tools.bench.accuracy import device_runs
+from host_tools.bench.accuracy import device_runs, heldout_valid
 from host_tools.simulation.sim_foreign import foreign_device
 TAUS = (60.0, 240.0, 960.0)
 def lag(x, tau):
@@ -24,11 +24,10 @@ def with_col(log, x, name="aux_w"):
     cols = dict(log.columns); cols[name] = x
     return RunLog.from_arrays(metadata=dict(log.metadata), source=log.source, **cols)
 def held(m, ho, fl):
-    out = compensate(ho, m); v = out["valid"] > 0
-    return float(np.std(out.rate_dph[v]) / fl), out
+    return float(np.std(heldout_valid(m, ho)) / fl)
 for seed in map(int, sys.argv[1:]):
     tr, ho, fl = device_runs(foreign_device(seed), True)
-    m0, _ = FP.fit_default([tr]); r0, _ = held(m0, ho, fl)
+    m0, _ = FP.fit_default([tr]); r0 = held(m0, ho, fl)
     f = np.asarray(tr.columns["freq_hz"], float); T = np.asarray(tr.columns["temp_c"], float)
     ref = (f.mean(), f.std(), T.mean(), T.std())
     Xtr, Xho = basis(tr, ref), basis(ho, ref)
@@ -42,7 +41,7 @@ for seed in map(int, sys.argv[1:]):
     FL.sensor_source = lambda logs, config: ("aux_w", 0.5 * (w_tr.min() + w_tr.max()), 0.6 * (w_tr.max() - w_tr.min()))
     saved = FL.SENSOR_TAUS_S; FL.SENSOR_TAUS_S = (0.0,)
     try:
-        m1, _ = FP.fit_default([tr2]); r1, _ = held(m1, ho2, fl)
+        m1, _ = FP.fit_default([tr2]); r1 = held(m1, ho2, fl)
     finally:
         FL.sensor_source = orig; FL.SENSOR_TAUS_S = saved
     print(seed, "base %.2f composite %.2f" % (r0, r1), m0.fit.get("lag_block", {}).get("chosen"), "->", m1.fit.get("lag_block", {}).get("chosen"), flush=True)

@@ -8,8 +8,8 @@ import json, sys, time
 import numpy as np
 from host_tools.fitting import fit_lag as FL
 from host_tools.fitting.fit import fit_logs, _rate_label
-from host_tools.golden.compensate import compensate, fit_config_from_logs
-from host_tools.bench.accuracy import damping_change_dph, device_runs, SEED_STRIDE
+from host_tools.golden.compensate import fit_config_from_logs
+from host_tools.bench.accuracy import damping_change_dph, device_runs, heldout_valid, SEED_STRIDE
 from host_tools.simulation.sim_foreign import foreign_device
 
 S, a, b, outp = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
@@ -17,9 +17,7 @@ CANDS = (("diff", 8, 4), ("diffn", 16, 4), ("lsq", 32, 4), ("iir", 8, 7), ("iir"
 
 
 def ratio(m, ho, fl):
-    out = compensate(ho, m)
-    v = out["valid"] > 0
-    return float(np.std(out.rate_dph[v]) / fl)
+    return float(np.std(heldout_valid(m, ho)) / fl)
 
 
 fo = open(outp, "w")

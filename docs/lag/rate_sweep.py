@@ -8,17 +8,15 @@ import numpy as np
 import host_tools.golden.compensate as C
 from host_tools.fitting import fit_lag as FL
 from host_tools.fitting.fit import fit_logs, RATE_CANDIDATES, _rate_label
-from host_tools.golden.compensate import compensate, fit_config_from_logs, prepare
-from host_tools.bench.accuracy import damping_change_dph, device_runs, SEED_STRIDE
+from host_tools.golden.compensate import fit_config_from_logs, prepare
+from host_tools.bench.accuracy import damping_change_dph, device_runs, heldout_valid, SEED_STRIDE
 from host_tools.simulation.sim_foreign import foreign_device
 
 S, a, b, outp = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
 
 
 def ratio(m, ho, fl):
-    out = compensate(ho, m)
-    v = out["valid"] > 0
-    return float(np.std(out.rate_dph[v]) / fl)
+    return float(np.std(heldout_valid(m, ho)) / fl)
 
 
 fo = open(outp, "w")

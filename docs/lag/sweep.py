@@ -8,13 +8,11 @@ from host_tools.fitting import fit_lag as FL
 from host_tools.simulation.sim_foreign import foreign_device
 from host_tools.fitting.fit import fit_logs
 from host_tools.fitting.fit_pipeline import fit_default
-from host_tools.golden.compensate import compensate
-from host_tools.bench.accuracy import damping_change_dph, device_runs
+from host_tools.bench.accuracy import damping_change_dph, device_runs, heldout_valid
 a, b, outp = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
 C.DEFAULT_LAG_BLOCK = "off"
 def ratio(m, ho, fl):
-    out = compensate(ho, m); v = out["valid"] > 0
-    return float(np.std(out.rate_dph[v]) / fl)
+    return float(np.std(heldout_valid(m, ho)) / fl)
 fo = open(outp, "w")
 for seed in range(a, b):
     dev = foreign_device(seed)

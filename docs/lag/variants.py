@@ -6,8 +6,7 @@ import json, sys, time
 import numpy as np
 import host_tools.golden.compensate as C
 from host_tools.fitting import fit_lag as FL, fit as F, fit_pipeline as FP
-from host_tools.golden.compensate import compensate
-from host_tools.bench.accuracy import damping_change_dph, device_runs, SEED_STRIDE
+from host_tools.bench.accuracy import damping_change_dph, device_runs, heldout_valid, SEED_STRIDE
 from host_tools.simulation.sim_foreign import foreign_device
 
 VARIANTS = {
@@ -95,9 +94,7 @@ def run(tr, ho, fl, var):
         t = time.time()
         m, _ = FP.fit_default([tr])
         dt = time.time() - t
-        out = compensate(ho, m)
-        v = out["valid"] > 0
-        return {"r": float(np.std(out.rate_dph[v]) / fl), "t": dt, "lag": m.fit.get("lag_block", {}).get("chosen"),
+        return {"r": float(np.std(heldout_valid(m, ho)) / fl), "t": dt, "lag": m.fit.get("lag_block", {}).get("chosen"),
                 "rate": m.config.rate.estimator + str(m.config.rate.shift if m.config.rate.estimator == "iir" else m.config.rate.n)}
     finally:
         for k, v in saved.items():

@@ -139,6 +139,13 @@ def floor_of(floor_log) -> float:
     return _std(floor_log.rate_dph)
 
 
+def heldout_valid(model, holdout) -> np.ndarray:
+    """The compensated output [deg/h] of ``holdout`` under ``model`` at its valid samples: the
+    benchmark's metric is its std at 1 s (over the run's floor, :func:`floor_of`)."""
+    out = compensate(holdout, model)
+    return out.rate_dph[out["valid"] > 0]
+
+
 def evaluate_option(opt: Option, train, holdout) -> tuple[float, str]:
     """(held-out std at 1 s over valid samples [deg/h], error text or '')."""
     try:
@@ -156,11 +163,10 @@ def evaluate_option(opt: Option, train, holdout) -> tuple[float, str]:
             est, n, shift = ESTIMATORS[opt.est]
             cfg = fit_config_from_logs([train], rate_estimator=est, n=n, shift=shift, reversal=rev)
             model, _ = fit_logs([train], cfg, terms=opt.terms, significance=opt.sig)
-        out = compensate(holdout, model)
-        valid = out["valid"] > 0
-        if valid.sum() < 2:
+        x = heldout_valid(model, holdout)
+        if len(x) < 2:
             return float("nan"), "no valid held-out sample"
-        return _std(out.rate_dph[valid]), ""
+        return _std(x), ""
     except (ValueError, np.linalg.LinAlgError) as exc:
         return float("nan"), f"{type(exc).__name__}: {exc}"
 
