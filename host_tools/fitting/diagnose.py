@@ -73,7 +73,12 @@ Procedure (:func:`diagnose`)
    exchange with ONE coefficient for both banks, i.e. a transient that follows the mode sign like
    the rate, tau <= 2 x the settle window), then for mode-reversal logs the order/combiner
    (:func:`_order_step`: regress_first with each other combiner, whole-model CV), confirmed the
-   same way; phase 2 offers the effect families on the residual of the structured base, and the
+   same way.  Beside the structure phase 1 also scores the drift in time (``COMPETE_FAMILIES``:
+   aging, a ramp or a decay longer than any turn-on), which a lag of the proxy of thousands of
+   seconds mimics; it is taken there, as an effect step, only when it leaves at most
+   1/DRIFT_MARGIN (1.7) of the residual variance the best structural candidate leaves (chosen on
+   calibration seed 1, docs/LOOP.md "A drift beside the structure"); else phase 2 has it as
+   before.  Phase 2 offers the effect families on the residual of the structured base, and the
    higher powers of the proxy (u^4, u^5: reported as structure, the order of the model's own
    polynomial, but scanned here: ``SCANNED_WITH_EFFECTS``).  Steps
    carry ``kind`` 'structure' / 'effect'; the verdict is "effect found" only for a kept effect
@@ -118,8 +123,8 @@ from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE,
 from host_tools.fitting.diagnose_noise import (_allan_bridged, _noise_series, artifact_of, characterize,  # noqa: F401
                                        combiner_lines, noise_model, spectral_lines, surrogates)
 from host_tools.fitting.diagnose_report import _verdict_detail, generalization, is_minor, verdict_of, write_report
-from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, G_MIN, MAX_ITER, N_SURROGATES, NULL_QUANTILE,  # noqa: F401
-                                      PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, _Accepted, _config, _explicit_weights,
+from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, DRIFT_MARGIN, G_MIN, MAX_ITER, N_SURROGATES,  # noqa: F401
+                                      NULL_QUANTILE, PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, _Accepted, _config, _explicit_weights,
                                       _poly_terms, _scan, _step_key, kind_of)
 from host_tools.fitting.diagnose_structure import _order_step, _settle_step
 from host_tools.fitting.fit import fit_logs
@@ -135,10 +140,13 @@ RULE = ("accept the best candidate iff (a) its cross-validated gain (1 - held-ou
         "fitted to the residual's Allan variance at short taus, through the combiner), mapped back "
         "through the candidate's own null, and (c) it lowers the held-out error in a strict "
         "majority of the folds; ties within 5 % prefer a regressor of the proxy alone; then refine "
-        "its parameter; stop when no candidate passes or after max_iter iterations")
+        "its parameter; stop when no candidate passes or after max_iter iterations; in the structure phase a "
+        "drift in time (aging) is scored beside the structure, outside its max-T, and taken there only when it "
+        f"leaves <= 1/{DRIFT_MARGIN:g} of the CV residual of the best structural candidate")
 
 
 COMPETE = False   # structure phase: score the effect candidates too and yield to a better one (see diagnose())
+COMPETE_FAMILIES = ("aging",)   # ... these always, under diagnose_scan.DRIFT_MARGIN: a drift in time, which a long lag mimics
 
 
 def base_options(*, proxy=None, rate_estimator=None, rate_n=None, rate_shift=None, combiner=None, order=None,
@@ -239,9 +247,10 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
             # on 76 bench runs it found 2 more aging/turn-on effects but raised "effect found" on clean
             # runs from 3/26 to 8/26: the clean devices' own dynamics then win as effects.  Not kept.)
             compete = COMPETE and phase == "structure" and "effect" in phases
+            also = frozenset(COMPETE_FAMILIES) if phase == "structure" and "effect" in phases else frozenset()
             scan = _scan(train, cfg, model, poly, gen_terms, rng, n_surrogates, g_min, cv_blocks, cv_folds,
                          families, rate_alternatives and rate_choice is None, frozenset(excluded),
-                         phase=None if compete else phase)
+                         phase=None if compete else phase, also=also)
             if characterization is None:
                 characterization = {"train": scan["characterization"],
                                     "holdout": [characterize(log, r, pr.valid, cfg.rate.fs, pr.v)

@@ -287,6 +287,8 @@ PHASES = ("structure", "effect")
 # 100 s instead of -> 10.1); a higher power of the proxy is not a dynamic that could masquerade as an effect
 SCANNED_WITH_EFFECTS = ("proxy_high_order",)
 STRUCT_TAU_FRACTION = 0.25   # structure phase: lags (block, second thermometer) <= this x the longest run
+DRIFT_MARGIN = 1.7           # structure phase: a drift (diagnose.COMPETE_FAMILIES) wins only leaving <= 1/this of
+                             # the best structural candidate's residual (chosen on calibration seed 1, docs/LOOP.md)
 
 
 def kind_of(family, params) -> str:
@@ -313,9 +315,10 @@ def _step_key(family, params) -> str:
 
 
 def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_folds, families, rate_alt,
-          excluded=frozenset(), phase=None):
+          excluded=frozenset(), phase=None, also=frozenset()):
     """Score every candidate (module doc, steps 3-4) against the current base; returns a dict with
-    the ranking, the null, the decision and the (refined) winner."""
+    the ranking, the null, the decision and the (refined) winner.  ``phase``: offer only that
+    phase's candidates (None: all), and the families in ``also`` besides."""
     fs = cfg.rate.fs
     preps = [prepare(log, replace(cfg, aux=AuxConfig())) for log in train]
     gen_cols = [[generator_values(log, t, fs) for t in gen_terms] for log in train]
@@ -377,13 +380,14 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
     have = [json.dumps(t, sort_keys=True) for t in gen_terms]
     cands = [c for c in cands if not any(json.dumps(t, sort_keys=True) in have for t in c.terms)
              and _step_key(c.family, c.params) not in excluded
-             and (phase is None or phase_of(c.family, c.params) == phase)]
+             and (phase is None or phase_of(c.family, c.params) == phase or c.family in also)]
     dur = max(float(log.t_s[-1] - log.t_s[0]) for log in train)
 
     def tau_cap(c):
         # a structural lag longer than a quarter of the run is a ramp (aging), not the device's dynamics
-        cap = STRUCT_TAU_FRACTION * dur if kind_of(c.family, c.params) == "structure" else dur
-        return min(cap, c.extra.get("max_tau_s", cap))
+        if kind_of(c.family, c.params) == "structure":
+            return min(STRUCT_TAU_FRACTION * dur, c.extra.get("max_tau_s", dur))
+        return c.extra.get("max_tau_s", dur)     # an aging decay may run longer than the run
 
     cands = [c for c in cands if c.params.get("tau_s", 0.0) <= tau_cap(c)]
     rows = []
@@ -447,7 +451,11 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
     if nsur:     # robust location / upper-tail scale: a wild negative tail must not inflate the bar
         mu = np.median(nulls, axis=1)
         sd = np.maximum(np.quantile(nulls, 0.8413, axis=1) - mu, NULL_SD_FLOOR)
-        null_max = ((nulls - mu[:, None]) / sd[:, None]).max(axis=0)
+        # the families offered beside a phase (``also``) are not in its max-T: the phase's own bar
+        # stays what it was without them
+        own = np.array([r["family"] not in also for r in rows]) if phase is not None else np.ones(len(rows), bool)
+        own = own if own.any() else np.ones(len(rows), bool)
+        null_max = ((nulls[own] - mu[own, None]) / sd[own, None]).max(axis=0)
         t_level = float(np.quantile(null_max, NULL_QUANTILE))
     else:
         mu, sd, null_max, t_level = np.zeros(len(rows)), np.ones(len(rows)), np.zeros(0), -np.inf
@@ -461,6 +469,19 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
     out.update(ranking=[{k: r[k] for k in keys} for r in rows[:TOP_RANKING]], threshold=threshold,
                null_max=[float(x) for x in null_max])
     passing = [r for r in rows if r["significant"]]
+    others = [r["gain"] for r in rows if r["family"] not in also]
+    if also and others and phase is not None:
+        # an effect family offered beside the structure (a drift in time, which a long lag of the
+        # proxy mimics) is taken first only when it leaves 1/DRIFT_MARGIN of the residual variance
+        # the best structural candidate leaves, or less
+        left = 1.0 - max(others)
+        kept = [r for r in passing if r["family"] not in also or left >= DRIFT_MARGIN * (1.0 - r["gain"])]
+        if passing and not kept:
+            out["reason"] = (f"{passing[0]['label']} (CV gain {passing[0]['gain']:.4f}) does not leave 1/{DRIFT_MARGIN:g} "
+                             f"of the best structural candidate's residual: the effect phase takes it")
+            out["best"] = {k: passing[0][k] for k in keys}
+            return out
+        passing = kept
     if any(r["family"] != "rate_estimator" for r in passing):
         # a longer rate warm-up hides the start of every run (turn-on): effects first
         passing = [r for r in passing if r["family"] != "rate_estimator"]

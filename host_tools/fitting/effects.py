@@ -32,7 +32,9 @@ proxy_high_order     u^4, u^5                                                 po
 board_temp           the other temperature column (temp_c when the proxy is   tau_s in 0 + grid
                      freq_hz, and vice versa), normalized, and its lags
 aux_<name>           every aux_* column, normalized, and its lags             tau_s in 0 + grid
-aging                time since power-on, t / T                               -
+aging                time since power-on, t / T; and decay since power-on     tau_s > MAX_TURN_ON_
+                     exp(-t/tau), tau beyond a turn-on (the drift             FRACTION x run,
+                     A (1 - exp(-t/tau)) up to the constant k0)               <= AGING_MAX_FRACTION
 periodic             sin and cos (2 columns) at the periods of the strongest  period_s
                      lines of the residual spectrum
 ===================  =======================================================  ======================
@@ -63,6 +65,7 @@ RAMP_MARGIN = 0.1
 MAX_TAU_FRACTION = 0.5     # thermal_lag / board_temp / aux lags: tau <= this x the longest training run
 LAG_BLOCK_ORDER = 3          # thermal_lag block: lag(u, tau)^1..3, three columns
 MAX_TURN_ON_FRACTION = 0.25  # turn_on: tau <= this x the longest training run (it must have decayed)
+AGING_MAX_FRACTION = 4.0     # aging: decays with MAX_TURN_ON_FRACTION x run < tau <= this x run (grid ratio 2)
 SETTLING_TAU_FACTOR = 2.0    # exchange_settling: tau <= this x the settle window (a longer window would remove it)
 FAMILIES = ("thermal_lag", "turn_on", "exchange_transient", "exchange_settling", "imperfect_reversal",
             "proxy_high_order", "board_temp", "aux", "aging", "periodic")
@@ -200,6 +203,14 @@ def library(train_logs, config, *, tau_grid=TAU_GRID_S, exchange_taus=EXCHANGE_T
         n_samples = max(1, int(math.ceil((1.0 + RAMP_MARGIN) * max(kmax, 1))))
         out.append(Candidate("aging", {"n_samples": n_samples},
                              (_term("ramp", "aging", n_samples=n_samples),)))
+        # a drift that has not settled in the run: exp(-t/tau) beyond every turn-on tau (a decay
+        # that does not finish in the run is a drift, one that does is a turn-on transient)
+        tau = float(tau_grid[0])
+        while tau <= AGING_MAX_FRACTION * dur:
+            if tau > MAX_TURN_ON_FRACTION * dur:
+                out.append(Candidate("aging", {"tau_s": tau}, (_term("decay_on", "aging", tau_s=tau),), "tau_s",
+                                     {"max_tau_s": AGING_MAX_FRACTION * dur, "min_tau_s": MAX_TURN_ON_FRACTION * dur}))
+            tau *= 2.0
     if "periodic" in want:
         for period in periods:
             out.append(periodic(float(period)))
@@ -230,7 +241,7 @@ def refine(cand: Candidate, ratios=(2 ** -0.5, 2 ** -0.25, 2 ** 0.25, 2 ** 0.5),
     out = []
     for r in ratios:
         v = value * r
-        if max_value is not None and v > max_value:
+        if (max_value is not None and v > max_value) or v <= cand.extra.get("min_tau_s", 0.0):
             continue
         out.append(with_param(cand, cand.scan, v))
     return out
