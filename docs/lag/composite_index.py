@@ -8,7 +8,7 @@ import sys, numpy as np
 from host_tools.fitting import fit_lag as FL, fit_pipeline as FP
 from host_tools.golden.compensate import compensate
 from host_tools.golden.runlog import RunLog
-from host_tools.bench.accuracy import device_runs, heldout_valid
+from host_tools.bench.accuracy import device_runs, heldout_ratio as held
 from host_tools.simulation.sim_foreign import foreign_device
 TAUS = (60.0, 240.0, 960.0)
 def lag(x, tau):
@@ -23,8 +23,6 @@ def basis(log, ref):
 def with_col(log, x, name="aux_w"):
     cols = dict(log.columns); cols[name] = x
     return RunLog.from_arrays(metadata=dict(log.metadata), source=log.source, **cols)
-def held(m, ho, fl):
-    return float(np.std(heldout_valid(m, ho)) / fl)
 for seed in map(int, sys.argv[1:]):
     tr, ho, fl = device_runs(foreign_device(seed), True)
     m0, _ = FP.fit_default([tr]); r0 = held(m0, ho, fl)

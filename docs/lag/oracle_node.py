@@ -8,7 +8,7 @@ import sys
 import numpy as np
 from host_tools.fitting import fit_lag as FL, fit_pipeline as FP
 from host_tools.golden.runlog import RunLog
-from host_tools.bench.accuracy import device_runs, heldout_valid
+from host_tools.bench.accuracy import device_runs, heldout_ratio
 from host_tools.simulation.sim_foreign import foreign_device, chamber_profile, node_temperatures
 
 def with_col(log, dev, rate, node, name="aux_te"):
@@ -23,7 +23,7 @@ def ratio(tr, ho, fl, patch):
     for k, v in patch.items(): setattr(FL, k, v)
     try:
         m, _ = FP.fit_default([tr])
-        return float(np.std(heldout_valid(m, ho)) / fl), m.fit.get("lag_block", {}).get("chosen")
+        return heldout_ratio(m, ho, fl), m.fit.get("lag_block", {}).get("chosen")
     finally:
         for k, v in saved.items(): setattr(FL, k, v)
 

@@ -5,28 +5,20 @@
 the lag-state block (fit_lag.add_lag_block) with its CV rms; held-out std / floor of both, as in
 `hdrg bench accuracy`.  docs/lag/rate_prefer_analyze.py replays selection rules from these."""
 import json, sys, time
-import numpy as np
 from host_tools.fitting import fit_lag as FL
 from host_tools.fitting.fit import fit_logs, _rate_label
 from host_tools.golden.compensate import fit_config_from_logs
-from host_tools.bench.accuracy import damping_change_dph, device_runs, heldout_valid, SEED_STRIDE
-from host_tools.simulation.sim_foreign import foreign_device
+from host_tools.bench.accuracy import heldout_ratio, set_devices, SEED_STRIDE
 
 S, a, b, outp = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
 CANDS = (("diff", 8, 4), ("diffn", 16, 4), ("lsq", 32, 4), ("iir", 8, 7), ("iir", 8, 9), ("iir", 8, 10), ("lsq", 128, 4))
 
 
-def ratio(m, ho, fl):
-    return float(np.std(heldout_valid(m, ho)) / fl)
 
 
 fo = open(outp, "w")
-for i in range(a, b):
-    seed = S * SEED_STRIDE + i
-    dev = foreign_device(seed)
-    rec = {"seed": seed, "dc": damping_change_dph(dev)}
-    for rev in (False, True):
-        tr, ho, fl = device_runs(dev, rev)
+for rec, cases in set_devices(S * SEED_STRIDE + i for i in range(a, b)):
+    for key, tr, ho, fl in cases:
         rows = []
         for est, n, sh in CANDS:
             e = {"est": _rate_label(est, n, sh)}
@@ -34,13 +26,13 @@ for i in range(a, b):
             try:
                 cfg = fit_config_from_logs([tr], rate_estimator=est, n=n, shift=sh)
                 m, r = fit_logs([tr], cfg, None, blocks=True, drop_unidentifiable=True)
-                e["cv"] = r.cv["cv_rms"]; e["r"] = ratio(m, ho, fl)
+                e["cv"] = r.cv["cv_rms"]; e["r"] = heldout_ratio(m, ho, fl)
                 m2, r2 = FL.add_lag_block([tr], m, r)
-                e["cv_lag"] = r2.cv["cv_rms"]; e["r_lag"] = ratio(m2, ho, fl); e["lag"] = m2.fit["lag_block"]["chosen"]
+                e["cv_lag"] = r2.cv["cv_rms"]; e["r_lag"] = heldout_ratio(m2, ho, fl); e["lag"] = m2.fit["lag_block"]["chosen"]
             except ValueError as exc:
                 e["err"] = str(exc)[:200]
             e["t"] = time.time() - t
             rows.append(e)
-        rec["mr" if rev else "ftr"] = rows
+        rec[key] = rows
     fo.write(json.dumps(rec) + "\n"); fo.flush()
-    print(seed, "done", flush=True)
+    print(rec["seed"], "done", flush=True)

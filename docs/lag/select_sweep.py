@@ -9,15 +9,10 @@ from host_tools.fitting import fit_lag as FL
 from host_tools.fitting.fit import fit_logs
 from host_tools.fitting.fit_pipeline import fit_default
 from host_tools.golden.compensate import prepare
-from host_tools.bench.accuracy import damping_change_dph, device_runs, heldout_valid, SEED_STRIDE
-from host_tools.simulation.sim_foreign import foreign_device
+from host_tools.bench.accuracy import heldout_ratio, set_devices, SEED_STRIDE
 
 S, a, b, outp = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
 C.DEFAULT_LAG_BLOCK = "off"
-
-
-def ratio(m, ho, fl):
-    return float(np.std(heldout_valid(m, ho)) / fl)
 
 
 def phase_groups(pr, n):
@@ -67,22 +62,17 @@ def per_group_sse(banks, idx):
 
 
 fo = open(outp, "w")
-for i in range(a, b):
-    seed = S * SEED_STRIDE + i
-    dev = foreign_device(seed)
-    rec = {"seed": seed, "dc": damping_change_dph(dev)}
-    for rev in (False, True):
-        key = "mr" if rev else "ftr"
-        tr, ho, fl = device_runs(dev, rev)
+for rec, cases in set_devices(S * SEED_STRIDE + i for i in range(a, b)):
+    for key, tr, ho, fl in cases:
         m, r = fit_default([tr])
         if r.cv is None:
             m, r = fit_logs([tr], m.config, None, blocks=True)
-        d = {"base": ratio(m, ho, fl), "base_cv": r.cv["cv_rms"], "rate": m.fit.get("rate_selection", {}).get("chosen")}
+        d = {"base": heldout_ratio(m, ho, fl), "base_cv": r.cv["cv_rms"], "rate": m.fit.get("rate_selection", {}).get("chosen")}
         cfg = m.config
         poly = (0,) + tuple(sorted(k for k in m.terms if k not in (0, 7)))
         duration = float(tr.t_s[-1] - tr.t_s[0])
         sensor = FL.sensor_source([tr], cfg)
-        cands = FL.candidates(duration, rev, sensor_taus=FL.SENSOR_TAUS_S if sensor else ())
+        cands = FL.candidates(duration, tr.reversal, sensor_taus=FL.SENSOR_TAUS_S if sensor else ())
         keys = sorted({FL._key(e) for c in cands for e in c})
         npoly = len(poly)
 
@@ -121,10 +111,10 @@ for i in range(a, b):
             else:
                 try:
                     m2, r2 = fit_logs([tr], cfg2, None, blocks=True, drop_unidentifiable=True)
-                    e["cv"] = r2.cv["cv_rms"]; e["ratio"] = ratio(m2, ho, fl); e["k7"] = 7 in m2.terms
+                    e["cv"] = r2.cv["cv_rms"]; e["ratio"] = heldout_ratio(m2, ho, fl); e["k7"] = 7 in m2.terms
                 except ValueError as exc:
                     e["err"] = str(exc)[:100]
             d["cands"].append(e)
         rec[key] = d
     fo.write(json.dumps(rec) + "\n"); fo.flush()
-    print(seed, "done", flush=True)
+    print(rec["seed"], "done", flush=True)

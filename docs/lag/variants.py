@@ -6,8 +6,7 @@ import json, sys, time
 import numpy as np
 import host_tools.golden.compensate as C
 from host_tools.fitting import fit_lag as FL, fit as F, fit_pipeline as FP
-from host_tools.bench.accuracy import damping_change_dph, device_runs, heldout_valid, SEED_STRIDE
-from host_tools.simulation.sim_foreign import foreign_device
+from host_tools.bench.accuracy import heldout_ratio, set_devices, SEED_STRIDE
 
 VARIANTS = {
     "base": {},                                   # the defaults as committed
@@ -94,7 +93,7 @@ def run(tr, ho, fl, var):
         t = time.time()
         m, _ = FP.fit_default([tr])
         dt = time.time() - t
-        return {"r": float(np.std(heldout_valid(m, ho)) / fl), "t": dt, "lag": m.fit.get("lag_block", {}).get("chosen"),
+        return {"r": heldout_ratio(m, ho, fl), "t": dt, "lag": m.fit.get("lag_block", {}).get("chosen"),
                 "rate": m.config.rate.estimator + str(m.config.rate.shift if m.config.rate.estimator == "iir" else m.config.rate.n)}
     finally:
         for k, v in saved.items():
@@ -102,13 +101,8 @@ def run(tr, ho, fl, var):
 
 
 fo = open(outp, "w")
-for i in range(a, b):
-    seed = S * SEED_STRIDE + i
-    dev = foreign_device(seed)
-    rec = {"seed": seed, "dc": damping_change_dph(dev)}
-    for rev in (False, True):
-        key = "mr" if rev else "ftr"
-        tr, ho, fl = device_runs(dev, rev)
+for rec, cases in set_devices(S * SEED_STRIDE + i for i in range(a, b)):
+    for key, tr, ho, fl in cases:
         rec[key] = {n: run(tr, ho, fl, VARIANTS[n]) for n in names}
     fo.write(json.dumps(rec) + "\n"); fo.flush()
-    print(seed, "done", flush=True)
+    print(rec["seed"], "done", flush=True)

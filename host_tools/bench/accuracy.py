@@ -146,6 +146,22 @@ def heldout_valid(model, holdout) -> np.ndarray:
     return out.rate_dph[out["valid"] > 0]
 
 
+def heldout_ratio(model, holdout, floor) -> float:
+    """np.std of :func:`heldout_valid` over ``floor``: the held-out ratio the docs/lag measurement
+    scripts record (the benchmark's ratio, without its guard for fewer than two valid samples)."""
+    return float(np.std(heldout_valid(model, holdout)) / floor)
+
+
+def set_devices(seeds, reversals=(False, True)):
+    """For the docs/lag measurement scripts: per seed of ``seeds`` a pair (rec, cases), rec =
+    {'seed', 'dc': :func:`damping_change_dph`}, cases = a lazy iterator over ``reversals`` of
+    (key 'ftr' / 'mr', train, hold, floor) from :func:`device_runs` (consume it before the next seed)."""
+    for seed in seeds:
+        dev = foreign_device(seed)
+        yield ({"seed": seed, "dc": damping_change_dph(dev)},
+               (("mr" if rev else "ftr",) + device_runs(dev, rev) for rev in reversals))
+
+
 def evaluate_option(opt: Option, train, holdout) -> tuple[float, str]:
     """(held-out std at 1 s over valid samples [deg/h], error text or '')."""
     try:
