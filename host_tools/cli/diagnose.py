@@ -67,5 +67,7 @@ def run(args) -> int:
         print(f"  line at {a['period_s']:.4g} s ({a['at']}): {a['cause']}; fix: {a['structural_fix']}")
     if report.get("stopped"):
         print(f"  stopped: {report['stopped']['reason']}")
+        if report["stopped"].get("not_offered"):
+            print(f"  firmware capacity: {report['stopped']['not_offered']}")
     print(f"written: {os.path.join(args.out, 'diagnose.md')}, diagnose.json, model.json")
     return 0

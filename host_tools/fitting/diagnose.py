@@ -52,20 +52,23 @@ Procedure (:func:`diagnose`)
 
    Ties: among the candidates within 5 % (relative) of the best gain, one computed from the proxy,
    the mode and the sample counter alone is preferred to one that needs another logged channel
-   (board_temp, aux_*) (:func:`_preferred`).  The winner's continuous parameter (tau or period)
+   (board_temp, aux, aux_*) (:func:`_preferred`).  The winner's continuous parameter (tau or period)
    is then refined on finer grids (ratios 2^(+-1/4, +-1/2), then 2^(+-1/8); periods +-2, 4 %,
    then +-1 %) by the same CV gain.  Periodic candidates: at the periods of significant lines of
    the training residual (power / continuum > ln(bins / 0.01)) and on a period grid (120 s ..
-   a third of the run, ratio 2^(1/4)); never at a **combiner line** (:func:`combiner_lines`: the
+   half the run: two cycles, ratio 2^(1/4)); never at a **combiner line** (:func:`combiner_lines`: the
    reversal cycle, its harmonics and their sidebands with the chamber cycle), which is reported
    in ``artifacts`` with the combiner as the cause and the structural fix.
+   **Firmware capacity**: the k7 sum holds at most AUX_MAX_TERMS (6) terms, so a candidate that
+   would not fit beside the accepted generators is not offered (``not_offered`` in ``stopped``).
 5. **Add the effect**: the polynomial terms plus every accepted generator as its own column are
    refitted by a small explicit least-squares solve on the training runs; the generator weights
    are normalized by the sum of their magnitudes (so |z| <= 1 everywhere, host_tools.golden.regressors)
    and baked into ``AuxConfig('sum', ...)``; the fitter then fits the 17 coefficients with k7.
    (A rate_estimator winner changes the model's rate estimator instead.)  **Confirm** it on the
    held-out runs (:data:`CONFIRM_RULE`): if the held-out error does not drop, the step is
-   reported ``confirmed: false`` and reverted, its family is not offered again.  Iterate while a
+   reported ``confirmed: false`` and reverted, its family is not offered again (a periodic
+   step: the periods within PERIOD_EXCLUDE_RATIO = 2^(1/2) of it).  Iterate while a
    candidate passes the rule, at most ``max_iter`` (3) times per phase.  **Structure first**
    (:data:`PHASES`): phase 1 offers only the structural candidates (:func:`kind_of`: the rate
    estimator, the lag-state block of the proxy, board_temp = the second thermometer, lags <=
@@ -264,7 +267,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                         "reason": f"an effect candidate ({w['label']}, CV gain {w['gain']:.3f}) explains more than "
                                   f"every structural candidate: the effect phase takes it"}
             if not scan["accept"]:
-                stopped = {k: scan[k] for k in ("best", "threshold", "ranking", "reason", "null_max")}
+                stopped = {k: scan[k] for k in ("best", "threshold", "ranking", "reason", "null_max", "not_offered")}
                 stopped["phase"] = phase
                 break
             best = scan["winner"]

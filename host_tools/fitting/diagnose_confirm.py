@@ -24,7 +24,7 @@ CONFIRM_RULE = ("a step is confirmed iff, on the held-out runs, the std of 100-s
                 "100 s is undefined) drops by >= 5 %, the std of 1-s averages rises by at most 1 % and, per "
                 "held-out run, the leg rms (quadratic mean over its gap-free segments of each segment's rms, "
                 "mean offset included) rises by at most 5 %; an unconfirmed step is reverted and its family "
-                "not offered again")
+                "not offered again (a periodic step: the periods within a factor 2^(1/2) of its period)")
 EFFECT_MIN_DROP = 0.18       # an effect is NAMED ("effect found") only when its step lowers the held-out error >= 18 %
 EFFECT_RULE = ("a confirmed step of kind 'effect' names an effect (verdict \"effect found\") only when it lowers the "
                f"held-out error by >= {100 * EFFECT_MIN_DROP:.0f} % (material); a confirmed effect step with a smaller drop stays in the "

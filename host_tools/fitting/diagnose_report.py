@@ -130,6 +130,8 @@ def markdown(doc, model) -> str:
     if doc.get("stopped"):
         st = doc["stopped"]
         lines += [f"Stopped: {st['reason']}.", ""]
+        if st.get("not_offered"):
+            lines += [f"Firmware capacity: {st['not_offered']}.", ""]
         if st.get("ranking"):
             lines += ["Best remaining candidates (CV gain, folds improved):", ""]
             lines += [f"* {r['label']}: {r['gain']:.4f} ({r['folds_improved']}/{r['folds']})"

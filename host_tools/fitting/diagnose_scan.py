@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from firmware_ref.formats import AUX_MAX_TERMS
 from firmware_ref.terms import K_AUX
 from host_tools.fitting import effects
 from host_tools.golden import runlog as rl
@@ -32,8 +33,10 @@ NULL_SD_FLOOR = 0.005        # max-T: smallest upper-tail scale of a candidate's
 MAX_ITER = 3
 CV_BLOCKS = 16               # single training run: contiguous blocks ...
 CV_FOLDS = 4                 # ... dealt round-robin into folds
-PERIOD_GRID_MIN_S = 120.0    # ... plus a grid of periods from this, ratio 2^(1/4), up to a third of the run
+PERIOD_GRID_MIN_S = 120.0    # ... plus a grid of periods from this, ratio 2^(1/4), ...
 PERIOD_GRID_RATIO = 2 ** 0.25
+PERIOD_EXCLUDE_RATIO = 2 ** 0.5   # a reverted periodic step excludes the periods within this ratio (None: the family)
+PERIOD_GRID_MAX_FRACTION = 0.5   # ... up to half the training run: two cycles, the fewest that tell a line from a drift
 RATE_ALTERNATIVES_S = (16.0, 64.0)   # rate_estimator candidates: lsq windows [s] ...
 RATE_IIR_TAUS_S = (8.0, 32.0, 128.0, 512.0)   # ... and iir time constants 2^shift / fs [s]
 TOP_RANKING = 12
@@ -310,8 +313,23 @@ def phase_of(family, params) -> str:
 
 
 def _step_key(family, params) -> str:
-    """The name under which a reverted step is not offered again: the family; the lag block apart."""
+    """The name under which a reverted step is not offered again: the family; the lag block apart;
+    with PERIOD_EXCLUDE_RATIO a periodic step by its period (:func:`_excluded`)."""
+    if family == "periodic" and PERIOD_EXCLUDE_RATIO:
+        return f"periodic@{float(params['period_s'])!r}"
     return "thermal_lag_block" if family == "thermal_lag" and "order" in params else family
+
+
+def _excluded(c, excluded) -> bool:
+    """Candidate ``c`` is not offered again: its step key was reverted, or (PERIOD_EXCLUDE_RATIO) it
+    is a period within that ratio of a reverted period: another line may still be tried."""
+    if _step_key(c.family, c.params) in excluded:
+        return True
+    if c.family != "periodic" or not PERIOD_EXCLUDE_RATIO:
+        return False
+    p = float(c.params["period_s"])
+    return any(max(p / q, q / p) <= PERIOD_EXCLUDE_RATIO
+               for q in (float(k.split("@", 1)[1]) for k in excluded if k.startswith("periodic@")))
 
 
 def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_folds, families, rate_alt,
@@ -374,13 +392,18 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
     if (families is None or "periodic" in families) and phase != "structure":      # a period grid too: a line may hide under slow residual
         dur = max(float(log.t_s[-1] - log.t_s[0]) for log in train)
         grid = PERIOD_GRID_MIN_S * PERIOD_GRID_RATIO ** np.arange(64)
-        cands += [effects.periodic(float(p)) for p in grid[grid <= dur / 3.0]
+        cands += [effects.periodic(float(p)) for p in grid[grid <= PERIOD_GRID_MAX_FRACTION * dur]
                   if not artifact_of(float(p), clines) and all(abs(p / q - 1.0) > 0.05 for q in periods)]
     # drop candidates equal to an accepted generator
     have = [json.dumps(t, sort_keys=True) for t in gen_terms]
     cands = [c for c in cands if not any(json.dumps(t, sort_keys=True) in have for t in c.terms)
-             and _step_key(c.family, c.params) not in excluded
+             and not _excluded(c, excluded)
              and (phase is None or phase_of(c.family, c.params) == phase or c.family in also)]
+    # the model goes to the firmware: its k7 sum holds at most AUX_MAX_TERMS terms, so a candidate
+    # that would not fit beside the accepted ones is not offered (the report says how many)
+    room = AUX_MAX_TERMS - len(gen_terms)
+    n_full = sum(len(c.terms) > room for c in cands)
+    cands = [c for c in cands if len(c.terms) <= room]
     dur = max(float(log.t_s[-1] - log.t_s[0]) for log in train)
 
     def tau_cap(c):
@@ -440,9 +463,11 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
                          "_cand": None, "_null": g[1:]})
     out = {"characterization": charac, "artifacts": artifacts, "combiner_lines": clines,
            "noise_models": noise_models, "accept": False, "reason": None, "winner": None, "ranking": [],
-           "best": None, "threshold": None, "null_max": []}
+           "best": None, "threshold": None, "null_max": [],
+           "not_offered": (f"{n_full} candidates not offered: the firmware's k7 sum holds at most {AUX_MAX_TERMS} "
+                           f"terms and {len(gen_terms)} are taken" if n_full else None)}
     if not rows:
-        out["reason"] = "no candidates"
+        out["reason"] = "no candidates" + (f" ({out['not_offered']})" if n_full else "")
         return out
     # rule (b): the largest gain of the whole scan on each surrogate; its 95 % level
     # (max-T: every candidate's gain standardized by its own null (median, 84th percentile - median),
@@ -523,8 +548,8 @@ def _cand_columns(c, log, pr, fs):
 
 def _tier(family) -> int:
     """0: a regressor from the proxy, the mode and the sample counter only; 1: it needs another
-    logged channel (board_temp, aux_*)."""
-    return 1 if family == "board_temp" or family.startswith("aux_") else 0
+    logged channel (board_temp, aux, aux_*)."""
+    return 1 if family in ("board_temp", "aux") or family.startswith("aux_") else 0
 
 
 def _preferred(rows) -> dict:

@@ -32,6 +32,9 @@ proxy_high_order     u^4, u^5                                                 po
 board_temp           the other temperature column (temp_c when the proxy is   tau_s in 0 + grid
                      freq_hz, and vice versa), normalized, and its lags
 aux_<name>           every aux_* column, normalized, and its lags             tau_s in 0 + grid
+aux                  every aux_* column at once (one coefficient each, no     columns
+                     lag): supply and g sensitivity on every axis, which one
+                     column at a time fits with a biased coefficient
 aging                time since power-on, t / T; and decay since power-on     tau_s > MAX_TURN_ON_
                      exp(-t/tau), tau beyond a turn-on (the drift             FRACTION x run,
                      A (1 - exp(-t/tau)) up to the constant k0)               <= AGING_MAX_FRACTION
@@ -190,6 +193,7 @@ def library(train_logs, config, *, tau_grid=TAU_GRID_S, exchange_taus=EXCHANGE_T
     for name in logs[0].aux_columns:
         if "aux" in want or name in want:
             columns.append((name, name))
+    joint = []
     for family, col in columns:
         rng = training_range(logs, col)
         if rng is None:
@@ -198,6 +202,10 @@ def library(train_logs, config, *, tau_grid=TAU_GRID_S, exchange_taus=EXCHANGE_T
             out.append(Candidate(family, {"column": col, "tau_s": tau},
                                  (_term("input", family, column=col, ref=rng[0], span=rng[1], tau_s=tau),),
                                  "tau_s"))
+        if family != "board_temp" and "aux" in want:
+            joint.append(_term("input", "aux", column=col, ref=rng[0], span=rng[1], tau_s=0.0))
+    if len(joint) >= 2:     # every aux column at once: a sensitivity to supply and to g on every axis
+        out.append(Candidate("aux", {"columns": "+".join(t["column"] for t in joint), "tau_s": 0.0}, tuple(joint)))
     if "aging" in want:
         kmax = max(int(np.rint(log.t_s[-1] * fs)) for log in logs)
         n_samples = max(1, int(math.ceil((1.0 + RAMP_MARGIN) * max(kmax, 1))))
