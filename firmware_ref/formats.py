@@ -91,7 +91,7 @@ MODE_SIGN = (1, 1, -1, 0)           # rate sign per run-log mode 0..3
 
 # -- the aux regressor z: generators of aux_gen 1 'sum' (host_tools.golden.regressors module doc) -------------
 # AUX_KINDS (term kind 0..6): firmware_ref.vocabulary
-AUX_MAX_TERMS = 6         # terms of the sum (hdrg diagnose offers no candidate that would exceed it)
+AUX_MAX_TERMS = 6         # terms of the sum (hdrg diagnose: 3 iterations x at most 2 terms)
 AUX_MAX_CHANNELS = 4      # aux input words A0..A3 (run-log aux_* columns)
 AUX_TERM_WORDS = 11       # table words per term
 AUX_FRAC_MAX = 48         # aux word A_c: int32, LSB 2^-AF_c of its column's unit, AF_c in 0..48 (table)
