@@ -389,8 +389,8 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
     for c in cands:
         if c.family == "periodic":
             c.extra["line"] = True
+    dur = effects._duration_s(train)     # the longest training run [s]
     if (families is None or "periodic" in families) and phase != "structure":      # a period grid too: a line may hide under slow residual
-        dur = max(float(log.t_s[-1] - log.t_s[0]) for log in train)
         grid = PERIOD_GRID_MIN_S * PERIOD_GRID_RATIO ** np.arange(64)
         cands += [effects.periodic(float(p)) for p in grid[grid <= PERIOD_GRID_MAX_FRACTION * dur]
                   if not artifact_of(float(p), clines) and all(abs(p / q - 1.0) > 0.05 for q in periods)]
@@ -404,7 +404,6 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
     room = AUX_MAX_TERMS - len(gen_terms)
     n_full = sum(len(c.terms) > room for c in cands)
     cands = [c for c in cands if len(c.terms) <= room]
-    dur = max(float(log.t_s[-1] - log.t_s[0]) for log in train)
 
     def tau_cap(c):
         # a structural lag longer than a quarter of the run is a ramp (aging), not the device's dynamics
