@@ -49,13 +49,19 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 import time
 import warnings
 
 import numpy as np
 from pathlib import Path
 
+from firmware_ref.terms import K_AUX
 from host_tools.atomic import atomic_open, atomic_path
+from host_tools.fitting.diagnose_scan import _explicit_weights, _poly_terms
+from host_tools.fitting.effects import training_range
+from host_tools.fitting.fit import fit_logs
+from host_tools.golden.regressors import AuxConfig
 from host_tools.fitting.diagnose import _score, base_model, base_options, diagnose, error_stats
 from host_tools.fitting.diagnose_report import is_minor
 from host_tools.simulation.sim_foreign import EFFECTS, EFFECT_KINDS, foreign_device, simulate_foreign
@@ -68,6 +74,11 @@ DETECTION_RULE = ("detection: effect runs with effect_ratio >= 2 whose CONFIRMED
                   "(aux: any aux_* column); detection_or_structure: ... whose confirmed steps of either kind name it (the report names the family in both cases: a thermal_lag found as a lag "
                   "of the proxy, board_temp as the second thermometer); clean_runs_naming_family: clean runs whose "
                   "confirmed steps (either kind) name the family, the false-positive side of the same count")
+IDENTIFIABLE_RULE = ("*_identifiable: the same counts over the effect runs whose oracle_fit_ratio is also >= 2: "
+                     "the base model plus the TRUE effect signal as one k7 term, fitted on the training run, "
+                     "halves the held-out error (issue #11's 'adding the true effect halves the error'); "
+                     "effect_ratio alone removes the effect from the physics, which no model fitted on one "
+                     "temperature rate may be able to do (u^4 absorbed by the cross terms of the 17)")
 
 
 def plan(n_runs: int, seed: int = 0) -> list:
@@ -101,6 +112,25 @@ def _base_error(train, hold) -> float:
     return _score(error_stats([hold], _base_model(train)))[0]
 
 
+def _oracle_fit_error(train, hold, ctrain, chold) -> float:
+    """Held-out error of the base model plus the TRUE effect as one more k7 input term fitted on the
+    training run: the effect's own signal (the run with the effect minus the same run without it:
+    the foreign simulator draws the noise independently of the effects), column ``aux_truth``,
+    sign-interacted on mode-reversal runs (it enters the rate as s * flipping + non-flipping
+    effects, so c = s * rate holds it whole).  What a loop that names the family AND its parameters
+    exactly can reach from this training run; base / this = ``oracle_fit_ratio``."""
+    tr = train.with_columns(aux_truth=train.rate_dph - ctrain.rate_dph)
+    ho = hold.with_columns(aux_truth=hold.rate_dph - chold.rate_dph)
+    model = _base_model(tr)
+    cfg = model.config
+    ref, span = training_range([tr], "aux_truth")
+    gen = [{"gen": "input", "weight": 1.0, "effect": "truth", "column": "aux_truth", "ref": ref, "span": span,
+            "sign": bool(tr.reversal)}]
+    cfg = replace(cfg, aux=AuxConfig.from_terms(_explicit_weights([tr], cfg, _poly_terms(model), gen), cfg.rate.fs))
+    oracle, _ = fit_logs([tr], cfg, tuple(_poly_terms(model)) + (K_AUX,), drop_unidentifiable=True)
+    return _score(error_stats([ho], oracle))[0]
+
+
 def run_one(spec: dict, duration_s=None, n_surrogates=None) -> dict:
     """One benchmark run (module doc): the record."""
     dev = foreign_device(spec["device"])
@@ -115,11 +145,12 @@ def run_one(spec: dict, duration_s=None, n_surrogates=None) -> dict:
         third = simulate_foreign(dev, 3.0, rev, 2, 2, duration_s=duration_s, effect=eff, strength=st or 1.0)
         base3 = _score(error_stats([third], _base_model(train)))[0]
         final3 = _score(error_stats([third], model))[0]
-        ratio = None
+        ratio = fit_ratio = None
         if eff is not None:
             ctrain = simulate_foreign(dev, 4.0, rev, 0, 0, duration_s=duration_s)
             chold = simulate_foreign(dev, 2.0, rev, 1, 1, duration_s=duration_s)
             ratio = _score(rep["baseline"]["holdout"])[0] / _base_error(ctrain, chold)
+            fit_ratio = _score(rep["baseline"]["holdout"])[0] / _oracle_fit_error(train, hold, ctrain, chold)
     steps = [{"effect": it["effect"], "params": it["params"], "kind": it["kind"], "confirmed": it["confirmed"],
               "material": it["material"],
               "before": it["heldout_error"]["before"], "after": it["heldout_error"]["after"]}
@@ -127,7 +158,7 @@ def run_one(spec: dict, duration_s=None, n_surrogates=None) -> dict:
     return {**spec, "verdict": rep["verdict"], "steps": steps,
             "base": _score(rep["baseline"]["holdout"])[0], "final": _score(rep["final"])[0],
             "third_base": base3, "third_final": final3,
-            "effect_ratio": ratio,
+            "effect_ratio": ratio, "oracle_fit_ratio": fit_ratio,
             "named": bool(eff and any(_names_effect(s) and _named(eff, s["effect"]) for s in steps)),
             "named_or_structure": bool(eff and any(s["confirmed"] and _named(eff, s["effect"]) for s in steps)),
             "artifacts": [a["period_s"] for a in (rep["artifacts"] or {}).get("lines", [])],
@@ -151,6 +182,7 @@ def _frac(num, den):
 def summarize(records: list) -> dict:
     """The summary of module doc from the records."""
     matters = [r for r in records if r["effect"] and r["effect_ratio"] is not None and r["effect_ratio"] >= MATTERS_RATIO]
+    ident = [r for r in matters if (r.get("oracle_fit_ratio") or 0) >= MATTERS_RATIO]
     clean = [r for r in records if not r["effect"]]
     found = [r for r in records if r["verdict"] == "effect found"]
     structural = [r for r in records if r["verdict"] in ("model structure improved", "minor improvement confirmed")]
@@ -172,6 +204,9 @@ def summarize(records: list) -> dict:
                                                   for s in r["steps"]) for r in matters), len(matters)),
             "detection_or_structure": _frac(sum(r.get("named_or_structure", r["named"]) for r in matters), len(matters)),
             "detection_or_structure_per_kind": per_kind_s,
+            "identifiable": IDENTIFIABLE_RULE,
+            "detection_identifiable": _frac(sum(r["named"] for r in ident), len(ident)),
+            "detection_or_structure_identifiable": _frac(sum(r["named_or_structure"] for r in ident), len(ident)),
             "false_discovery": _frac(sum(r["verdict"] == "effect found" for r in clean), len(clean)),
             "false_discovery_ftr": _frac(sum(r["verdict"] == "effect found" for r in clean if not r["reversal"]),
                                          sum(1 for r in clean if not r["reversal"])),

@@ -91,6 +91,11 @@ def run(args) -> int:
     print(_line("family named, either kind", s["detection_or_structure"]))
     for kind, f in s["detection_or_structure_per_kind"].items():
         print(_line(f"  {kind}", f))
+    if "detection_identifiable" in s:
+        print("  identifiable from the training run: effect runs whose oracle_fit_ratio >= 2 too (the true effect "
+              "as one k7 term fitted on the training run halves the held-out error)")
+        print(_line("  identifiable: effect steps", s["detection_identifiable"]))
+        print(_line("  identifiable: either kind", s["detection_or_structure_identifiable"]))
     named = s.get("clean_runs_naming_family", {})
     print(f"  clean runs naming each family in a confirmed step (either kind), of {named.get('n')}: "
           + ", ".join(f"{k} {v}" for k, v in named.items() if k != "n"))

@@ -7,6 +7,7 @@ import sys
 
 from host_tools.cli.options import add_model_options
 from host_tools.fitting.diagnose import CV_BLOCKS, CV_FOLDS, G_MIN, MAX_ITER, N_SURROGATES, fmt_value, diagnose
+from host_tools.fitting.diagnose_scan import TRIES_PER_STEP
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -16,7 +17,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, help="output directory (diagnose.md, diagnose.json, model.json, PNG)")
     parser.add_argument("--json", default=None, metavar="FILE", help="also write the JSON report to FILE")
     add_model_options(parser, "the starting model")
-    parser.add_argument("--max-iter", type=int, default=MAX_ITER, help="most effects to add (default 3)")
+    parser.add_argument("--max-iter", type=int, default=MAX_ITER,
+                        help=f"most steps kept per phase (default {MAX_ITER}; a step the held-out runs do not confirm is "
+                             f"reverted and counts against --max-tries only)")
+    parser.add_argument("--max-tries", type=int, default=None,
+                        help=f"most steps tried per phase (default {TRIES_PER_STEP} x --max-iter)")
     parser.add_argument("--surrogates", type=int, default=N_SURROGATES,
                         help=f"surrogate residuals for the significance threshold (default {N_SURROGATES})")
     parser.add_argument("--g-min", type=float, default=G_MIN, help=f"minimum CV gain (default {G_MIN})")
@@ -31,6 +36,8 @@ def run(args) -> int:
     from host_tools.atomic import atomic_open, refuse_overwrite
     from host_tools.golden.checks import check_fit_inputs
 
+    if args.max_iter < 0 or args.surrogates < 0 or (args.max_tries is not None and args.max_tries < 0):
+        raise ValueError("--max-iter, --max-tries and --surrogates must be >= 0")
     refuse_overwrite([args.json] + [os.path.join(args.out, f) for f in ("model.json", "diagnose.json", "diagnose.md")],
                      list(args.runs) + list(args.holdout))
     train = [rl.read(p) for p in args.runs]
@@ -39,12 +46,10 @@ def run(args) -> int:
     print(f"hdrg diagnose: {len(train)} training run(s), {len(hold)} held-out; fitting and tracing the residual "
           f"(up to {args.max_iter} iteration(s), {args.surrogates} surrogates each; this takes a while) ...",
           file=sys.stderr, flush=True)
-    if args.max_iter < 0 or args.surrogates < 0:
-        raise ValueError("--max-iter and --surrogates must be >= 0")
     report, model = diagnose(train, hold, proxy=args.proxy, rate_estimator=args.rate_estimator,
                              rate_n=args.rate_n, rate_shift=args.rate_shift, terms=args.terms,
                              combiner=args.combiner, order=args.order, settle_s=args.settle, proxy_range=args.proxy_range,
-                             rate_range=args.rate_range, max_iter=args.max_iter, n_surrogates=args.surrogates,
+                             rate_range=args.rate_range, max_iter=args.max_iter, max_tries=args.max_tries, n_surrogates=args.surrogates,
                              g_min=args.g_min, cv_blocks=args.cv_blocks, cv_folds=args.cv_folds,
                              seed=args.seed, out_dir=args.out, plots=not args.no_plots,
                              progress=lambda msg: print(f"hdrg diagnose: {msg}", file=sys.stderr, flush=True))

@@ -69,7 +69,10 @@ Procedure (:func:`diagnose`)
    held-out runs (:data:`CONFIRM_RULE`): if the held-out error does not drop, the step is
    reported ``confirmed: false`` and reverted, its family is not offered again (a periodic
    step: the periods within PERIOD_EXCLUDE_RATIO = 2^(1/2) of it).  Iterate while a
-   candidate passes the rule, at most ``max_iter`` (3) times per phase.  **Structure first**
+   candidate passes the rule, until ``max_iter`` (3) steps are kept in the phase or
+   TRIES_PER_STEP x max_iter (6) have been tried: a reverted step uses a try, not one of the
+   max_iter (with 3 tries an unconfirmed long lag or drift fitting the training run's slow
+   residual took the turns of the u^4 that held out 1.28 -> 0.36 deg/h; docs/LOOP.md).  **Structure first**
    (:data:`PHASES`): phase 1 offers only the structural candidates (:func:`kind_of`: the rate
    estimator, the lag-state block of the proxy, board_temp = the second thermometer, lags <=
    STRUCT_TAU_FRACTION of the run; for per-mode banks the exchange settling: a decay after each
@@ -95,7 +98,9 @@ Procedure (:func:`diagnose`)
    error before and after (:func:`error_stats`: stability 1 sigma and variation p-p of 1-s and
    100-s averages, host_tools.fitting.metrics) on the held-out runs (the training runs when none are
    given; several runs: the mean over runs), next to the noise floor (white noise: the Allan
-   deviation at 1 s, and that / 10 for 100 s).  DIR/diagnose.json (also ``--json``),
+   deviation at 1 s, and that / 10 for 100 s).  A kept periodic step whose period fits less than
+   twice in every gap-free training segment carries a ``caveat`` (in its status and the verdict
+   detail): a line and a slow drift in time cannot be told apart there (diagnose_report.line_or_drift).  DIR/diagnose.json (also ``--json``),
    DIR/diagnose.md, DIR/model.json (the final model, usable by ``hdrg compensate``) and
    DIR/*.png.
 
@@ -125,10 +130,12 @@ from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE,
                                          material_on_holdout, noise_floor, offsets_hold, step_errors)
 from host_tools.fitting.diagnose_noise import (_allan_bridged, _noise_series, artifact_of, characterize,  # noqa: F401
                                        combiner_lines, noise_model, spectral_lines, surrogates)
-from host_tools.fitting.diagnose_report import _verdict_detail, generalization, is_minor, verdict_of, write_report
+from host_tools.fitting.diagnose_report import (_verdict_detail, generalization, is_minor, line_or_drift, verdict_of,
+                                                write_report)
 from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, DRIFT_MARGIN, G_MIN, MAX_ITER, N_SURROGATES,  # noqa: F401
                                       NULL_QUANTILE, PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, _Accepted, _config, _explicit_weights,
                                       _poly_terms, _scan, _step_key, kind_of)
+from host_tools.fitting import diagnose_scan as _ds
 from host_tools.fitting.diagnose_structure import _order_step, _settle_step
 from host_tools.fitting.fit import fit_logs
 from host_tools.fitting.fit_pipeline import fit_default
@@ -143,7 +150,8 @@ RULE = ("accept the best candidate iff (a) its cross-validated gain (1 - held-ou
         "fitted to the residual's Allan variance at short taus, through the combiner), mapped back "
         "through the candidate's own null, and (c) it lowers the held-out error in a strict "
         "majority of the folds; ties within 5 % prefer a regressor of the proxy alone; then refine "
-        "its parameter; stop when no candidate passes or after max_iter iterations; in the structure phase a "
+        "its parameter; stop when no candidate passes, after max_iter kept steps or 2 x max_iter tried steps per phase "
+        "(a step not confirmed on held-out is reverted and counts as tried only); in the structure phase a "
         "drift in time (aging) is scored beside the structure, outside its max-T, and taken there only when it "
         f"leaves <= 1/{DRIFT_MARGIN:g} of the CV residual of the best structural candidate")
 
@@ -187,7 +195,7 @@ def base_model(train, opts, terms=None):
 def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, rate_n=None, rate_shift=None,
              terms=None, combiner=None, order=None, settle_s=None, proxy_range=None, rate_range=None,
              max_iter=MAX_ITER, n_surrogates=N_SURROGATES, g_min=G_MIN, cv_blocks=CV_BLOCKS,
-             cv_folds=CV_FOLDS, seed=0, families=None, rate_alternatives=True, out_dir=None,
+             cv_folds=CV_FOLDS, seed=0, families=None, max_tries=None, rate_alternatives=True, out_dir=None,
              plots=True, progress=None, phases=None) -> tuple:
     """Run the closed loop (module doc) on RunLogs.  Returns ``(report, model)``: the report dict
     (the JSON of the module doc) and the final BiasModel (the last step confirmed on the held-out
@@ -201,6 +209,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     if not train:
         raise ValueError("no training runs")
     rev = any(log.reversal for log in train)
+    max_tries = _ds.TRIES_PER_STEP * max_iter if max_tries is None else max_tries
     opts = base_options(proxy=proxy, rate_estimator=rate_estimator, rate_n=rate_n, rate_shift=rate_shift,
                         combiner=combiner, order=order, settle_s=settle_s, proxy_range=proxy_range,
                         rate_range=rate_range, reversal=rev)
@@ -227,7 +236,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
               "effect_rule": EFFECT_RULE if hold else "no held-out runs: every accepted effect step is named",
               "settings": {"g_min": g_min, "n_surrogates": n_surrogates, "null_quantile": NULL_QUANTILE,
                            "cv": "runs" if len(train) >= 2 else f"{cv_blocks} blocks round-robin in {cv_folds} folds",
-                           "max_iter": max_iter, "seed": seed, "terms": [int(k) for k in poly]},
+                           "max_iter": max_iter, "max_tries": max_tries, "seed": seed, "terms": [int(k) for k in poly]},
               "baseline": {"holdout" if hold else "train": first_stats,
                            "train": error_stats(train, model) if hold else first_stats},
               "noise_floor": noise_floor(evals, model)}
@@ -243,7 +252,9 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
         raise ValueError(f"unknown diagnose phases {sorted(unknown)}: choose from {PHASES}")
     for phase in [p for p in PHASES if p in phases]:
         stopped = None
-        for _ in range(max_iter):
+        kept = tries = 0
+        while kept < max_iter and tries < max_tries:
+            tries += 1
             it += 1
             say(f"iteration {it} ({phase}): scoring the {phase} candidates (CV, {n_surrogates} noise-model surrogates)")
             # (tried: the structure phase also scoring the effect candidates and yielding to a better one;
@@ -303,6 +314,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                      "ranking": scan["ranking"], "null_max": scan["null_max"],
                      "aux": model.config.aux.to_dict(), "rate": model.config.rate.to_dict(),
                      "before_runs": before["runs"], "after_runs": after["runs"]}
+            entry["caveat"] = line_or_drift(acc.family, acc.params, train)
             entry["_plot"] = (before_model, model, best)
             iterations.append(entry)
             if confirmed is False:
@@ -317,10 +329,14 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                     h = entry["heldout_error"]
                     entry["status"] += (f" (minor: held-out error down {1 - h['after'] / h['before']:.0%} only; kept, "
                                         f"not named as an effect)")
+                if entry["caveat"]:
+                    entry["status"] += f" ({entry['caveat']})"
                 accepted.append(acc)
+                kept += 1
         else:
             if max_iter > 0:
-                stopped = {"reason": f"max_iter ({max_iter}) reached", "best": None, "threshold": None,
+                stopped = {"reason": f"max_iter ({max_iter}) reached" if kept >= max_iter else
+                           f"{tries} steps tried, {kept} kept (at most {tries} tries per phase)", "best": None, "threshold": None,
                            "ranking": [], "null_max": [], "phase": phase}
         if phase == "structure" and rev and max_iter > 0:
             say("structural candidates: regress-then-reverse (per-mode banks) with each combiner, and the "

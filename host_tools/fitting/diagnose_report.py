@@ -61,6 +61,26 @@ def generalization(train_dph: float, holdout_dph: float) -> dict:
     return {"train_dph": train_dph, "holdout_dph": holdout_dph, "ratio": ratio, "warning": warning}
 
 
+def line_or_drift(family, params, train_logs):
+    """The caveat of a periodic step whose period the training runs cannot tell from a slow drift:
+    fewer than two cycles in every gap-free training segment (``RunLog.segments``).  A sinusoid
+    that long fitted across a gap (e.g. two cooling passes around a held-out heating leg) is a
+    smooth function of time there; the step is kept on its held-out result, the name says less
+    than it seems.  None when the period fits twice in some segment, or for other families."""
+    if family != "periodic" or not params.get("period_s"):
+        return None
+    longest = 0.0
+    for log in train_logs:
+        t = np.asarray(log.t_s, np.float64)
+        ends = list(log.segments[1:]) + [len(t)]
+        longest = max([longest] + [float(t[e - 1] - t[b]) for b, e in zip(log.segments, ends) if e > b])
+    if 2.0 * params["period_s"] <= longest:
+        return None
+    return (f"period {params['period_s']:.0f} s: fewer than two cycles in any gap-free training segment "
+            f"(longest {longest:.0f} s), so a line and a slow drift in time cannot be told apart; "
+            f"read it as a time-varying term of unknown shape")
+
+
 def _verdict_detail(iterations, hold) -> str:
     if not iterations:
         return "no candidate passed the selection rule on the training runs"
@@ -70,6 +90,8 @@ def _verdict_detail(iterations, hold) -> str:
                None: "not confirmed (no held-out runs)"}[e["confirmed"]]
         if is_minor(e):
             tag += " (minor: kept, not named as an effect)"
+        if e.get("caveat") and e["confirmed"] is not False:
+            tag += f" ({e['caveat']})"
         parts.append(f"step {k} {e['effect']}: {tag}")
     kept = [k for k, e in enumerate(iterations, 1) if e["confirmed"] is not False]
     final = f"final model: after step {kept[-1]}" if kept else "final model: the base model"

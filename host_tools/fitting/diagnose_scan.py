@@ -31,6 +31,8 @@ N_SURROGATES = 39            # surrogate residuals for the null of the scan's be
 NULL_QUANTILE = 0.95
 NULL_SD_FLOOR = 0.005        # max-T: smallest upper-tail scale of a candidate's null gains
 MAX_ITER = 3
+TRIES_PER_STEP = 2           # a phase tries at most this many steps per step it may keep (max_iter): a step the
+                             # held-out runs do not confirm is reverted and uses a try, not one of the max_iter
 CV_BLOCKS = 16               # single training run: contiguous blocks ...
 CV_FOLDS = 4                 # ... dealt round-robin into folds
 PERIOD_GRID_MIN_S = 120.0    # ... plus a grid of periods from this, ratio 2^(1/4), ...
