@@ -150,7 +150,7 @@ RULE = ("accept the best candidate iff (a) its cross-validated gain (1 - held-ou
         "fitted to the residual's Allan variance at short taus, through the combiner), mapped back "
         "through the candidate's own null, and (c) it lowers the held-out error in a strict "
         "majority of the folds; ties within 5 % prefer a regressor of the proxy alone; then refine "
-        "its parameter; stop when no candidate passes, after max_iter kept steps or 2 x max_iter tried steps per phase "
+        f"its parameter; stop when no candidate passes, after max_iter kept steps or {_ds.TRIES_PER_STEP} x max_iter tried steps per phase "
         "(a step not confirmed on held-out is reverted and counts as tried only); in the structure phase a "
         "drift in time (aging) is scored beside the structure, outside its max-T, and taken there only when it "
         f"leaves <= 1/{DRIFT_MARGIN:g} of the CV residual of the best structural candidate")
