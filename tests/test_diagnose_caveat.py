@@ -43,3 +43,39 @@ def test_the_caveat_is_in_the_verdict_detail_of_a_kept_step_only():
     kept = _verdict_detail([{**base, "confirmed": True}], hold=True)
     reverted = _verdict_detail([{**base, "confirmed": False}], hold=True)
     assert "fewer than two cycles" in kept and "fewer than two cycles" not in reverted
+
+
+# -- rivals: another family the training runs cannot tell from the kept step ------------------------
+
+def test_rivals_are_other_significant_families_within_the_tie_tolerance():
+    from host_tools.fitting.diagnose_scan import TIE_TOLERANCE, rivals
+    winner = {"family": "thermal_lag", "gain": 0.980, "coarse_gain": 0.977}
+    rows = [{"label": "thermal_lag(tau_s=1244)", "family": "thermal_lag", "gain": 0.977, "significant": True},
+            {"label": "board_temp(tau_s=0)", "family": "board_temp", "gain": 0.964, "significant": True},
+            {"label": "board_temp(tau_s=15)", "family": "board_temp", "gain": 0.963, "significant": True},
+            {"label": "aging(tau_s=7680)", "family": "aging", "gain": 0.977 * (1 - TIE_TOLERANCE) - 1e-6,
+             "significant": True},
+            {"label": "aux_vdd(tau_s=60)", "family": "aux_vdd", "gain": 0.970, "significant": False}]
+    assert rivals(rows, winner) == ["board_temp(tau_s=0)"]       # best of its family; aging just outside; aux_vdd not significant
+    assert rivals(rows[:1], winner) == []
+
+
+def test_a_board_temp_run_kept_as_a_lag_of_the_proxy_names_the_thermometer_as_rival():
+    """Calibration seed 1 run 62 (board_temp, FTR): the loop keeps a lag-state block of the proxy
+    (3.62 -> 0.81 deg/h held out), which the sensor thermometer explains within 5 % on the training
+    run: the report says so for the kept step (status and verdict detail)."""
+    from host_tools.bench import loop
+    from host_tools.fitting.diagnose import diagnose
+    from host_tools.simulation.sim_foreign import foreign_device, simulate_foreign
+    spec = loop.plan(150, 1)[62]
+    dev = foreign_device(spec["device"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tr = simulate_foreign(dev, 4.0, spec["reversal"], 0, 0, effect=spec["effect"], strength=spec["strength"])
+        ho = simulate_foreign(dev, 2.0, spec["reversal"], 1, 1, effect=spec["effect"], strength=spec["strength"])
+        rep, _ = diagnose([tr], [ho], plots=False, phases=("structure",))
+    assert spec["effect"] == "board_temp"
+    step = next(e for e in rep["iterations"] if e["confirmed"])
+    assert step["effect"] == "thermal_lag" and any(r.startswith("board_temp") for r in step["rivals"])
+    assert "explain it about as well by board_temp" in step["status"]
+    assert "explain it about as well by board_temp" in rep["verdict_detail"]

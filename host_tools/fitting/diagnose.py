@@ -100,7 +100,10 @@ Procedure (:func:`diagnose`)
    given; several runs: the mean over runs), next to the noise floor (white noise: the Allan
    deviation at 1 s, and that / 10 for 100 s).  A kept periodic step whose period fits less than
    twice in every gap-free training segment carries a ``caveat`` (in its status and the verdict
-   detail): a line and a slow drift in time cannot be told apart there (diagnose_report.line_or_drift).  DIR/diagnose.json (also ``--json``),
+   detail): a line and a slow drift in time cannot be told apart there (diagnose_report.line_or_drift).
+   A kept step also lists its ``rivals`` (diagnose_scan.rivals): significant candidates of other
+   families whose CV gain is within TIE_TOLERANCE of its own; the held-out runs confirm the step,
+   not which of them the device has (a lag of the proxy and a lagged second thermometer).  DIR/diagnose.json (also ``--json``),
    DIR/diagnose.md, DIR/model.json (the final model, usable by ``hdrg compensate``) and
    DIR/*.png.
 
@@ -130,11 +133,11 @@ from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE,
                                          material_on_holdout, noise_floor, offsets_hold, step_errors)
 from host_tools.fitting.diagnose_noise import (_allan_bridged, _noise_series, artifact_of, characterize,  # noqa: F401
                                        combiner_lines, noise_model, spectral_lines, surrogates)
-from host_tools.fitting.diagnose_report import (_verdict_detail, generalization, is_minor, line_or_drift, verdict_of,
-                                                write_report)
+from host_tools.fitting.diagnose_report import (_verdict_detail, generalization, is_minor, line_or_drift, rivals_note,
+                                                verdict_of, write_report)
 from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, DRIFT_MARGIN, G_MIN, MAX_ITER, N_SURROGATES,  # noqa: F401
                                       NULL_QUANTILE, PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, _Accepted, _config, _explicit_weights,
-                                      _poly_terms, _scan, _step_key, kind_of)
+                                      _poly_terms, _scan, _step_key, kind_of, rivals)
 from host_tools.fitting import diagnose_scan as _ds
 from host_tools.fitting.diagnose_structure import _order_step, _settle_step
 from host_tools.fitting.fit import fit_logs
@@ -315,6 +318,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                      "aux": model.config.aux.to_dict(), "rate": model.config.rate.to_dict(),
                      "before_runs": before["runs"], "after_runs": after["runs"]}
             entry["caveat"] = line_or_drift(acc.family, acc.params, train)
+            entry["rivals"] = rivals(scan["ranking"], best)
             entry["_plot"] = (before_model, model, best)
             iterations.append(entry)
             if confirmed is False:
@@ -331,6 +335,8 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                                         f"not named as an effect)")
                 if entry["caveat"]:
                     entry["status"] += f" ({entry['caveat']})"
+                if entry["rivals"]:
+                    entry["status"] += f" ({rivals_note(entry['rivals'])})"
                 accepted.append(acc)
                 kept += 1
         else:

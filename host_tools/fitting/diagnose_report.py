@@ -13,6 +13,7 @@ from host_tools.atomic import atomic_open, atomic_path
 from host_tools.golden.compensate import prepare, residual
 from host_tools.fitting.diagnose_confirm import STAT_KEYS, fmt_value, _residuals
 from host_tools.fitting.diagnose_noise import _allan_bridged, _filled
+from host_tools.fitting.diagnose_scan import TIE_TOLERANCE
 from host_tools.golden.model import jsonable
 from host_tools.golden.regressors import generator_values
 
@@ -81,6 +82,12 @@ def line_or_drift(family, params, train_logs):
             f"read it as a time-varying term of unknown shape")
 
 
+def rivals_note(labels) -> str:
+    """The verdict-detail words for a kept step's rivals (diagnose_scan.rivals)."""
+    return (f"the training runs explain it about as well by {', '.join(labels)} (CV gain within {TIE_TOLERANCE:.0%}): "
+            f"the held-out runs confirm the step, not which of these the device has")
+
+
 def _verdict_detail(iterations, hold) -> str:
     if not iterations:
         return "no candidate passed the selection rule on the training runs"
@@ -92,6 +99,8 @@ def _verdict_detail(iterations, hold) -> str:
             tag += " (minor: kept, not named as an effect)"
         if e.get("caveat") and e["confirmed"] is not False:
             tag += f" ({e['caveat']})"
+        if e.get("rivals") and e["confirmed"] is not False:
+            tag += f" ({rivals_note(e['rivals'])})"
         parts.append(f"step {k} {e['effect']}: {tag}")
     kept = [k for k, e in enumerate(iterations, 1) if e["confirmed"] is not False]
     final = f"final model: after step {kept[-1]}" if kept else "final model: the base model"

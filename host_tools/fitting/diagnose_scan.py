@@ -564,6 +564,21 @@ def _preferred(rows) -> dict:
     return max((r for r in close if _tier(r["family"]) == tier), key=lambda r: r["gain"])
 
 
+def rivals(ranking, winner) -> list:
+    """Labels of the candidates of OTHER families that the training runs cannot tell from the
+    accepted ``winner`` (a scan's ``winner``; ``ranking``: its ``ranking`` rows): significant, CV
+    gain within TIE_TOLERANCE (relative) of the winner's coarse gain; the best of each family.
+    E.g. a lag of the proxy and a lagged second thermometer when the sensor node is itself a lag
+    of the resonator: the step holds on held-out, which of the two the device has does not."""
+    top = winner.get("coarse_gain", winner["gain"])
+    out = {}
+    for r in ranking:
+        if (r["family"] != winner["family"] and r["significant"] and r["family"] not in out
+                and r["gain"] >= top - TIE_TOLERANCE * abs(top)):
+            out[r["family"]] = r["label"]
+    return list(out.values())
+
+
 def _pooled_periods(lines_per_log) -> list:
     """Periods [s] of the strongest lines over all logs (strongest first), lines within 2 % merged,
     at most MAX_LINES."""
