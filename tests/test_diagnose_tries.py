@@ -61,7 +61,7 @@ def test_oracle_fit_ratio_tells_what_one_training_rate_can_identify(seed, i, ide
     _, ctr, cho = _runs(seed, i, 120, clean=True)
     base = loop._base_error(tr, ho)
     clean = loop._base_error(ctr, cho)
-    oracle = loop._oracle_fit_error(tr, ho, ctr, cho)
+    oracle = loop._oracle_fit_error(loop._base_model(tr), tr, ho, ctr, cho)
     assert base / clean > 20                       # removing the effect would help a lot in both
     if identifiable:
         assert base / oracle > 10

@@ -49,19 +49,15 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import replace
 import time
 import warnings
 
 import numpy as np
 from pathlib import Path
 
-from firmware_ref.terms import K_AUX
 from host_tools.atomic import atomic_open, atomic_path
-from host_tools.fitting.diagnose_scan import _explicit_weights, _poly_terms
-from host_tools.fitting.effects import training_range
-from host_tools.fitting.fit import fit_logs
-from host_tools.golden.regressors import AuxConfig
+from host_tools.fitting.diagnose_scan import _poly_terms, refit_with
+from host_tools.fitting.effects import _term, training_range
 from host_tools.fitting.diagnose import _score, base_model, base_options, diagnose, error_stats
 from host_tools.fitting.diagnose_report import is_minor
 from host_tools.simulation.sim_foreign import EFFECTS, EFFECT_KINDS, foreign_device, simulate_foreign
@@ -112,22 +108,19 @@ def _base_error(train, hold) -> float:
     return _score(error_stats([hold], _base_model(train)))[0]
 
 
-def _oracle_fit_error(train, hold, ctrain, chold) -> float:
-    """Held-out error of the base model plus the TRUE effect as one more k7 input term fitted on the
-    training run: the effect's own signal (the run with the effect minus the same run without it:
-    the foreign simulator draws the noise independently of the effects), column ``aux_truth``,
-    sign-interacted on mode-reversal runs (it enters the rate as s * flipping + non-flipping
-    effects, so c = s * rate holds it whole).  What a loop that names the family AND its parameters
-    exactly can reach from this training run; base / this = ``oracle_fit_ratio``."""
+def _oracle_fit_error(base, train, hold, ctrain, chold) -> float:
+    """Held-out error of the base model ``base`` (fitted on ``train``) plus the TRUE effect as one
+    more k7 input term fitted on the training run: the effect's own signal (the run with the effect
+    minus the same run without it: the foreign simulator draws the noise independently of the
+    effects), column ``aux_truth``, sign-interacted on mode-reversal runs (it enters the rate as
+    s * flipping + non-flipping effects, so c = s * rate holds it whole).  What a loop that names
+    the family AND its parameters exactly can reach from this training run; base / this =
+    ``oracle_fit_ratio``."""
     tr = train.with_columns(aux_truth=train.rate_dph - ctrain.rate_dph)
     ho = hold.with_columns(aux_truth=hold.rate_dph - chold.rate_dph)
-    model = _base_model(tr)
-    cfg = model.config
     ref, span = training_range([tr], "aux_truth")
-    gen = [{"gen": "input", "weight": 1.0, "effect": "truth", "column": "aux_truth", "ref": ref, "span": span,
-            "sign": bool(tr.reversal)}]
-    cfg = replace(cfg, aux=AuxConfig.from_terms(_explicit_weights([tr], cfg, _poly_terms(model), gen), cfg.rate.fs))
-    oracle, _ = fit_logs([tr], cfg, tuple(_poly_terms(model)) + (K_AUX,), drop_unidentifiable=True)
+    truth = _term("input", "truth", column="aux_truth", ref=ref, span=span, sign=bool(tr.reversal))
+    oracle, _ = refit_with([tr], base.config, _poly_terms(base), [truth])
     return _score(error_stats([ho], oracle))[0]
 
 
@@ -143,14 +136,15 @@ def run_one(spec: dict, duration_s=None, n_surrogates=None) -> dict:
         kw = {} if n_surrogates is None else {"n_surrogates": n_surrogates}
         rep, model = diagnose([train], [hold], plots=False, **kw)
         third = simulate_foreign(dev, 3.0, rev, 2, 2, duration_s=duration_s, effect=eff, strength=st or 1.0)
-        base3 = _score(error_stats([third], _base_model(train)))[0]
+        base = _base_model(train)
+        base3 = _score(error_stats([third], base))[0]
         final3 = _score(error_stats([third], model))[0]
         ratio = fit_ratio = None
         if eff is not None:
             ctrain = simulate_foreign(dev, 4.0, rev, 0, 0, duration_s=duration_s)
             chold = simulate_foreign(dev, 2.0, rev, 1, 1, duration_s=duration_s)
             ratio = _score(rep["baseline"]["holdout"])[0] / _base_error(ctrain, chold)
-            fit_ratio = _score(rep["baseline"]["holdout"])[0] / _oracle_fit_error(train, hold, ctrain, chold)
+            fit_ratio = _score(rep["baseline"]["holdout"])[0] / _oracle_fit_error(base, train, hold, ctrain, chold)
     steps = [{"effect": it["effect"], "params": it["params"], "kind": it["kind"], "confirmed": it["confirmed"],
               "material": it["material"],
               "before": it["heldout_error"]["before"], "after": it["heldout_error"]["after"]}

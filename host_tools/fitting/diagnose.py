@@ -126,24 +126,21 @@ from dataclasses import replace
 
 import numpy as np
 
-from firmware_ref.terms import K_AUX
 from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE, CONFIRM_TOL_1S, CONFIRM_TOL_RMS,  # noqa: F401
                                          EFFECT_RULE, HELDOUT_METRIC, REPORT_TAUS, STAT_KEYS, _clean, fmt_value, _residuals, _score,
                                          _stats_one, _step_metric, confirmed_on_holdout, error_stats, leg_rms,
                                          material_on_holdout, noise_floor, offsets_hold, step_errors)
 from host_tools.fitting.diagnose_noise import (_allan_bridged, _noise_series, artifact_of, characterize,  # noqa: F401
                                        combiner_lines, noise_model, spectral_lines, surrogates)
-from host_tools.fitting.diagnose_report import (_verdict_detail, generalization, is_minor, line_or_drift, rivals_note,
-                                                verdict_of, write_report)
+from host_tools.fitting.diagnose_report import (_verdict_detail, generalization, is_minor, kept_step_notes,
+                                                line_or_drift, verdict_of, write_report)
 from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, DRIFT_MARGIN, G_MIN, MAX_ITER, N_SURROGATES,  # noqa: F401
-                                      NULL_QUANTILE, PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, _Accepted, _config, _explicit_weights,
-                                      _poly_terms, _scan, _step_key, kind_of, rivals)
-from host_tools.fitting import diagnose_scan as _ds
+                                      NULL_QUANTILE, PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, TRIES_PER_STEP, _Accepted,
+                                      _config, _poly_terms, _scan, _step_key, kind_of, refit_with, rivals)
 from host_tools.fitting.diagnose_structure import _order_step, _settle_step
 from host_tools.fitting.fit import fit_logs
 from host_tools.fitting.fit_pipeline import fit_default
 from host_tools.golden.model import jsonable
-from host_tools.golden.regressors import AuxConfig
 
 
 RULE = ("accept the best candidate iff (a) its cross-validated gain (1 - held-out SSE of 1-s means "
@@ -153,7 +150,7 @@ RULE = ("accept the best candidate iff (a) its cross-validated gain (1 - held-ou
         "fitted to the residual's Allan variance at short taus, through the combiner), mapped back "
         "through the candidate's own null, and (c) it lowers the held-out error in a strict "
         "majority of the folds; ties within 5 % prefer a regressor of the proxy alone; then refine "
-        f"its parameter; stop when no candidate passes, after max_iter kept steps or {_ds.TRIES_PER_STEP} x max_iter tried steps per phase "
+        f"its parameter; stop when no candidate passes, after max_iter kept steps or {TRIES_PER_STEP} x max_iter tried steps per phase "
         "(a step not confirmed on held-out is reverted and counts as tried only); in the structure phase a "
         "drift in time (aging) is scored beside the structure, outside its max-T, and taken there only when it "
         f"leaves <= 1/{DRIFT_MARGIN:g} of the CV residual of the best structural candidate")
@@ -212,7 +209,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     if not train:
         raise ValueError("no training runs")
     rev = any(log.reversal for log in train)
-    max_tries = _ds.TRIES_PER_STEP * max_iter if max_tries is None else max_tries
+    max_tries = TRIES_PER_STEP * max_iter if max_tries is None else max_tries
     opts = base_options(proxy=proxy, rate_estimator=rate_estimator, rate_n=rate_n, rate_shift=rate_shift,
                         combiner=combiner, order=order, settle_s=settle_s, proxy_range=proxy_range,
                         rate_range=rate_range, reversal=rev)
@@ -296,13 +293,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
             else:
                 acc = _Accepted(best["family"], dict(best["params"]), [dict(t) for t in best["terms"]])
                 gen_terms = gen_terms + acc.terms
-            cfg = _config(train, opts, rate=rate_choice)
-            if gen_terms:
-                weighted = _explicit_weights(train, cfg, poly, gen_terms)
-                cfg = replace(cfg, aux=AuxConfig.from_terms(weighted, cfg.rate.fs))
-                model, _ = fit_logs(train, cfg, tuple(poly) + (K_AUX,), drop_unidentifiable=True)
-            else:
-                model, _ = fit_logs(train, cfg, tuple(poly), drop_unidentifiable=True)
+            model, cfg = refit_with(train, _config(train, opts, rate=rate_choice), poly, gen_terms)
             after = error_stats(evals, model)
             cb, ca = step_errors(evals, before_model, model)     # the one metric (HELDOUT_METRIC)
             confirmed = confirmed_on_holdout(cb, ca) if hold else None
@@ -333,16 +324,13 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                     h = entry["heldout_error"]
                     entry["status"] += (f" (minor: held-out error down {1 - h['after'] / h['before']:.0%} only; kept, "
                                         f"not named as an effect)")
-                if entry["caveat"]:
-                    entry["status"] += f" ({entry['caveat']})"
-                if entry["rivals"]:
-                    entry["status"] += f" ({rivals_note(entry['rivals'])})"
+                entry["status"] += "".join(f" ({n})" for n in kept_step_notes(entry))
                 accepted.append(acc)
                 kept += 1
         else:
             if max_iter > 0:
                 stopped = {"reason": f"max_iter ({max_iter}) reached" if kept >= max_iter else
-                           f"{tries} steps tried, {kept} kept (at most {tries} tries per phase)", "best": None, "threshold": None,
+                           f"{tries} steps tried, {kept} kept (at most {max_tries} tries per phase)", "best": None, "threshold": None,
                            "ranking": [], "null_max": [], "phase": phase}
         if phase == "structure" and rev and max_iter > 0:
             say("structural candidates: regress-then-reverse (per-mode banks) with each combiner, and the "

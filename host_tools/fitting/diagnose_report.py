@@ -82,10 +82,16 @@ def line_or_drift(family, params, train_logs):
             f"read it as a time-varying term of unknown shape")
 
 
-def rivals_note(labels) -> str:
-    """The verdict-detail words for a kept step's rivals (diagnose_scan.rivals)."""
-    return (f"the training runs explain it about as well by {', '.join(labels)} (CV gain within {TIE_TOLERANCE:.0%}): "
-            f"the held-out runs confirm the step, not which of these the device has")
+def kept_step_notes(entry) -> list:
+    """What a kept step's name does not say (its status and the verdict detail): the ``caveat``
+    of :func:`line_or_drift` and the ``rivals`` (diagnose_scan.rivals).  [] for a reverted step."""
+    if entry["confirmed"] is False:
+        return []
+    notes = [entry["caveat"]] if entry.get("caveat") else []
+    if entry.get("rivals"):
+        notes.append(f"the training runs explain it about as well by {', '.join(entry['rivals'])} (CV gain within "
+                     f"{TIE_TOLERANCE:.0%}): the held-out runs confirm the step, not which of these the device has")
+    return notes
 
 
 def _verdict_detail(iterations, hold) -> str:
@@ -97,10 +103,7 @@ def _verdict_detail(iterations, hold) -> str:
                None: "not confirmed (no held-out runs)"}[e["confirmed"]]
         if is_minor(e):
             tag += " (minor: kept, not named as an effect)"
-        if e.get("caveat") and e["confirmed"] is not False:
-            tag += f" ({e['caveat']})"
-        if e.get("rivals") and e["confirmed"] is not False:
-            tag += f" ({rivals_note(e['rivals'])})"
+        tag += "".join(f" ({n})" for n in kept_step_notes(e))
         parts.append(f"step {k} {e['effect']}: {tag}")
     kept = [k for k, e in enumerate(iterations, 1) if e["confirmed"] is not False]
     final = f"final model: after step {kept[-1]}" if kept else "final model: the base model"

@@ -21,6 +21,7 @@ from host_tools.golden import runlog as rl
 from host_tools.golden.compensate import fit_config_from_logs, prepare
 from host_tools.fitting.cv import fold_ids, heldout_sse
 from host_tools.fitting.diagnose_confirm import fmt_value
+from host_tools.fitting.fit import fit_logs
 from host_tools.fitting.diagnose_noise import (MAX_LINES, _artifact_entry, _combined, artifact_of, characterize,
                                        combiner_lines, noise_model, spectral_lines, surrogates)
 from host_tools.golden.regressors import AuxConfig, generator_values, regressor_matrix
@@ -248,6 +249,16 @@ def _explicit_weights(train, cfg, poly, gen_terms) -> list:
     if not total > 0:
         raise ValueError("the accepted generators have zero weight in the explicit refit")
     return [{**t, "weight": float(cj / total)} for t, cj in zip(gen_terms, cg)]
+
+
+def refit_with(train, cfg, poly, gen_terms):
+    """The model of ``poly`` terms plus the generators ``gen_terms`` (none: the poly terms alone)
+    fitted on ``train`` as the loop keeps it: generator weights from :func:`_explicit_weights`
+    baked into ``AuxConfig('sum')`` as k7.  Returns (model, config)."""
+    if gen_terms:
+        cfg = replace(cfg, aux=AuxConfig.from_terms(_explicit_weights(train, cfg, poly, gen_terms), cfg.rate.fs))
+        return fit_logs(train, cfg, tuple(poly) + (K_AUX,), drop_unidentifiable=True)[0], cfg
+    return fit_logs(train, cfg, tuple(poly), drop_unidentifiable=True)[0], cfg
 
 
 def _rate_alternatives(train, cfg) -> list:
@@ -553,13 +564,18 @@ def _tier(family) -> int:
     return 1 if family in ("board_temp", "aux") or family.startswith("aux_") else 0
 
 
+def _tied(gain, top) -> bool:
+    """A CV gain within TIE_TOLERANCE (relative) of the best one ``top``: the scan cannot tell them apart."""
+    return gain >= top - TIE_TOLERANCE * abs(top)
+
+
 def _preferred(rows) -> dict:
     """The winner of a ranking (sorted by gain): among the rows within TIE_TOLERANCE (relative) of
     the best gain, the best one of the lowest :func:`_tier` (Occam: when another channel explains
     no more than the proxy itself, within the noise of the gains, the proxy's lag is the
     simpler model and needs no extra input in the firmware)."""
     top = rows[0]["gain"]
-    close = [r for r in rows if r["gain"] >= top - TIE_TOLERANCE * abs(top)]
+    close = [r for r in rows if _tied(r["gain"], top)]
     tier = min(_tier(r["family"]) for r in close)
     return max((r for r in close if _tier(r["family"]) == tier), key=lambda r: r["gain"])
 
@@ -573,8 +589,7 @@ def rivals(ranking, winner) -> list:
     top = winner.get("coarse_gain", winner["gain"])
     out = {}
     for r in ranking:
-        if (r["family"] != winner["family"] and r["significant"] and r["family"] not in out
-                and r["gain"] >= top - TIE_TOLERANCE * abs(top)):
+        if r["family"] != winner["family"] and r["significant"] and r["family"] not in out and _tied(r["gain"], top):
             out[r["family"]] = r["label"]
     return list(out.values())
 
