@@ -95,6 +95,23 @@ def test_fit_compensate_metrics_cli(tmp_path, runs, capsys):
     assert run["kind"] == "compensated"
 
 
+
+def test_fit_of_several_runs_says_what_it_does_not_model(tmp_path, runs, capsys):
+    """Several training runs: one coefficient set for all of them, the power-on change not modelled
+    (docs/ACCURACY.md, 'Several training runs'): said on the console and in model.json; one run: not."""
+    from host_tools.cli.fit import SEVERAL_RUNS_NOTE
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    runlog.write(runs["ftr4"], a)
+    runlog.write(runs["ftr4b"], b)
+    fixed = ["--rate-estimator", "diff", "--terms", "k0,k1,k2"]
+    assert main(["fit", str(a), str(b), "-o", str(tmp_path / "m2.json")] + fixed) == 0
+    out = capsys.readouterr().out
+    assert "warning: 2 training runs: " + SEVERAL_RUNS_NOTE in out and "power-on" in SEVERAL_RUNS_NOTE
+    assert BiasModel.from_json(tmp_path / "m2.json").fit["several_runs"] == SEVERAL_RUNS_NOTE
+    assert main(["fit", str(a), "-o", str(tmp_path / "m1.json")] + fixed) == 0
+    assert "training runs" not in capsys.readouterr().out
+    assert "several_runs" not in BiasModel.from_json(tmp_path / "m1.json").fit
+
 def test_rank_deficient_design_is_refused_then_dropped(tmp_path, capsys):
     """A single monotonic ramp at constant rate: the rate terms repeat the constant and temperature terms."""
     t = np.arange(20000.0)

@@ -11,6 +11,15 @@ from host_tools.fitting.fit import MIN_SAMPLES_PER_TERM, UnidentifiableError, fi
 from host_tools.fitting.fit_pipeline import fit_default
 
 
+# What `hdrg fit` says when it is given several runs (model.json fit.several_runs, and the console).
+SEVERAL_RUNS_NOTE = (
+    "one coefficient set is fitted to all of them, and the cross-validation leaves one run out. Measured on "
+    "foreign devices (docs/ACCURACY.md, 'Several training runs'): runs from DIFFERENT power-ons made the "
+    "held-out error worse on average (the power-on damping change is not modelled), runs at ONE chamber "
+    "rate too (leaving one out cannot see the extrapolation to another rate); runs at different chamber "
+    "rates from ONE power-on made it better. Check the model on a held-out run (hdrg report)")
+
+
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs", metavar="RUN", nargs="+", help="training run logs (CSV or .npz)")
     parser.add_argument("-o", "--output", required=True, help="model JSON to write")
@@ -69,6 +78,8 @@ def run(args) -> int:
         raise ValueError(f"{res.n} valid samples for {len(res.terms)} coefficients (fewer than "
                          f"{MIN_SAMPLES_PER_TERM} per coefficient): the fit would follow the noise; record more "
                          f"data, fit fewer terms (--terms), or pass --force")
+    if len(logs) > 1:
+        model.fit["several_runs"] = SEVERAL_RUNS_NOTE
     model.to_json(args.output)
     print(f"{args.output}: {len(res.terms)} terms {['k%d' % k for k in res.terms]}, n={res.n}, "
           f"rms={res.rms:.4g} deg/h, cond={res.cond:.3g}")
@@ -78,6 +89,8 @@ def run(args) -> int:
     if weak:
         print(f"warning: the data do not identify {['k%d' % k for k in weak]} (|coef| < 2 standard errors); "
               f"they fit noise: consider --terms auto")
+    if len(logs) > 1:
+        print(f"warning: {len(logs)} training runs: {SEVERAL_RUNS_NOTE}")
     if res.cv:
         print(f"cross-validated rms: {res.cv['cv_rms']:.4g} deg/h over {res.cv['groups']} groups")
     for k in res.terms:
