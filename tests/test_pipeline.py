@@ -108,8 +108,11 @@ def test_fit_of_several_runs_says_what_it_does_not_model(tmp_path, runs, capsys)
     out = capsys.readouterr().out
     assert "warning: 2 training runs: " + SEVERAL_RUNS_NOTE in out and "power-on" in SEVERAL_RUNS_NOTE
     assert BiasModel.from_json(tmp_path / "m2.json").fit["several_runs"] == SEVERAL_RUNS_NOTE
+    offs = BiasModel.from_json(tmp_path / "m2.json").fit["run_offsets"]["offsets_dph"]
+    assert f"per-run offsets removed before the fit [deg/h]: {a} {offs[0][0]:+.4g}; {b} {offs[1][0]:+.4g}" in out
     assert main(["fit", str(a), "-o", str(tmp_path / "m1.json")] + fixed) == 0
-    assert "training runs" not in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "training runs" not in out and "per-run offsets" not in out
     assert "several_runs" not in BiasModel.from_json(tmp_path / "m1.json").fit
 
 def test_rank_deficient_design_is_refused_then_dropped(tmp_path, capsys):

@@ -1,5 +1,5 @@
 # Measurement script of docs/ACCURACY.md "One training rate cannot identify the node" (not part of the package).
-# Usage: PYTHONPATH=. python docs/lag/two_rates.py SET mr|ftr START STOP [POWER_ON] 2>> rows.jsonl
+# Usage: [RUN_OFFSETS=off] PYTHONPATH=. python docs/lag/two_rates.py SET mr|ftr START STOP [POWER_ON] 2>> rows.jsonl
 """Is the tail a limit of the method or of the data?  Per device, the default fit (`hdrg fit`
 without options, fit_pipeline.fit_default) on three training sets, each held out on the
 benchmark's held-out run (2 degC/min, power-on 1, noise seed 1; std at 1 s / floor):
@@ -13,9 +13,12 @@ benchmark's held-out run (2 degC/min, power-on 1, noise seed 1; std at 1 s / flo
 
 POWER_ON (default 2) is the second run's power-on index; 0 = the SAME power-on as the first run
 (no new damping change, only new noise): separates "a second run" from "a second power-on".
+RUN_OFFSETS=off: several runs pooled without the per-run offsets (fit_default run_offsets="off", the
+default before they were built; docs/lag/data/two_rates_po{2,0}.jsonl were measured that way).
 
 One JSON line per device on stderr."""
 import json
+import os
 import sys
 from host_tools.fitting import fit_pipeline as FP
 from host_tools.bench.accuracy import device_runs, heldout_ratio, damping_change_dph
@@ -35,7 +38,7 @@ def main():
         for name, extra in (("one", None), ("same", (4.0, po, 2)), ("two", (3.0, po, 2))):
             logs = [tr] if extra is None else [tr, simulate_foreign(dev, extra[0], rev, extra[1], extra[2])]
             try:
-                m, _ = FP.fit_default(logs)
+                m, _ = FP.fit_default(logs, run_offsets=os.environ.get("RUN_OFFSETS", "auto"))
                 rec[name] = heldout_ratio(m, ho, fl)
                 rec[name + "_lag"] = m.fit.get("lag_block", {}).get("chosen")
                 rec[name + "_rate"] = f"{m.config.rate.estimator}/{m.config.rate.n}/{m.config.rate.shift}"

@@ -183,10 +183,12 @@ def base_model(train, opts, terms=None):
     for iir 9 (host_tools.fitting.fit.RATE_PREFERRED): the loop's thresholds were calibrated from
     that start, and from the preferred start the loop bench's MR control got an "effect found"
     (seed 2, run 33: periodic 1153 s; docs/LOOP.md "Rate preference").  The structure phase still
-    offers the rate estimator, iir 9 included, under CV and held-out confirmation."""
+    offers the rate estimator, iir 9 included, under CV and held-out confirmation.  No per-run offsets
+    (fit_default run_offsets="off"): the thresholds were calibrated without them."""
     if all(opts.get(k) is None for k in ("rate_estimator", "n", "shift")):
         kw = {k: v for k, v in opts.items() if k not in ("rate_estimator", "n", "shift")}
-        model = fit_default(train, terms, drop_unidentifiable=True, lag_block="off", rate_prefer=None, **kw)[0]
+        model = fit_default(train, terms, drop_unidentifiable=True, lag_block="off", rate_prefer=None, run_offsets="off",
+                            **kw)[0]
         return model, model.config
     cfg = _config(train, opts)
     return fit_logs(train, cfg, terms, drop_unidentifiable=True)[0], cfg
