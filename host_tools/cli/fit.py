@@ -17,7 +17,7 @@ SEVERAL_RUNS_NOTE = (
     "power-on changes in the turn-on and damping offsets) is removed first (model.json fit.run_offsets); "
     "its change of the damping SCALE is not modelled, and the cross-validation leaves one run out. Measured "
     "on foreign devices (docs/ACCURACY.md, 'Several training runs'): a second run at ANOTHER chamber rate "
-    "made the held-out error smaller (MR x0.89 .. x0.93, FTR x0.75), one at the SAME rate larger for mode "
+    "made the held-out error smaller (MR x0.89 .. x0.93, FTR x0.75 .. x0.86), one at the SAME rate larger for mode "
     "reversal (x1.14 .. x1.43). Record the runs at different chamber rates, and check the model on a "
     "held-out run (hdrg report)")
 
