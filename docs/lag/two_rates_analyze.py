@@ -25,7 +25,7 @@ def main():
             if not by_po:
                 continue
             seeds = sorted(set.intersection(*(set(d) for d in by_po.values())))
-            first = by_po[min(by_po, key=lambda p: -p)]
+            first = by_po[max(by_po)]
             one = np.array([first[s]["one"] for s in seeds])
             cells = [f"{np.median(one):.2f} / {np.percentile(one, 90):.2f}"]
             for po in (2, 0):

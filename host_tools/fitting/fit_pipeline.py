@@ -9,7 +9,6 @@ import numpy as np
 
 from host_tools.golden import compensate
 from host_tools.golden.regressors import regressor_matrix
-from host_tools.golden.runlog import RunLog
 from host_tools.fitting.fit import fit_auto_rate, fit_logs
 from host_tools.fitting.fit_lag import add_lag_block
 
@@ -73,19 +72,17 @@ def run_offsets(logs, model) -> list:
     return out
 
 
-def _shifted(log, offsets, two: bool):
-    """``log`` with its rate moved so that the fit target of each bank loses its offset (target
-    y = rate for FTR, y = s * rate for regress_first: mode 2 moves the other way)."""
+def _shifted(log, offsets):
+    """``log`` with its rate moved so that the fit target of each bank loses its offset (one bank:
+    target y = rate; two banks (regress_first): y = s * rate, so mode 2 moves the other way)."""
     rate = np.array(log.rate_dph, np.float64)
-    if two:
+    if len(offsets) == 2:
         mode = np.asarray(log.mode)
         rate[mode == 1] -= offsets[0]
         rate[mode == 2] += offsets[1]
     else:
         rate -= offsets[0]
-    cols = dict(log.columns)
-    cols["rate_dph"] = rate
-    return RunLog.from_arrays(metadata=dict(log.metadata), source=log.source, **cols)
+    return log.with_columns(rate_dph=rate)
 
 
 def fit_without_run_offsets(logs, fit):
@@ -98,17 +95,16 @@ def fit_without_run_offsets(logs, fit):
     ``run_offsets``: {"passes", "offsets_dph": per run the total offset removed per bank, "runs"}.
     Measured on foreign devices (docs/ACCURACY.md "Several training runs")."""
     model, res = fit(logs)
-    two = model.config.reversal is not None and model.config.reversal.order == "regress_first"
-    total = None
+    total = 0.0
     shifted = logs
     for _ in range(RUN_OFFSET_PASSES):
         off = run_offsets(shifted, model)
         if not off:
             return model, res
-        total = off if total is None else [[a + b for a, b in zip(t, o)] for t, o in zip(total, off)]
-        shifted = [_shifted(log, o, two) for log, o in zip(shifted, off)]
+        total = total + np.asarray(off)
+        shifted = [_shifted(log, o) for log, o in zip(shifted, off)]
         model, res = fit(shifted)
-    model.fit["run_offsets"] = {"passes": RUN_OFFSET_PASSES, "offsets_dph": total,
+    model.fit["run_offsets"] = {"passes": RUN_OFFSET_PASSES, "offsets_dph": total.tolist(),
                                 "runs": [log.source for log in logs],
                                 "method": "per run and coefficient bank, the mean training residual removed "
                                           "from the run before the fit (host_tools.fitting.fit_pipeline)"}
