@@ -13,6 +13,9 @@ benchmark's held-out run (2 degC/min, power-on 1, noise seed 1; std at 1 s / flo
 
 POWER_ON (default 2) is the second run's power-on index; 0 = the SAME power-on as the first run
 (no new damping change, only new noise): separates "a second run" from "a second power-on".
+SECOND_RATE (default 3.0 degC/min): the chamber rate of the ``two`` run (1.0 brackets the held-out
+2 degC/min: interpolation in rate instead of extrapolation).  CASES (default "one,same,two"): the
+training sets to fit.
 RUN_OFFSETS=off: several runs pooled without the per-run offsets (fit_default run_offsets="off", the
 default before they were built; docs/lag/data/two_rates_po{2,0}.jsonl were measured that way).
 
@@ -34,8 +37,13 @@ def main():
     for seed in range(SET_BASE[st] + a, SET_BASE[st] + b):
         dev = foreign_device(seed)
         tr, ho, fl = device_runs(dev, rev)
-        rec = {"seed": seed, "kind": kind, "dc": damping_change_dph(dev), "second_power_on": po}
-        for name, extra in (("one", None), ("same", (4.0, po, 2)), ("two", (3.0, po, 2))):
+        second = float(os.environ.get("SECOND_RATE", "3.0"))
+        cases = os.environ.get("CASES", "one,same,two").split(",")
+        rec = {"seed": seed, "kind": kind, "dc": damping_change_dph(dev), "second_power_on": po, "second_rate": second}
+        for name, extra in (("one", None), ("same", (4.0, po, 2)), ("two", (second, po, 2))):
+            if name not in cases:
+                rec[name] = None
+                continue
             logs = [tr] if extra is None else [tr, simulate_foreign(dev, extra[0], rev, extra[1], extra[2])]
             try:
                 m, _ = FP.fit_default(logs, run_offsets=os.environ.get("RUN_OFFSETS", "auto"))
