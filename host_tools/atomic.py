@@ -27,6 +27,7 @@ import contextlib
 import os
 import signal
 import tempfile
+import threading
 
 
 def _special(path: str) -> bool:
@@ -61,17 +62,30 @@ def _finish(tmp: str, path: str) -> None:
 
 @contextlib.contextmanager
 def _stops_held():
-    """SIGINT and SIGTERM held (pending, delivered on exit) for the duration, where the platform
-    can (POSIX ``pthread_sigmask``); elsewhere nothing is held."""
-    held = {signal.SIGINT, signal.SIGTERM}
-    if not hasattr(signal, "pthread_sigmask"):
-        yield
-        return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    """SIGINT and SIGTERM held for the duration and delivered on exit.  Two layers: on POSIX the
+    signals are masked in this thread (``pthread_sigmask``); and in the main thread their Python
+    handlers are replaced by one that only records them, because a signal sent to the PROCESS may
+    be taken by another thread (numba's, a serial device's), whose C-level handler then makes the
+    main thread run the Python handler at its next instruction, inside the window, whatever this
+    thread's mask.  On exit the mask and the handlers are restored and every recorded signal is
+    raised again (``signal.raise_signal``: its handler runs before this returns)."""
+    held = (signal.SIGINT, signal.SIGTERM)
+    caught = []
+    old_handlers = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in held:
+            if signal.getsignal(sig) is not None:       # None: a handler not set from Python, left alone
+                old_handlers[sig] = signal.signal(sig, lambda signum, frame: caught.append(signum))
+    old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, held) if hasattr(signal, "pthread_sigmask") else None
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        if old_mask is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)   # a pending signal is recorded here
+        for sig, handler in old_handlers.items():
+            signal.signal(sig, handler)
+        for sig in dict.fromkeys(caught):
+            signal.raise_signal(sig)
 
 
 def _umask() -> int:

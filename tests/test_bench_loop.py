@@ -123,3 +123,23 @@ def test_a_minor_effect_step_is_neither_a_detection_nor_a_false_discovery():
     assert "MATERIAL" in s["detection_rule"]
     old = {k: v for k, v in recs[2]["steps"][0].items() if k != "material"}      # records before the rule
     assert bl._names_effect(old) and not bl._names_effect({**old, "material": False})
+
+
+def test_second_training_run_is_another_rate_of_the_same_power_on_and_keeps_the_invariants(capsys):
+    dev = bl.foreign_device(1)
+    one = bl._training_runs(dev, True, 1500.0, None)
+    two = bl._training_runs(dev, True, 1500.0, 3.0, effect="thermal_lag", strength=2.0)
+    assert len(one) == 1 and len(two) == 2
+    assert [r.metadata["profile"] for r in two] == ["trapezoid 4 degC/min", "trapezoid 3 degC/min"]
+    assert [r.metadata["power_on"] for r in two] == ["0", "0"]
+    assert two[1].metadata["noise_seed"] == str(bl.SECOND_TRAIN_NOISE)
+    spec = bl.plan(3, seed=0)[1]                      # an effect run
+    r = bl.run_one(spec, duration_s=1500.0, n_surrogates=5, second_train=3.0)
+    assert r["final"] <= r["base"] * (1 + 1e-12)
+    assert all(st["after"] <= 0.95 * st["before"] for st in r["steps"] if st["confirmed"])
+    assert r["effect_ratio"] > 0 and r["oracle_fit_ratio"] > 0
+    # the base model of two runs is fitted on both: it differs from the one-run base
+    b1, b2 = bl._base_model(one), bl._base_model(bl._training_runs(dev, True, 1500.0, 3.0))
+    assert b1.coef.tolist() != b2.coef.tolist()
+    assert cli.main(["bench", "loop", "--runs", "1", "--second-train", "0"]) == 2
+    assert "--second-train must be a chamber rate > 0" in capsys.readouterr().err

@@ -6,6 +6,7 @@ small simulated runs, except where a real process is needed (SIGPIPE).
 """
 import os
 import signal
+import threading
 import subprocess
 import sys
 import warnings
@@ -465,7 +466,9 @@ def test_a_stop_during_the_rename_is_held_until_it_is_recorded(tmp_path, monkeyp
 
     def replace_then_signal(src, dst):
         real_replace(src, dst)
-        os.kill(os.getpid(), signal.SIGTERM)          # arrives between the rename and the record
+        # arrives between the rename and the record; directed at this thread, so that no other
+        # thread of the test process takes it (that case: the next test)
+        signal.pthread_kill(threading.get_ident(), signal.SIGTERM)
         seen.append(list(atomic.COMPLETED))
 
     def handler(signum, frame):
@@ -481,3 +484,35 @@ def test_a_stop_during_the_rename_is_held_until_it_is_recorded(tmp_path, monkeyp
         signal.signal(signal.SIGTERM, old)
     assert seen == [[]]                                   # the signal was pending during the rename ...
     assert atomic.COMPLETED == [os.path.realpath(out)] and out.read_text() == "x\n"    # ... and came after the record
+
+
+def test_a_stop_taken_by_another_thread_is_held_too(tmp_path, monkeypatch):
+    """A SIGTERM sent to the process may be taken by another thread (numba's, a serial device's):
+    its C-level handler makes the MAIN thread run the Python handler at its next instruction,
+    whatever the main thread's mask.  Simulated by calling the installed handler inside the window:
+    it must only record the stop, which is raised after the rename is recorded."""
+    from host_tools import atomic
+    monkeypatch.setattr(atomic, "COMPLETED", [])
+    out = tmp_path / "o.txt"
+    real_replace = os.replace
+    seen = []
+
+    def replace_then_handler(src, dst):
+        real_replace(src, dst)
+        signal.getsignal(signal.SIGTERM)(signal.SIGTERM, None)   # what the main thread runs
+        seen.append(list(atomic.COMPLETED))
+
+    def handler(signum, frame):
+        raise cli._Terminated()
+
+    old = signal.signal(signal.SIGTERM, handler)
+    try:
+        monkeypatch.setattr(atomic.os, "replace", replace_then_handler)
+        with pytest.raises(cli._Terminated):
+            with atomic.atomic_open(out, "w") as fh:
+                fh.write("x\n")
+        assert signal.getsignal(signal.SIGTERM) is handler        # the command's handler is back
+    finally:
+        signal.signal(signal.SIGTERM, old)
+    assert seen == [[]]
+    assert atomic.COMPLETED == [os.path.realpath(out)] and out.read_text() == "x\n"

@@ -11,6 +11,10 @@ Runs ``i = 0 .. N-1`` (``--runs``, default 120), device seed ``S * 100000 + i`` 
 * **train** on one run (4 degC/min, power-on 0, noise seed 0), **hold out** another (2 degC/min,
   power-on 1: another damping change, noise seed 1): ``diagnose([train], [holdout])`` with its
   defaults (single training run: CV over time blocks; every step confirmed on the held-out run).
+  ``--second-train CPM``: a second training run at CPM degC/min from the SAME power-on (noise seed
+  SECOND_TRAIN_NOISE), ``diagnose([train, train2], [holdout])``: the loop's CV then leaves one run
+  out, i.e. scores every candidate by how it carries to another chamber rate; the base model,
+  ``effect_ratio`` and ``oracle_fit_ratio`` are taken on the same two runs.
 
 Per run the record holds the verdict, every step (effect, parameters, held-out before/after,
 confirmed), and ``effect_ratio``: the held-out error of the base model (the loop's starting
@@ -64,6 +68,7 @@ from host_tools.simulation.sim_foreign import EFFECTS, EFFECT_KINDS, foreign_dev
 
 SEED_STRIDE = 100000
 STRENGTH_LO, STRENGTH_HI = 1.0, 10.0
+SECOND_TRAIN_NOISE = 3   # --second-train: the second training run's noise seed (power-on 0, as the first)
 MATTERS_RATIO = 2.0
 DETECTION_RULE = ("detection: effect runs with effect_ratio >= 2 whose CONFIRMED, MATERIAL steps of kind 'effect' "
                   "(diagnose.EFFECT_RULE: the ones that make the verdict 'effect found') name the injected family "
@@ -99,9 +104,16 @@ def _named(kind: str, family: str) -> bool:
     return family == kind or (kind == "aux" and family.startswith("aux_"))
 
 
+def _logs(train) -> list:
+    """One training RunLog or a list of them -> a list."""
+    return list(train) if isinstance(train, (list, tuple)) else [train]
+
+
 def _base_model(train):
-    """The loop's starting model: the product default of ``hdrg fit`` (diagnose.base_model)."""
-    return base_model([train], base_options(reversal=train.reversal))[0]
+    """The loop's starting model: the product default of ``hdrg fit`` (diagnose.base_model) on the
+    training run(s) ``train`` (a RunLog or a list)."""
+    logs = _logs(train)
+    return base_model(logs, base_options(reversal=logs[0].reversal))[0]
 
 
 def _base_error(train, hold) -> float:
@@ -109,39 +121,50 @@ def _base_error(train, hold) -> float:
 
 
 def _oracle_fit_error(base, train, hold, ctrain, chold) -> float:
-    """Held-out error of the base model ``base`` (fitted on ``train``) plus the TRUE effect as one
-    more k7 input term fitted on the training run: the effect's own signal (the run with the effect
-    minus the same run without it: the foreign simulator draws the noise independently of the
-    effects), column ``aux_truth``, sign-interacted on mode-reversal runs (it enters the rate as
-    s * flipping + non-flipping effects, so c = s * rate holds it whole).  What a loop that names
-    the family AND its parameters exactly can reach from this training run; base / this =
-    ``oracle_fit_ratio``."""
-    tr = train.with_columns(aux_truth=train.rate_dph - ctrain.rate_dph)
+    """Held-out error of the base model ``base`` (fitted on ``train``, a RunLog or a list) plus the
+    TRUE effect as one more k7 input term fitted on the training run(s): the effect's own signal
+    (each run with the effect minus the same run without it, ``ctrain`` in the same order: the
+    foreign simulator draws the noise independently of the effects), column ``aux_truth``,
+    sign-interacted on mode-reversal runs (it enters the rate as s * flipping + non-flipping
+    effects, so c = s * rate holds it whole).  What a loop that names the family AND its
+    parameters exactly can reach from these training runs; base / this = ``oracle_fit_ratio``."""
+    tr = [t.with_columns(aux_truth=t.rate_dph - c.rate_dph) for t, c in zip(_logs(train), _logs(ctrain))]
     ho = hold.with_columns(aux_truth=hold.rate_dph - chold.rate_dph)
-    ref, span = training_range([tr], "aux_truth")
-    truth = _term("input", "truth", column="aux_truth", ref=ref, span=span, sign=bool(tr.reversal))
-    oracle, _ = refit_with([tr], base.config, _poly_terms(base), [truth])
+    ref, span = training_range(tr, "aux_truth")
+    truth = _term("input", "truth", column="aux_truth", ref=ref, span=span, sign=bool(tr[0].reversal))
+    oracle, _ = refit_with(tr, base.config, _poly_terms(base), [truth])
     return _score(error_stats([ho], oracle))[0]
 
 
-def run_one(spec: dict, duration_s=None, n_surrogates=None) -> dict:
-    """One benchmark run (module doc): the record."""
+def _training_runs(dev, rev, duration_s, second_train, **effect) -> list:
+    """The training run (4 degC/min, power-on 0, noise 0) and, with ``second_train`` (degC/min), a
+    second one at that chamber rate from the SAME power-on (noise SECOND_TRAIN_NOISE)."""
+    runs = [simulate_foreign(dev, 4.0, rev, 0, 0, duration_s=duration_s, **effect)]
+    if second_train:
+        runs.append(simulate_foreign(dev, float(second_train), rev, 0, SECOND_TRAIN_NOISE, duration_s=duration_s, **effect))
+    return runs
+
+
+def run_one(spec: dict, duration_s=None, n_surrogates=None, second_train=None) -> dict:
+    """One benchmark run (module doc): the record.  ``second_train``: None, or the chamber rate
+    [degC/min] of a second training run from the same power-on (``hdrg bench loop
+    --second-train``): the loop then cross-validates over the two runs."""
     dev = foreign_device(spec["device"])
     eff, rev, st = spec["effect"], spec["reversal"], spec["strength"]
     t0 = time.time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        train = simulate_foreign(dev, 4.0, rev, 0, 0, duration_s=duration_s, effect=eff, strength=st or 1.0)
+        train = _training_runs(dev, rev, duration_s, second_train, effect=eff, strength=st or 1.0)
         hold = simulate_foreign(dev, 2.0, rev, 1, 1, duration_s=duration_s, effect=eff, strength=st or 1.0)
         kw = {} if n_surrogates is None else {"n_surrogates": n_surrogates}
-        rep, model = diagnose([train], [hold], plots=False, **kw)
+        rep, model = diagnose(train, [hold], plots=False, **kw)
         third = simulate_foreign(dev, 3.0, rev, 2, 2, duration_s=duration_s, effect=eff, strength=st or 1.0)
         base = _base_model(train)
         base3 = _score(error_stats([third], base))[0]
         final3 = _score(error_stats([third], model))[0]
         ratio = fit_ratio = None
         if eff is not None:
-            ctrain = simulate_foreign(dev, 4.0, rev, 0, 0, duration_s=duration_s)
+            ctrain = _training_runs(dev, rev, duration_s, second_train)
             chold = simulate_foreign(dev, 2.0, rev, 1, 1, duration_s=duration_s)
             ratio = _score(rep["baseline"]["holdout"])[0] / _base_error(ctrain, chold)
             fit_ratio = _score(rep["baseline"]["holdout"])[0] / _oracle_fit_error(base, train, hold, ctrain, chold)
@@ -221,13 +244,13 @@ def summarize(records: list) -> dict:
 
 
 def run_benchmark(n_runs: int, seed: int = 0, duration_s=None, n_surrogates=None, progress=None,
-                  shard=(0, 1), json_path=None) -> dict:
+                  shard=(0, 1), json_path=None, second_train=None) -> dict:
     """The benchmark (module doc); ``shard`` (k, m): only the runs with i % m == k; with
-    ``json_path`` the result so far is written after every run."""
+    ``json_path`` the result so far is written after every run; ``second_train``: see :func:`run_one`."""
     records = []
     specs = [sp for sp in plan(n_runs, seed) if sp["i"] % shard[1] == shard[0]]
     for spec in specs:
-        rec = run_one(spec, duration_s, n_surrogates)
+        rec = run_one(spec, duration_s, n_surrogates, second_train)
         records.append(rec)
         if json_path:
             with atomic_open(json_path, "w", encoding="utf-8") as fh:
@@ -239,7 +262,9 @@ def run_benchmark(n_runs: int, seed: int = 0, duration_s=None, n_surrogates=None
                      f" (ratio {rec['effect_ratio'] if rec['effect_ratio'] is None else round(rec['effect_ratio'], 2)},"
                      f" {rec['seconds']} s)")
     return {"config": {"runs": n_runs, "seed": seed, "duration_s": duration_s, "n_surrogates": n_surrogates,
-                       "train": "4 degC/min, power-on 0, noise 0", "holdout": "2 degC/min, power-on 1, noise 1",
+                       "train": "4 degC/min, power-on 0, noise 0" + (
+                           f"; and {second_train:g} degC/min, power-on 0, noise {SECOND_TRAIN_NOISE}" if second_train else ""),
+                       "holdout": "2 degC/min, power-on 1, noise 1",
                        "strength": [STRENGTH_LO, STRENGTH_HI], "matters_ratio": MATTERS_RATIO},
             "summary": summarize(records), "records": records}
 

@@ -17,6 +17,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="instead: summarize the records of these --json files together")
     parser.add_argument("--duration", type=float, default=None, help="cut every run to this many seconds")
     parser.add_argument("--json", default=None, metavar="FILE", help="write records and summary to FILE")
+    parser.add_argument("--second-train", type=float, default=None, metavar="CPM",
+                        help="train on a second run too, at this chamber rate [degC/min] from the same power-on "
+                             "(the loop then cross-validates over the two runs); default: one training run")
     parser.add_argument("--hdrg-clean", action="store_true",
                         help="instead: false discovery on 20 clean runs of hdrg's own simulator (FTR/MR, 1 and 2 cycles)")
     parser.add_argument("--measured", default=None, metavar="DIR",
@@ -74,8 +77,10 @@ def run(args) -> int:
         k, m = (int(x) for x in args.shard.split("/"))
         if not 0 <= k < m:
             raise ValueError(f"--shard K/M needs 0 <= K < M, not {args.shard}")
+        if args.second_train is not None and not args.second_train > 0:
+            raise ValueError(f"--second-train must be a chamber rate > 0 degC/min, not {args.second_train}")
         res = run_benchmark(args.runs, args.seed, args.duration, shard=(k, m), json_path=args.json,
-                            progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+                            second_train=args.second_train, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     s = res["summary"]
     print(f"hdrg bench loop: {s['runs']} foreign runs (seed {args.seed}), {s['effect_runs']} with an undeclared effect")
     print("  detection counts effect runs with effect_ratio >= 2 whose confirmed steps name the injected family: "
