@@ -331,6 +331,9 @@ def test_cli_writes_report_model_and_figures(tmp_path, capsys, monkeypatch):
         assert (out / f).stat().st_size > 0
     assert len(it["figures"]) == 3
     assert "periodic" in (out / "diagnose.md").read_text()
+    # two training runs: the caveat of a loop calibrated with one, in the JSON, the report and on the console
+    assert doc["several_runs"].startswith("2 training runs: the cross-validation leaves one run out")
+    assert "note: 2 training runs" in text and "**Several training runs:**" in (out / "diagnose.md").read_text()
     # the model written is usable by hdrg compensate
     assert main(["compensate", paths[2], "--model", str(out / "model.json"), "-o", str(tmp_path / "c.csv")]) == 0
     assert runlog.read(tmp_path / "c.csv").metadata["compensated"] == "yes"
@@ -598,6 +601,7 @@ def test_the_report_warns_when_the_held_out_error_is_far_above_the_training_erro
     same, _ = diagnose([tr], [tr], plots=False, max_iter=0)
     assert same["generalization"]["ratio"] == pytest.approx(1.0) and same["generalization"]["warning"] is None
     assert diagnose([tr], plots=False, max_iter=0)[0]["generalization"] is None   # no held-out runs
+    assert rep["several_runs"] is None and "Several training runs" not in (tmp_path / "d" / "diagnose.md").read_text()
     tr_p, ho_p = tmp_path / "tr.csv", tmp_path / "ho.csv"
     runlog.write(tr, str(tr_p))
     runlog.write(ho, str(ho_p))

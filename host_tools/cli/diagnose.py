@@ -68,6 +68,8 @@ def run(args) -> int:
     print(f"  {report['verdict_detail']}")
     if (report.get("generalization") or {}).get("warning"):
         print(f"  warning: {report['generalization']['warning']}")
+    if report.get("several_runs"):
+        print(f"  note: {report['several_runs']}")
     for a in (report.get("artifacts") or {}).get("lines", []):
         print(f"  line at {a['period_s']:.4g} s ({a['at']}): {a['cause']}; fix: {a['structural_fix']}")
     if report.get("stopped"):

@@ -133,7 +133,7 @@ from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE,
 from host_tools.fitting.diagnose_noise import (_allan_bridged, _noise_series, artifact_of, characterize,  # noqa: F401
                                        combiner_lines, noise_model, spectral_lines, surrogates)
 from host_tools.fitting.diagnose_report import (_verdict_detail, generalization, is_minor, kept_step_notes,
-                                                line_or_drift, verdict_of, write_report)
+                                                line_or_drift, several_runs_caveat, verdict_of, write_report)
 from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, DRIFT_MARGIN, G_MIN, MAX_ITER, N_SURROGATES,  # noqa: F401
                                       NULL_QUANTILE, PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, TRIES_PER_STEP, _Accepted,
                                       _config, _poly_terms, _scan, _step_key, kind_of, refit_with, rivals)
@@ -358,6 +358,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     report.update({"iterations": iterations, "final": _clean(final), "final_runs": final["runs"],
                    "final_train": _clean(final_train),
                    "generalization": generalization(_score(final_train)[0], _score(final)[0]) if hold else None,
+                   "several_runs": several_runs_caveat(len(train)),
                    "verdict": verdict, "verdict_detail": _verdict_detail(iterations, hold),
                    "artifacts": artifacts, "stopped": stopped, "characterization": characterization})
     model.fit["diagnose"] = {"effects": [{"effect": a.family, "params": a.params} for a in accepted],
