@@ -454,21 +454,19 @@ def test_atomic_writes_keep_symlinks_and_special_files(tmp_path):
             pass
 
 
-def test_a_stop_during_the_rename_is_held_until_it_is_recorded(tmp_path, monkeypatch):
-    """A SIGTERM that arrives while the destination is renamed into place is delivered only after
-    the rename is recorded in atomic.COMPLETED (the window CI hit: the file complete, the message
-    "(no output written)")."""
+def _stop_inside_the_rename(tmp_path, monkeypatch, deliver):
+    """atomic_open under a SIGTERM handler that raises cli._Terminated, with ``deliver()`` called
+    between the rename and its record; returns (what COMPLETED held right after ``deliver``, out
+    path) once the stop has surfaced as cli._Terminated; asserts the command's handler is back."""
     from host_tools import atomic
     monkeypatch.setattr(atomic, "COMPLETED", [])
     out = tmp_path / "o.txt"
     real_replace = os.replace
     seen = []
 
-    def replace_then_signal(src, dst):
+    def replace_then_deliver(src, dst):
         real_replace(src, dst)
-        # arrives between the rename and the record; directed at this thread, so that no other
-        # thread of the test process takes it (that case: the next test)
-        signal.pthread_kill(threading.get_ident(), signal.SIGTERM)
+        deliver()
         seen.append(list(atomic.COMPLETED))
 
     def handler(signum, frame):
@@ -476,12 +474,24 @@ def test_a_stop_during_the_rename_is_held_until_it_is_recorded(tmp_path, monkeyp
 
     old = signal.signal(signal.SIGTERM, handler)
     try:
-        monkeypatch.setattr(atomic.os, "replace", replace_then_signal)
+        monkeypatch.setattr(atomic.os, "replace", replace_then_deliver)
         with pytest.raises(cli._Terminated):
             with atomic.atomic_open(out, "w") as fh:
                 fh.write("x\n")
+        assert signal.getsignal(signal.SIGTERM) is handler        # the command's handler is back
     finally:
         signal.signal(signal.SIGTERM, old)
+    return seen, out
+
+
+def test_a_stop_during_the_rename_is_held_until_it_is_recorded(tmp_path, monkeypatch):
+    """A SIGTERM that arrives while the destination is renamed into place is delivered only after
+    the rename is recorded in atomic.COMPLETED (the window CI hit: the file complete, the message
+    "(no output written)").  Directed at this thread, so that no other thread of the test process
+    takes it (that case: the next test)."""
+    from host_tools import atomic
+    seen, out = _stop_inside_the_rename(
+        tmp_path, monkeypatch, lambda: signal.pthread_kill(threading.get_ident(), signal.SIGTERM))
     assert seen == [[]]                                   # the signal was pending during the rename ...
     assert atomic.COMPLETED == [os.path.realpath(out)] and out.read_text() == "x\n"    # ... and came after the record
 
@@ -492,27 +502,7 @@ def test_a_stop_taken_by_another_thread_is_held_too(tmp_path, monkeypatch):
     whatever the main thread's mask.  Simulated by calling the installed handler inside the window:
     it must only record the stop, which is raised after the rename is recorded."""
     from host_tools import atomic
-    monkeypatch.setattr(atomic, "COMPLETED", [])
-    out = tmp_path / "o.txt"
-    real_replace = os.replace
-    seen = []
-
-    def replace_then_handler(src, dst):
-        real_replace(src, dst)
-        signal.getsignal(signal.SIGTERM)(signal.SIGTERM, None)   # what the main thread runs
-        seen.append(list(atomic.COMPLETED))
-
-    def handler(signum, frame):
-        raise cli._Terminated()
-
-    old = signal.signal(signal.SIGTERM, handler)
-    try:
-        monkeypatch.setattr(atomic.os, "replace", replace_then_handler)
-        with pytest.raises(cli._Terminated):
-            with atomic.atomic_open(out, "w") as fh:
-                fh.write("x\n")
-        assert signal.getsignal(signal.SIGTERM) is handler        # the command's handler is back
-    finally:
-        signal.signal(signal.SIGTERM, old)
+    seen, out = _stop_inside_the_rename(
+        tmp_path, monkeypatch, lambda: signal.getsignal(signal.SIGTERM)(signal.SIGTERM, None))
     assert seen == [[]]
     assert atomic.COMPLETED == [os.path.realpath(out)] and out.read_text() == "x\n"
