@@ -64,7 +64,7 @@ def run(args) -> int:
                     return fit_logs(lg, cfg, args.terms, drop_unidentifiable=args.drop_unidentifiable,
                                     cv_blocks=args.cv_blocks)
             # several runs: per-run offsets removed as fit_default does
-            model, res = fit_without_run_offsets(logs, fit) if len(logs) > 1 else fit(logs)
+            model, res = fit_without_run_offsets(logs, fit)
         sel = model.fit.get("rate_selection")
         if sel:
             print(f"rate estimator auto: {sel['chosen']} (" + ", ".join(

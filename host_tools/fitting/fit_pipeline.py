@@ -30,7 +30,7 @@ def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, c
     if run_offsets not in ("auto", "off"):
         raise ValueError(f"run_offsets must be 'auto' or 'off', not {run_offsets!r}")
     logs = list(logs)
-    if run_offsets == "auto" and len(logs) > 1:
+    if run_offsets == "auto":
         return fit_without_run_offsets(logs, lambda lg: fit_default(
             lg, terms, drop_unidentifiable=drop_unidentifiable, lag_block=lag_block, cv_blocks=cv_blocks,
             rate_prefer=rate_prefer, run_offsets="off", **config_kw))
@@ -93,8 +93,11 @@ def fit_without_run_offsets(logs, fit):
     The model's k0 stays the level of all runs together; every fit decision (rate estimator, lag
     block, terms, cross-validation over runs) is taken on the shifted runs.  model.fit
     ``run_offsets``: {"passes", "offsets_dph": per run the total offset removed per bank, "runs"}.
+    One run: ``fit(logs)`` as it is (no offset to tell from the model's k0).
     Measured on foreign devices (docs/ACCURACY.md "Several training runs")."""
     model, res = fit(logs)
+    if len(logs) < 2:
+        return model, res
     total = 0.0
     shifted = logs
     for _ in range(RUN_OFFSET_PASSES):
