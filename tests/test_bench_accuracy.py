@@ -139,6 +139,21 @@ def test_ablation_table():
     assert all(" / " in r for r in rows[2:])
 
 
+def test_the_self_heating_ablation_removes_only_the_rise_after_power_on():
+    import copy
+    from host_tools.simulation.sim_foreign import foreign_device, node_temperatures
+    dev = foreign_device(3)
+    quiet = copy.deepcopy(dev)
+    ba.ABLATIONS["no self-heating"](quiet)
+    t = np.arange(0.0, 3000.0)
+    air = np.full_like(t, 20.0)                       # a soaked chamber: every node at 20 degC
+    hot, cold = node_temperatures(dev, t, air), node_temperatures(quiet, t, air)
+    k = dev.self_heating["node"]
+    assert all(np.allclose(c, 20.0) for c in cold)
+    assert hot[k][-1] - 20.0 > 0.5 * dev.self_heating["rise_c"] and abs(hot[k][0] - 20.0) < 1e-9
+    assert dev.self_heating["rise_c"] > 0 and quiet.self_heating["tau_s"] == dev.self_heating["tau_s"]
+
+
 def test_variant_options_and_split_runs_merge_to_the_whole():
     names = [o.name for o in ba.all_options()]
     if ba.has_order():

@@ -227,3 +227,19 @@ def test_cli(tmp_path, capsys):
     # the default family is still the calibrated simulator
     assert cli.main(["simulate", "--scenario", "static", "--duration", "10", "-o", str(out)]) == 0
     assert "family" not in runlog.read(out).metadata
+
+
+def test_a_lag_starts_soaked_and_is_exact_for_a_ramp():
+    """The nodes start soaked at the chamber's first temperature: a lag of a constant is that
+    constant from the first sample (not a transient whose size depends on where 0 degC is), and a
+    lag of a ramp from a soaked start is the exact first-order response r (t - tau (1 - e^(-t/tau)))."""
+    from host_tools.simulation.sim_foreign import lag
+    t = np.arange(0.0, 4000.0)
+    for tau in (60.0, 500.0, 1500.0):
+        assert np.max(np.abs(lag(np.full_like(t, 23.7), tau) - 23.7)) < 1e-12
+        r = 0.05
+        exact = 20.0 + r * (t - tau * (1.0 - np.exp(-t / tau)))
+        assert np.max(np.abs(lag(20.0 + r * t, tau) - exact)) < 1e-9
+    quiet = copy.deepcopy(foreign_device(3))
+    quiet.self_heating["rise_c"] = 0.0
+    assert all(np.max(np.abs(x - 20.0)) < 1e-12 for x in node_temperatures(quiet, t, np.full_like(t, 20.0)))

@@ -23,23 +23,24 @@ def basis(log, ref):
 def with_col(log, x, name="aux_w"):
     cols = dict(log.columns); cols[name] = x
     return RunLog.from_arrays(metadata=dict(log.metadata), source=log.source, **cols)
-for seed in map(int, sys.argv[1:]):
-    tr, ho, fl = device_runs(foreign_device(seed), True)
-    m0, _ = FP.fit_default([tr]); r0 = held(m0, ho, fl)
-    f = np.asarray(tr.columns["freq_hz"], float); T = np.asarray(tr.columns["temp_c"], float)
-    ref = (f.mean(), f.std(), T.mean(), T.std())
-    Xtr, Xho = basis(tr, ref), basis(ho, ref)
-    out = compensate(tr, m0); v = out["valid"] > 0
-    y = np.asarray(out.rate_dph)[v]
-    A = np.column_stack([Xtr[v], np.ones(v.sum())])
-    coef, *_ = np.linalg.lstsq(A, y - y.mean(), rcond=None)
-    w_tr, w_ho = Xtr @ coef[:-1], Xho @ coef[:-1]
-    tr2, ho2 = with_col(tr, w_tr), with_col(ho, w_ho)
-    orig = FL.sensor_source
-    FL.sensor_source = lambda logs, config: ("aux_w", 0.5 * (w_tr.min() + w_tr.max()), 0.6 * (w_tr.max() - w_tr.min()))
-    saved = FL.SENSOR_TAUS_S; FL.SENSOR_TAUS_S = (0.0,)
-    try:
-        m1, _ = FP.fit_default([tr2]); r1 = held(m1, ho2, fl)
-    finally:
-        FL.sensor_source = orig; FL.SENSOR_TAUS_S = saved
-    print(seed, "base %.2f composite %.2f" % (r0, r1), m0.fit.get("lag_block", {}).get("chosen"), "->", m1.fit.get("lag_block", {}).get("chosen"), flush=True)
+if __name__ == "__main__":
+    for seed in map(int, sys.argv[1:]):
+        tr, ho, fl = device_runs(foreign_device(seed), True)
+        m0, _ = FP.fit_default([tr]); r0 = held(m0, ho, fl)
+        f = np.asarray(tr.columns["freq_hz"], float); T = np.asarray(tr.columns["temp_c"], float)
+        ref = (f.mean(), f.std(), T.mean(), T.std())
+        Xtr, Xho = basis(tr, ref), basis(ho, ref)
+        out = compensate(tr, m0); v = out["valid"] > 0
+        y = np.asarray(out.rate_dph)[v]
+        A = np.column_stack([Xtr[v], np.ones(v.sum())])
+        coef, *_ = np.linalg.lstsq(A, y - y.mean(), rcond=None)
+        w_tr, w_ho = Xtr @ coef[:-1], Xho @ coef[:-1]
+        tr2, ho2 = with_col(tr, w_tr), with_col(ho, w_ho)
+        orig = FL.sensor_source
+        FL.sensor_source = lambda logs, config: ("aux_w", 0.5 * (w_tr.min() + w_tr.max()), 0.6 * (w_tr.max() - w_tr.min()))
+        saved = FL.SENSOR_TAUS_S; FL.SENSOR_TAUS_S = (0.0,)
+        try:
+            m1, _ = FP.fit_default([tr2]); r1 = held(m1, ho2, fl)
+        finally:
+            FL.sensor_source = orig; FL.SENSOR_TAUS_S = saved
+        print(seed, "base %.2f composite %.2f" % (r0, r1), m0.fit.get("lag_block", {}).get("chosen"), "->", m1.fit.get("lag_block", {}).get("chosen"), flush=True)

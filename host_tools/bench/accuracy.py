@@ -320,6 +320,7 @@ ABLATIONS = {   # name -> in-place change of a device copy: which physics costs 
     "bias on the resonator node": _same_node,
     "no tanh (cubic-representable common mode)": lambda d: d.common.update(e3=0.0),
     "no settling tail": lambda d: d.exchange.update(tail_amp_dph=0.0),
+    "no self-heating": lambda d: d.self_heating.update(rise_c=0.0),
 }
 
 

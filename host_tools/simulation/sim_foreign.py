@@ -274,7 +274,7 @@ def lag(u: np.ndarray, tau_s: float, dt_s: float = 1.0) -> np.ndarray:
     a = math.exp(-dt_s / tau_s)
     g = tau_s / dt_s * (1.0 - a)
     b = np.array([1.0 - g, g - a])
-    y, _ = lfilter(b, [1.0, -a], u, zi=np.array([u[0] * a]))
+    y, _ = lfilter(b, [1.0, -a], u, zi=np.array([u[0] * g]))   # steady state: y = u = u[0] from the start
     return y
 
 
