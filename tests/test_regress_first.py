@@ -182,7 +182,8 @@ def test_none_needs_regress_first_and_order_is_checked():
         ReversalConfig("none", order="combine_first")
     with pytest.raises(ValueError, match="order"):
         ReversalConfig("pair", order="regress_last")
-    assert ReversalConfig.from_dict({"combiner": "pair"}).order == "combine_first"
+    legacy = {"combiner": "pair", "max_stale_s": 300.0, "settle_s": 0.0}      # a model from before 'order'
+    assert ReversalConfig.from_dict(legacy).order == "combine_first"
     rt = ReversalConfig("none", 100.0, 2.0, "regress_first")
     assert ReversalConfig.from_dict(rt.to_dict()) == rt
 

@@ -68,6 +68,12 @@ def run(args) -> int:
     print(f"  {report['verdict_detail']}")
     if (report.get("generalization") or {}).get("warning"):
         print(f"  warning: {report['generalization']['warning']}")
+    for m in report.get("holdout_in_training") or []:
+        print(f"  warning: {m}")
+    for m in report.get("not_scanned") or []:
+        print(f"  note: not scanned: {m}")
+    for m in report.get("extrapolation") or []:
+        print(f"  warning: extrapolation on the held-out run (final model): {m}")
     if report.get("several_runs"):
         print(f"  note: {report['several_runs']}")
     for a in (report.get("artifacts") or {}).get("lines", []):

@@ -36,8 +36,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     from host_tools.golden import runlog
     from host_tools.atomic import refuse_overwrite
-    from host_tools.golden.checks import check_fit_inputs
-    from host_tools.golden.compensate import fit_config_from_logs
+    from host_tools.golden.checks import check_fit_inputs, coverage_warnings
+    from host_tools.golden.compensate import compensate, fit_config_from_logs
+    from host_tools.golden.flags import problems
 
     refuse_overwrite(args.output, args.runs)
     logs = [runlog.read(p) for p in args.runs]
@@ -68,7 +69,7 @@ def run(args) -> int:
         sel = model.fit.get("rate_selection")
         if sel:
             print(f"rate estimator auto: {sel['chosen']} (" + ", ".join(
-                f"{r['estimator']} {r['cv_rms']:.4g}" if "cv_rms" in r else f"{r['estimator']} failed"
+                f"{r['estimator']} {r['cv_rms']:.4g}" if "cv_rms" in r else f"{r['estimator']} failed: {r.get('error', '?')}"
                 for r in sel["candidates"]) + " deg/h cross-validated rms)")
         lag = model.fit.get("lag_block")
         if lag and lag.get("chosen"):
@@ -100,6 +101,15 @@ def run(args) -> int:
               f"they fit noise: consider --terms auto")
     if len(logs) > 1:
         print(f"warning: {len(logs)} training runs: {SEVERAL_RUNS_NOTE}")
+    for w in coverage_warnings(logs, args.proxy):
+        print(f"warning: {w}")
+    for log in logs:   # e.g. --proxy-range / --rate-range narrower than the data: the fit saw clamped inputs
+        for m in problems(compensate(log, model)):
+            print(f"warning: training run {log.source}: {m}")
+    if tuple(res.terms) == (0,) and args.terms in (None, "auto"):
+        print("warning: term selection kept only the offset k0: no temperature term held out in the "
+              "cross-validation; the model does not compensate temperature (see the warnings above, or fix the "
+              "terms with --terms)")
     offs = model.fit.get("run_offsets")
     if offs:
         print("per-run offsets removed before the fit [deg/h" + (", mode 1 / mode 2" if len(offs["offsets_dph"][0]) == 2

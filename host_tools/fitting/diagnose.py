@@ -132,7 +132,7 @@ from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE,
                                          material_on_holdout, noise_floor, offsets_hold, step_errors)
 from host_tools.fitting.diagnose_noise import (_allan_bridged, _noise_series, artifact_of, characterize,  # noqa: F401
                                        combiner_lines, noise_model, spectral_lines, surrogates)
-from host_tools.fitting.diagnose_report import (_verdict_detail, generalization, is_minor, kept_step_notes,
+from host_tools.fitting.diagnose_report import (_verdict_detail, extrapolation, generalization, not_scanned, is_minor, kept_step_notes,
                                                 line_or_drift, several_runs_caveat, verdict_of, write_report)
 from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, DRIFT_MARGIN, G_MIN, MAX_ITER, N_SURROGATES,  # noqa: F401
                                       NULL_QUANTILE, PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, TRIES_PER_STEP, _Accepted,
@@ -140,6 +140,7 @@ from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, DRIFT_MARGIN,
 from host_tools.fitting.diagnose_structure import _order_step, _settle_step
 from host_tools.fitting.fit import fit_logs
 from host_tools.fitting.fit_pipeline import fit_default
+from host_tools.golden.checks import check_distinct_runs, same_runs
 from host_tools.golden.model import jsonable
 
 
@@ -210,6 +211,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     hold = list(holdout_logs)
     if not train:
         raise ValueError("no training runs")
+    check_distinct_runs(train)
     rev = any(log.reversal for log in train)
     max_tries = TRIES_PER_STEP * max_iter if max_tries is None else max_tries
     opts = base_options(proxy=proxy, rate_estimator=rate_estimator, rate_n=rate_n, rate_shift=rate_shift,
@@ -241,7 +243,10 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                            "max_iter": max_iter, "max_tries": max_tries, "seed": seed, "terms": [int(k) for k in poly]},
               "baseline": {"holdout" if hold else "train": first_stats,
                            "train": error_stats(train, model) if hold else first_stats},
-              "noise_floor": noise_floor(evals, model)}
+              "noise_floor": noise_floor(evals, model),
+              "holdout_in_training": [f"held-out run {b} has the same data as training run {a}: its 'confirmation' "
+                                      f"is not independent" for a, b in same_runs(train, hold)],
+              "not_scanned": not_scanned(train + hold)}
     characterization = None
     artifacts = None
     it = 0
@@ -359,6 +364,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                    "final_train": _clean(final_train),
                    "generalization": generalization(_score(final_train)[0], _score(final)[0]) if hold else None,
                    "several_runs": several_runs_caveat(len(train)),
+                   "extrapolation": extrapolation(hold, model),
                    "verdict": verdict, "verdict_detail": _verdict_detail(iterations, hold),
                    "artifacts": artifacts, "stopped": stopped, "characterization": characterization})
     model.fit["diagnose"] = {"effects": [{"effect": a.family, "params": a.params} for a in accepted],

@@ -57,11 +57,11 @@ import numpy as np
 
 from host_tools.golden import runlog as rl
 from host_tools.golden.checks import check_sample_rate
-from host_tools.golden.flags import add_flags
+from host_tools.golden.flags import add_flags, note_aux_inputs
 from host_tools.golden.model import BiasModel, ModelConfig
 from host_tools.golden.proxy import ProxyConfig, parse_range
 from host_tools.golden.rate import RateConfig, parse_rate_range
-from host_tools.golden.regressors import AuxConfig, aux_regressor
+from host_tools.golden.regressors import AuxConfig, aux_inputs_clamped, aux_regressor
 from host_tools.golden import reversal as _reversal
 from host_tools.golden.reversal import ReversalConfig, check_modes, combine, combine_values, sign_of
 
@@ -199,7 +199,8 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
     check_impl(impl)
     if impl == "fixed":
         from host_tools.fixed.fixed_point import compensate_log
-        return add_flags(*compensate_log(log, model, table=table, return_flags=True))
+        return note_aux_inputs(add_flags(*compensate_log(log, model, table=table, return_flags=True)),
+                               aux_inputs_clamped(log, model.config.aux))
     if table is not None:
         raise ValueError("a coefficient table is only used with --impl fixed")
     if str(log.metadata.get("compensated", "")).strip().lower() == "yes" or "bias_dph" in log:
@@ -217,7 +218,7 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
         "compensation_terms": ",".join(f"k{k}" for k in model.terms),
         "compensation_valid": f"{nvalid} of {len(prep)} samples",
     })
-    return add_flags(out, prep.flags)
+    return note_aux_inputs(add_flags(out, prep.flags), aux_inputs_clamped(log, model.config.aux))
 
 
 def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: str | None = None,
@@ -272,7 +273,7 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
             # (hdrg paper's combine_first and regression-alone rows get worse with 5 s)
             if "settle_s" not in kw:
                 kw["settle_s"] = DEFAULT_SETTLE_S if (kw["order"], kw["combiner"]) == ("regress_first", "pair") else 0.0
-            rev = ReversalConfig.from_dict(kw)
+            rev = ReversalConfig(**kw)
     if rate_estimator == "auto":
         raise ValueError("rate estimator 'auto' is chosen by fitting every candidate: use hdrg fit "
                          "(host_tools.fitting.fit.fit_auto_rate), not a fixed model configuration")

@@ -16,6 +16,11 @@ bit   name             meaning
 128   saturated        a saturation inside the fixed-point pipeline (window count, trend, output)
 ====  ===============  ======================================================================
 
+An aux input outside the range its k7 term was fitted on is clamped on its own, which bit 32 (the
+sum z) does not see: a host check (host_tools.golden.regressors.aux_inputs_clamped) counts it into
+the metadata ``aux_inputs_clamped`` (:func:`note_aux_inputs`), and :func:`problems` treats it as
+extrapolation like the bits.
+
 Clamping (1, 2, 32) keeps a sample valid but means the model is *extrapolated*: above
 ``WARN_FRACTION`` of the samples `hdrg compensate` warns (``--strict``: refuses).  A saturated
 sample (64, 128) is never valid: its output is held like any invalid sample, and any saturation
@@ -35,6 +40,7 @@ EXTRAPOLATION = {VOC.FLAG_PROXY_CLAMPED: "the proxy is outside the model's proxy
                  VOC.FLAG_RATE_CLAMPED: "the proxy rate is outside the model's rate range",
                  VOC.FLAG_AUX_CLAMPED: "the k7 regressor is outside its range"}
 WARN_FRACTION = 0.01   # warn when more than 1 % of the samples are clamped (extrapolation)
+AUX_INPUTS_KEY = "aux_inputs_clamped"   # metadata: 'column count, ...' of aux inputs outside the model's range
 
 
 class CompensationWarning(UserWarning):
@@ -72,12 +78,33 @@ def add_flags(out, flags):
     return out
 
 
+def note_aux_inputs(out, clamped: dict):
+    """Record ``clamped`` ({aux column: samples outside the model's range of it},
+    host_tools.golden.regressors.aux_inputs_clamped) in the metadata of the compensated log ``out``
+    (AUX_INPUTS_KEY), where :func:`problems` and the user find it."""
+    if clamped:
+        out.metadata[AUX_INPUTS_KEY] = ", ".join(f"{c} {k}" for c, k in clamped.items())
+    return out
+
+
+def _aux_inputs(out) -> dict:
+    text = str(out.metadata.get(AUX_INPUTS_KEY, "") or "").strip()
+    pairs = [p.rsplit(" ", 1) for p in text.split(", ")] if text else []
+    return {c: int(k) for c, k in pairs}
+
+
 def problems(out) -> list:
-    """The warnings a compensated log deserves: extrapolation above WARN_FRACTION, any
-    saturation; each a sentence with the count, the share and the source."""
+    """The warnings a compensated log deserves: extrapolation above WARN_FRACTION (clamp flags, and
+    aux inputs outside the model's range: :func:`note_aux_inputs`), any saturation; each a sentence
+    with the count, the share and the source."""
     flags = np.asarray(out["flags"], np.int64)
     n = len(flags)
     msgs = []
+    for col, k in _aux_inputs(out).items():
+        if k > WARN_FRACTION * n:
+            msgs.append(f"extrapolation: {k} of {n} samples ({100.0 * k / n:.1f} %) have aux input '{col}' outside "
+                        f"the range the model's k7 term was fitted on (clamped to its edge; the aux_clamped flag "
+                        f"does not see a single input); the model is applied outside its training data there")
     for bit, what in EXTRAPOLATION.items():
         k = int(np.count_nonzero(flags & bit))
         if k > WARN_FRACTION * n:

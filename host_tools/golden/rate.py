@@ -170,8 +170,17 @@ class RateConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> "RateConfig":
-        """Inverse of :meth:`to_dict`; 'divisor' and 'warmup' are derived and checked if present."""
-        cfg = cls(d["estimator"], d.get("n", 8), d.get("shift", 4), d["span"], d["fs"])
+        """Inverse of :meth:`to_dict`; 'divisor' and 'warmup' are derived and checked if present.  A
+        missing or unknown key is an error naming it (a hand-edited model must not fall back to a
+        default estimator constant behind the user's back)."""
+        need = ("estimator", "n", "shift", "span", "fs")
+        missing = [k for k in need if k not in d]
+        unknown = sorted(set(d) - set(need) - {"divisor", "warmup"})
+        if missing or unknown:
+            raise ValueError("rate config: " + "; ".join(
+                ([f"missing {', '.join(missing)}"] if missing else []) + ([f"unknown {', '.join(unknown)}"] if unknown else []))
+                + f" (fields: {', '.join(need)}, divisor, warmup)")
+        cfg = cls(d["estimator"], d["n"], d["shift"], d["span"], d["fs"])
         for name in ("divisor", "warmup"):
             if name in d and d[name] != getattr(cfg, name):
                 raise ValueError(f"rate {name} {d[name]!r} does not match the estimator settings "

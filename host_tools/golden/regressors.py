@@ -406,6 +406,27 @@ def generator_values(log, term: dict, fs: float) -> np.ndarray:
     return g
 
 
+def aux_inputs_clamped(log, aux_config: AuxConfig | None = None) -> dict:
+    """{column: samples of ``log`` whose value lies outside the range an 'input' term of
+    ``aux_config`` was fitted on (|x - ref| > span, where the normalization clamps it to the edge)},
+    columns with such samples only.  A host check: the firmware's aux_clamped flag (bit 32) covers
+    the sum z, which cannot leave [-1, 1] while the weights' |sum| <= 1, so it does not see an input
+    clamped on its own."""
+    cfg = AuxConfig() if aux_config is None else aux_config
+    out = {}
+    if cfg.generator == "none":
+        return out
+    for term in cfg.params["terms"]:
+        t = normalize_term(term)
+        if t["gen"] != "input":
+            continue
+        x = _column(log, t["column"], f"aux generator '{t['gen']}'")
+        k = int(np.count_nonzero(np.abs(x - float(t["ref"])) > float(t["span"])))
+        if k:
+            out[t["column"]] = max(k, out.get(t["column"], 0))
+    return out
+
+
 def aux_regressor(log, aux_config: AuxConfig | None = None) -> np.ndarray:
     """z float64[len(log)] from the run log; 'none' (or None) gives zeros; 'sum' as in the module
     doc."""

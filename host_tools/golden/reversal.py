@@ -121,8 +121,18 @@ class ReversalConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> "ReversalConfig":
-        kw = {k: d[k] for k in ("combiner", "max_stale_s", "settle_s", "order") if k in d}
-        kw.setdefault("order", "combine_first")
+        """Inverse of :meth:`to_dict`.  'order' may be absent (models written before it existed:
+        combine_first); any other missing or unknown key is an error naming it (a hand-edited model
+        must not fall back to a default settling window or staleness limit)."""
+        need = ("combiner", "max_stale_s", "settle_s")
+        missing = [k for k in need if k not in d]
+        unknown = sorted(set(d) - set(need) - {"order"})
+        if missing or unknown:
+            raise ValueError("reversal config: " + "; ".join(
+                ([f"missing {', '.join(missing)}"] if missing else []) + ([f"unknown {', '.join(unknown)}"] if unknown else []))
+                + f" (fields: {', '.join(need)}, order)")
+        kw = {k: d[k] for k in need}
+        kw["order"] = d.get("order", "combine_first")
         return cls(**kw)
 
 
