@@ -143,3 +143,28 @@ def test_second_training_run_is_another_rate_of_the_same_power_on_and_keeps_the_
     assert b1.coef.tolist() != b2.coef.tolist()
     assert cli.main(["bench", "loop", "--runs", "1", "--second-train", "0"]) == 2
     assert "--second-train must be a chamber rate > 0" in capsys.readouterr().err
+
+
+def test_a_clean_turn_on_at_the_devices_self_heating_time_constant_is_told_apart():
+    """The strict false discovery counts it; ``clean_found_self_heating`` says which of them is the
+    device's own power-on self-heating (clean physics of the foreign family)."""
+    from host_tools.bench.loop import SELF_HEATING_TAU_FACTOR, self_heating_turn_on, summarize
+    from host_tools.simulation.sim_foreign import foreign_device
+    tau = foreign_device(99).self_heating["tau_s"]
+
+    def rec(steps, effect=None, verdict="effect found"):
+        return {"i": 99, "device": 99, "effect": effect, "strength": 0.0, "reversal": True, "verdict": verdict,
+                "steps": steps, "base": 1.0, "final": 0.8, "third_base": 1.0, "third_final": 0.9,
+                "effect_ratio": None, "oracle_fit_ratio": None, "named": False, "named_or_structure": False}
+
+    def step(effect, t, material=True):
+        return {"effect": effect, "params": {"tau_s": t}, "kind": "effect", "confirmed": True, "material": material,
+                "before": 1.0, "after": 0.8}
+
+    assert self_heating_turn_on(rec([step("turn_on", 0.75 * tau)]))
+    assert not self_heating_turn_on(rec([step("turn_on", 1.1 * SELF_HEATING_TAU_FACTOR * tau)]))
+    assert not self_heating_turn_on(rec([step("turn_on", tau), step("aux_vdd", 1000.0)]))
+    assert not self_heating_turn_on(rec([step("turn_on", tau)], effect="turn_on"))
+    assert not self_heating_turn_on(rec([step("turn_on", tau, material=False)], verdict="minor improvement confirmed"))
+    s = summarize([rec([step("turn_on", tau)])])
+    assert s["false_discovery"]["k"] == 1 and s["clean_found_self_heating"] == 1

@@ -107,6 +107,9 @@ def run(args) -> int:
     print(_line("false discovery (clean)", s["false_discovery"]))
     print(_line("  FTR clean", s["false_discovery_ftr"]))
     print(_line("  MR control", s["mr_control"]))
+    if "clean_found_self_heating" in s:
+        print(f"    of the clean 'effect found': {s['clean_found_self_heating']} a turn-on at the time constant of the "
+              f"device's own power-on self-heating (clean physics of the family; docs/LOOP.md)")
     print(f"  clean runs with 'model structure improved' (rate estimator, lag block, board_temp, combiner): {s['structural_only']}")
     if "minor_only" in s:
         print(f"  clean runs with 'minor improvement confirmed': {s['minor_only']}; minor effect steps kept on clean "

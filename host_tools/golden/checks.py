@@ -69,13 +69,11 @@ def check_fit_inputs(logs, proxy: str | None) -> None:
         if is_compensated(log):
             raise ValueError(f"{log.source}: this is a compensated log (output of hdrg compensate: metadata "
                              f"'compensated: yes' or a bias_dph/flags column); fit needs raw run logs")
-    check_distinct_runs(logs)
-    if proxy is not None:
-        return
-    lacking = [log.source for log in logs if "freq_hz" not in log]
+    lacking = [log.source for log in logs if "freq_hz" not in log] if proxy is None else []
     if lacking and len(lacking) < len(logs):
         raise ValueError(f"no 'freq_hz' column in {', '.join(lacking)} while the other logs have one: the proxy "
                          f"would switch to temp_c for all; fix the column names or pass --proxy temp")
+    check_distinct_runs(logs)
     if lacking:
         warnings.warn(f"no 'freq_hz' column in {', '.join(lacking)}: the temperature proxy is 'temp_c' "
                       f"(pass --proxy temp to choose it explicitly)", ProxyWarning, stacklevel=2)
