@@ -174,3 +174,30 @@ def test_a_hand_edited_model_with_a_missing_or_misspelled_field_is_refused(tmp_p
         assert text in capsys.readouterr().err, name
     assert cli.main(["compensate", str(tmp_path / "a.csv"), "--model", str(tmp_path / "m.json"),
                      "-o", str(tmp_path / "ok.csv")]) == 0
+    capsys.readouterr()
+    doc = json.loads(json.dumps(good))
+    doc["coef_dph"][4] = 1.0                                    # a term the model does not enable
+    (tmp_path / "k4.json").write_text(json.dumps(doc))
+    assert cli.main(["compensate", str(tmp_path / "a.csv"), "--model", str(tmp_path / "k4.json"),
+                     "-o", str(tmp_path / "k4.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "k4 = 1.0 but term k4 is not enabled" in err and "np.float64" not in err
+
+
+def test_report_names_an_in_sample_run_and_finds_the_training_runs_beside_the_model(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    for i, name in enumerate(("a.csv", "b.csv", "c.csv")):
+        runlog.write(sim.simulate("paper-ftr-cycle-4dpm", seed=20 + i, duration_s=3000), tmp_path / name)
+    assert cli.main(["fit", "a.csv", "b.csv", "-o", "m.json", "--rate-estimator", "diff", "--terms", "k0,k1"]) == 0
+    (tmp_path / "sub").mkdir()
+    monkeypatch.chdir(tmp_path / "sub")                    # the recorded 'a.csv', 'b.csv' are not here
+    capsys.readouterr()
+    assert cli.main(["report", "--model", "../m.json", "--out", "r1", "--no-plots", "../b.csv", "../c.csv"]) == 0
+    out = capsys.readouterr().out
+    assert "b.csv is one of the model's training runs: its numbers are in-sample" in out
+    assert "c.csv is one of" not in out and "baseline not fitted" not in out      # found beside the model
+    (tmp_path / "a.csv").rename(tmp_path / "gone.csv")
+    assert cli.main(["report", "--model", "../m.json", "--out", "r2", "--no-plots", "../c.csv"]) == 0
+    out = capsys.readouterr().out
+    assert "baseline fitted on 1 of the model's 2 recorded training runs" in out and "a.csv" in out
+    assert "baseline fitted on 1 of" in (tmp_path / "sub" / "r2" / "report.md").read_text()

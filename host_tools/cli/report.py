@@ -25,11 +25,20 @@ def run(args) -> int:
                      + list(args.train or []))
     model = BiasModel.from_json(args.model)
     train = args.train
+    notes = []
     if train is None:
-        train = [p for p in (model.fit or {}).get("train", []) if os.path.exists(p)]
+        recorded = list((model.fit or {}).get("train", []))
+        # as recorded (relative to where hdrg fit ran), else relative to the model file's directory
+        found = {p: next((c for c in (p, os.path.join(os.path.dirname(os.path.abspath(args.model)), p))
+                          if os.path.exists(c)), None) for p in recorded}
+        train = [c for c in found.values() if c]
+        missing = [p for p, c in found.items() if not c]
+        if missing and train:
+            notes.append(f"baseline fitted on {len(train)} of the model's {len(recorded)} recorded training runs; not "
+                         f"found from {os.getcwd()}: {', '.join(missing)} (give them with --train)")
     logs = [runlog.read(p) for p in args.runs]
     train_logs = [runlog.read(p) for p in train] if train else None
-    doc = report(logs, model, args.out, train_logs, plots=not args.no_plots)
+    doc = report(logs, model, args.out, train_logs, plots=not args.no_plots, notes=notes)
     print(_table(doc["rows"]))
     for note in doc["notes"]:
         print(f"note: {note}")

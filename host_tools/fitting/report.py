@@ -129,17 +129,26 @@ def _plot(results, baseline_results, out_dir, proxy_unit):
     return files
 
 
-def report(logs, model: BiasModel, out_dir, train_logs=None, plots: bool = True) -> dict:
+def report(logs, model: BiasModel, out_dir, train_logs=None, plots: bool = True, notes=()) -> dict:
     """Evaluate ``model`` (and the baseline fitted on ``train_logs``, if given) on ``logs``;
-    write report.md, report.json and figures to ``out_dir``.  Returns the JSON dict."""
+    write report.md, report.json and figures to ``out_dir``.  Returns the JSON dict.  ``notes``:
+    lines the caller adds to the notes (e.g. recorded training runs it did not find).  A run that
+    is one of the model's training runs (the same path as in ``model.fit['train']``, or the same
+    data as one of ``train_logs``) is named in the notes: its numbers are in-sample."""
     from host_tools.fitting.baseline import fit_baseline
+    from host_tools.golden.checks import same_runs
 
     if os.path.exists(out_dir) and not os.path.isdir(out_dir):
         raise NotADirectoryError(f"{out_dir}: exists and is not a directory (--out names the directory to write into)")
     os.makedirs(out_dir, exist_ok=True)
     results = [evaluate(log, model) for log in logs]
     baseline = None
-    notes = []
+    notes = list(notes)
+    recorded = {os.path.abspath(p) for p in (model.fit or {}).get("train", [])} | {
+        os.path.abspath(log.source) for log in (train_logs or [])}
+    same = {b for _, b in same_runs(list(train_logs or []), list(logs))}
+    notes += [f"{os.path.basename(log.source)} is one of the model's training runs: its numbers are in-sample, "
+              f"not a held-out check" for log in logs if os.path.abspath(log.source) in recorded or log.source in same]
     if train_logs:
         try:
             baseline = fit_baseline(train_logs, like=model.config)

@@ -253,7 +253,7 @@ def _check_coef(coef, terms, source, name="coef_dph") -> np.ndarray:
         raise ModelError(source, name, f"k{int(np.argmax(bad))} is not finite ({arr[bad][0]})")
     for k in range(N_TERMS):
         if k not in terms and arr[k] != 0.0:
-            raise ModelError(source, name, f"k{k} = {arr[k]!r} but term k{k} is not enabled (terms {list(terms)})")
+            raise ModelError(source, name, f"k{k} = {float(arr[k])!r} but term k{k} is not enabled (terms {list(terms)})")
     return arr
 
 

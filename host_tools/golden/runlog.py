@@ -231,7 +231,7 @@ def _validate(log: RunLog) -> None:
         if np.any(d <= 0):
             row = int(np.argmax(d <= 0)) + 1
             kind = "duplicated" if d[row - 1] == 0 else "not increasing"
-            raise RunLogError(src, where(row), f"{rowtxt(row)}t_s {kind}: {t[row]!r} after {t[row - 1]!r}")
+            raise RunLogError(src, where(row), f"{rowtxt(row)}t_s {kind}: {float(t[row])!r} after {float(t[row - 1])!r}")
     mode = cols["mode"]
     bad = ~np.isin(mode, MODES)
     if bad.any():
