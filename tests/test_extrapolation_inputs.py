@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from host_tools import cli
+from host_tools.fitting.diagnose_confirm import error_stats
 from host_tools.fitting.diagnose_report import extrapolation
 from host_tools.fitting.fit import fit_logs
 from host_tools.golden import flags as hflags, runlog
@@ -76,9 +77,17 @@ def test_a_few_samples_outside_are_recorded_but_not_warned(vdd):
 
 
 def test_diagnose_reports_a_held_out_run_outside_the_models_range(vdd):
-    msgs = extrapolation([vdd["high"]], vdd["model"])
+    msgs = extrapolation(error_stats([vdd["high"]], vdd["model"]))
     assert len(msgs) == 1 and msgs[0].startswith(f"{vdd['high'].source}: extrapolation")
-    assert extrapolation([vdd["log"]], vdd["model"]) == []
+    assert extrapolation(error_stats([vdd["log"]], vdd["model"])) == []
+    from host_tools.fitting.diagnose import diagnose
+    log = vdd["log"]
+    f = np.asarray(log["freq_hz"], np.float64)
+    hot = log.with_columns(freq_hz=f + 0.5 * (f.max() - f.min()))       # half the range beyond it
+    rep, _ = diagnose([log], [hot], plots=False, max_iter=0)            # the loop's own model: no aux term
+    assert len(rep["extrapolation"]) == 1 and "proxy_clamped" in rep["extrapolation"][0]
+    assert rep["extrapolation"][0] == f"{hot.source}: {rep['final_runs'][0]['problems'][0]}"
+    assert diagnose([log], [log.with_columns(freq_hz=f + 0.0)], plots=False, max_iter=0)[0]["extrapolation"] == []
 
 
 def test_fit_names_a_training_run_that_covers_a_sliver_of_the_range(tmp_path, capsys):

@@ -132,8 +132,8 @@ from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE,
                                          material_on_holdout, noise_floor, offsets_hold, step_errors)
 from host_tools.fitting.diagnose_noise import (_allan_bridged, _noise_series, artifact_of, characterize,  # noqa: F401
                                        combiner_lines, noise_model, spectral_lines, surrogates)
-from host_tools.fitting.diagnose_report import (_verdict_detail, extrapolation, generalization, not_scanned, is_minor, kept_step_notes,
-                                                line_or_drift, several_runs_caveat, verdict_of, write_report)
+from host_tools.fitting.diagnose_report import (_verdict_detail, extrapolation, generalization, is_minor, kept_step_notes,
+                                                line_or_drift, not_scanned, several_runs_caveat, verdict_of, write_report)
 from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, DRIFT_MARGIN, G_MIN, MAX_ITER, N_SURROGATES,  # noqa: F401
                                       NULL_QUANTILE, PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, TRIES_PER_STEP, _Accepted,
                                       _config, _poly_terms, _scan, _step_key, kind_of, refit_with, rivals)
@@ -364,7 +364,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                    "final_train": _clean(final_train),
                    "generalization": generalization(_score(final_train)[0], _score(final)[0]) if hold else None,
                    "several_runs": several_runs_caveat(len(train)),
-                   "extrapolation": extrapolation(hold, model),
+                   "extrapolation": extrapolation(final) if hold else [],
                    "verdict": verdict, "verdict_detail": _verdict_detail(iterations, hold),
                    "artifacts": artifacts, "stopped": stopped, "characterization": characterization})
     model.fit["diagnose"] = {"effects": [{"effect": a.family, "params": a.params} for a in accepted],

@@ -12,6 +12,7 @@ import numpy as np
 
 from host_tools.fitting import metrics
 from host_tools.golden.compensate import compensate, prepare, residual
+from host_tools.golden.flags import problems
 from host_tools.golden.model import BiasModel
 
 
@@ -86,7 +87,7 @@ def error_stats(logs, model: BiasModel, other: BiasModel | None = None) -> dict:
         if other is not None:
             valid &= np.asarray(compensate(log, other)["valid"]) == 1
         rows.append({"run": log.source, **_stats_one(out.rate_dph, log.t_s, valid),
-                     "rms_legs_dph": leg_rms(out.rate_dph, valid, log.segments)})
+                     "rms_legs_dph": leg_rms(out.rate_dph, valid, log.segments), "problems": problems(out)})
     return {**_mean_stats(rows), "runs": rows}
 
 

@@ -74,14 +74,12 @@ SEVERAL_RUNS_CAVEAT = (
     "every power-on from the same soak), and check it on another held-out run")
 
 
-def extrapolation(hold_logs, model) -> list:
-    """'source: message' for every extrapolation or saturation of ``model`` on the held-out runs
-    (host_tools.golden.flags.problems: proxy, rate or aux input outside the model's range): a
-    held-out error measured where the model extrapolates judges the extrapolation as much as the
-    model, and the report must say so."""
-    from host_tools.golden.compensate import compensate
-    from host_tools.golden.flags import problems
-    return [f"{log.source}: {m}" for log in hold_logs for m in problems(compensate(log, model))]
+def extrapolation(stats) -> list:
+    """'source: message' for every extrapolation or saturation in ``stats`` (diagnose_confirm.error_stats
+    of a model on the held-out runs; each run's ``problems``, host_tools.golden.flags.problems: proxy,
+    rate or aux input outside the model's range): a held-out error measured where the model
+    extrapolates judges the extrapolation as much as the model, and the report must say so."""
+    return [f"{r['run']}: {m}" for r in stats["runs"] for m in r.get("problems", [])]
 
 
 def not_scanned(logs) -> list:

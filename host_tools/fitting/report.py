@@ -144,8 +144,7 @@ def report(logs, model: BiasModel, out_dir, train_logs=None, plots: bool = True,
     results = [evaluate(log, model) for log in logs]
     baseline = None
     notes = list(notes)
-    recorded = {os.path.abspath(p) for p in (model.fit or {}).get("train", [])} | {
-        os.path.abspath(log.source) for log in (train_logs or [])}
+    recorded = {os.path.abspath(p) for p in (model.fit or {}).get("train", [])}
     same = {b for _, b in same_runs(list(train_logs or []), list(logs))}
     notes += [f"{os.path.basename(log.source)} is one of the model's training runs: its numbers are in-sample, "
               f"not a held-out check" for log in logs if os.path.abspath(log.source) in recorded or log.source in same]

@@ -35,6 +35,18 @@ def is_compensated(log) -> bool:
             or "bias_dph" in log or "flags" in log)
 
 
+def check_fields(what: str, d: dict, required, optional=()) -> None:
+    """ValueError naming every missing key of ``required`` and every key of ``d`` in neither
+    ``required`` nor ``optional`` (a hand-edited config must not fall back to a default behind the
+    user's back, nor have a misspelled key ignored)."""
+    missing = [k for k in required if k not in d]
+    unknown = sorted(set(d) - set(required) - set(optional))
+    if missing or unknown:
+        raise ValueError(f"{what}: " + "; ".join(([f"missing {', '.join(missing)}"] if missing else [])
+                                                + ([f"unknown {', '.join(unknown)}"] if unknown else []))
+                         + f" (fields: {', '.join(list(required) + list(optional))})")
+
+
 def _fingerprint(log) -> bytes:
     """A digest of a run's data (t_s, mode, rate_dph): equal for the same run read twice or copied."""
     h = hashlib.sha1()
@@ -91,7 +103,7 @@ def coverage_warnings(logs, proxy: str | None = None) -> list:
         return []
     lo_hi = []
     for log in logs:
-        _, p = log.proxy(proxy or ("freq" if "freq_hz" in log else "temp"))
+        _, p = log.proxy(proxy)
         p = np.asarray(p, np.float64)
         p = p[np.isfinite(p)]
         lo_hi.append((np.percentile(p, 0.5), np.percentile(p, 99.5)) if len(p) else (np.nan, np.nan))

@@ -55,6 +55,7 @@ import numba
 import numpy as np
 
 from firmware_ref.vocabulary import ESTIMATORS
+from host_tools.golden.checks import check_fields
 _CODE = {name: i for i, name in enumerate(ESTIMATORS)}
 MAX_SHIFT = 24
 RATE_UNITS = {"freq": "Hz/s", "temp": "degC/s"}
@@ -173,13 +174,7 @@ class RateConfig:
         """Inverse of :meth:`to_dict`; 'divisor' and 'warmup' are derived and checked if present.  A
         missing or unknown key is an error naming it (a hand-edited model must not fall back to a
         default estimator constant behind the user's back)."""
-        need = ("estimator", "n", "shift", "span", "fs")
-        missing = [k for k in need if k not in d]
-        unknown = sorted(set(d) - set(need) - {"divisor", "warmup"})
-        if missing or unknown:
-            raise ValueError("rate config: " + "; ".join(
-                ([f"missing {', '.join(missing)}"] if missing else []) + ([f"unknown {', '.join(unknown)}"] if unknown else []))
-                + f" (fields: {', '.join(need)}, divisor, warmup)")
+        check_fields("rate config", d, ("estimator", "n", "shift", "span", "fs"), ("divisor", "warmup"))
         cfg = cls(d["estimator"], d["n"], d["shift"], d["span"], d["fs"])
         for name in ("divisor", "warmup"):
             if name in d and d[name] != getattr(cfg, name):

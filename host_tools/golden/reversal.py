@@ -79,6 +79,7 @@ import numba
 import numpy as np
 
 from firmware_ref.vocabulary import ORDERS, REVERSAL_COMBINERS as COMBINERS
+from host_tools.golden.checks import check_fields
 DEFAULT_MAX_STALE_S = 300.0
 # the defaults of new models (host_tools.golden.compensate.fit_config_from_logs, the CLI of hdrg fit / diagnose)
 # and of the raw-log combination of hdrg metrics: chosen on the foreign benchmark (docs/REGRESS_THEN_REVERSE.md)
@@ -124,16 +125,8 @@ class ReversalConfig:
         """Inverse of :meth:`to_dict`.  'order' may be absent (models written before it existed:
         combine_first); any other missing or unknown key is an error naming it (a hand-edited model
         must not fall back to a default settling window or staleness limit)."""
-        need = ("combiner", "max_stale_s", "settle_s")
-        missing = [k for k in need if k not in d]
-        unknown = sorted(set(d) - set(need) - {"order"})
-        if missing or unknown:
-            raise ValueError("reversal config: " + "; ".join(
-                ([f"missing {', '.join(missing)}"] if missing else []) + ([f"unknown {', '.join(unknown)}"] if unknown else []))
-                + f" (fields: {', '.join(need)}, order)")
-        kw = {k: d[k] for k in need}
-        kw["order"] = d.get("order", "combine_first")
-        return cls(**kw)
+        check_fields("reversal config", d, ("combiner", "max_stale_s", "settle_s"), ("order",))
+        return cls(d["combiner"], d["max_stale_s"], d["settle_s"], d.get("order", "combine_first"))
 
 
 @dataclass
