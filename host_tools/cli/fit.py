@@ -9,6 +9,7 @@ from firmware_ref.terms import TERM_NAMES
 from host_tools.cli.options import add_model_options
 from host_tools.fitting.fit import MIN_SAMPLES_PER_TERM, UnidentifiableError, fit_auto_rate, fit_logs
 from host_tools.fitting.fit_pipeline import fit_default, fit_without_run_offsets
+from host_tools.golden.reversal import DEFAULT_MAX_STALE_S, schedule_ages_s
 
 
 # What `hdrg fit` says when it is given several runs (model.json fit.several_runs, and the console).
@@ -93,6 +94,12 @@ def run(args) -> int:
     model.to_json(args.output)
     print(f"{args.output}: {len(res.terms)} terms {['k%d' % k for k in res.terms]}, n={res.n}, "
           f"rms={res.rms:.4g} deg/h, cond={res.cond:.3g}")
+    rev = model.config.reversal
+    if rev is not None and rev.max_stale_s != DEFAULT_MAX_STALE_S:
+        oldest = max(schedule_ages_s(log.mode, log.segments, model.config.rate.fs).max(initial=0.0) for log in logs)
+        print(f"mode reversal: max_stale_s {rev.max_stale_s:g} s (the training runs' windows reach {oldest:g} s "
+              f"before the other mode's is renewed; the paper's 30 s / 120 s schedule needs 150 s, the default is "
+              f"{DEFAULT_MAX_STALE_S:g} s)")
     if res.dropped:
         print(f"dropped as unidentifiable: {['k%d' % k for k in res.dropped]} (collinear: {res.collinear})")
     weak = model.fit.get("insignificant", [])

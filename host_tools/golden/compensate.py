@@ -51,19 +51,20 @@ The log's sample rate (``RunLog.sample_rate_hz``) must match the model's ``rate.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from host_tools.golden import runlog as rl
 from host_tools.golden.checks import check_sample_rate
-from host_tools.golden.flags import add_flags, note_aux_inputs
+from host_tools.golden.flags import STALE_KEY, add_flags, note_aux_inputs
 from host_tools.golden.model import BiasModel, ModelConfig
 from host_tools.golden.proxy import ProxyConfig, parse_range
 from host_tools.golden.rate import RateConfig, parse_rate_range
 from host_tools.golden.regressors import AuxConfig, aux_inputs_clamped, aux_regressor
 from host_tools.golden import reversal as _reversal
-from host_tools.golden.reversal import ReversalConfig, check_modes, combine, combine_values, sign_of
+from host_tools.golden.reversal import (ReversalConfig, check_modes, combine, combine_values, max_stale_for,
+                                        schedule_ages_s, sign_of)
 
 from firmware_ref.vocabulary import (FLAG_EXCHANGE, FLAG_PROXY_CLAMPED, FLAG_RATE_CLAMPED, FLAG_STALE,  # noqa: F401
                                      FLAG_WARMUP, GOLDEN_FLAG_NAMES as FLAG_NAMES)
@@ -72,6 +73,7 @@ from firmware_ref.vocabulary import (FLAG_EXCHANGE, FLAG_PROXY_CLAMPED, FLAG_RAT
 # Chosen on held-out runs at another temperature rate (docs/REGRESS_THEN_REVERSE.md "Defaults").
 DEFAULT_ORDER, DEFAULT_COMBINER = _reversal.DEFAULT_ORDER, _reversal.DEFAULT_COMBINER  # defined in host_tools.golden.reversal
 DEFAULT_SETTLE_S = _reversal.DEFAULT_SETTLE_S  # defined in host_tools.golden.reversal
+NO_AGE_LIMIT_S = 1e9   # max_stale_s of stale_by_age's reference: no window too old
 DEFAULT_RATE = {"estimator": "diff", "n": 8, "shift": 4}   # robust: no long warm-up, any fs, bursty logs
 DEFAULT_TERMS = "auto"
 DEFAULT_SIGNIFICANCE = 1.0   # of terms 'auto' in fit_logs: keep the smallest model within this many CV standard errors
@@ -189,6 +191,33 @@ def check_impl(impl: str) -> None:
         raise ValueError(f"--impl must be one of {IMPLS}, not {impl!r}")
 
 
+def stale_by_age(log, config, valid=None) -> tuple:
+    """(samples, age_s): how many samples of mode-reversal ``log`` are not valid only because the
+    other mode's latest window is older than ``config``'s max_stale_s (they would be valid with no
+    age limit), and the longest window age its schedule needs [s] (host_tools.golden.reversal.
+    schedule_ages_s).  ``valid``: the valid column under ``config`` when already computed.  (0, 0.0)
+    for FTR."""
+    cfg = _config_of(config)
+    if cfg.reversal is None or not log.reversal:
+        return 0, 0.0
+    if valid is None:
+        valid = prepare(log, cfg).valid
+    unlimited = replace(cfg, reversal=replace(cfg.reversal, max_stale_s=NO_AGE_LIMIT_S))
+    k = int(np.count_nonzero(prepare(log, unlimited).valid & ~np.asarray(valid, bool)))
+    ages = schedule_ages_s(log.mode, log.segments, cfg.rate.fs)
+    return k, float(ages.max()) if len(ages) else 0.0
+
+
+def note_stale_by_age(out, log, config, valid=None):
+    """Record :func:`stale_by_age` in the metadata of the compensated log ``out`` (STALE_KEY) when
+    some sample went stale by age, where host_tools.golden.flags.problems and the user find it."""
+    k, age = stale_by_age(log, config, valid)
+    if k:
+        out.metadata[STALE_KEY] = (f"{k} samples; the log's schedule needs max_stale_s >= {age:g} s, the model "
+                                   f"allows {_config_of(config).reversal.max_stale_s:g} s")
+    return out
+
+
 def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.RunLog:
     """The compensated run log (see the module doc): ``rate_dph = y - B``, ``bias_dph = B``,
     ``valid`` 1/0, other columns and metadata kept, ``compensated: yes`` added.
@@ -199,8 +228,9 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
     check_impl(impl)
     if impl == "fixed":
         from host_tools.fixed.fixed_point import compensate_log
-        return note_aux_inputs(add_flags(*compensate_log(log, model, table=table, return_flags=True)),
-                               aux_inputs_clamped(log, model.config.aux))
+        out = note_aux_inputs(add_flags(*compensate_log(log, model, table=table, return_flags=True)),
+                              aux_inputs_clamped(log, model.config.aux))
+        return note_stale_by_age(out, log, model)
     if table is not None:
         raise ValueError("a coefficient table is only used with --impl fixed")
     if str(log.metadata.get("compensated", "")).strip().lower() == "yes" or "bias_dph" in log:
@@ -218,7 +248,8 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
         "compensation_terms": ",".join(f"k{k}" for k in model.terms),
         "compensation_valid": f"{nvalid} of {len(prep)} samples",
     })
-    return note_aux_inputs(add_flags(out, prep.flags), aux_inputs_clamped(log, model.config.aux))
+    out = note_aux_inputs(add_flags(out, prep.flags), aux_inputs_clamped(log, model.config.aux))
+    return note_stale_by_age(out, log, model, prep.valid)
 
 
 def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: str | None = None,
@@ -236,8 +267,9 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
       of |dp/dt| past warm-up on non-exchange samples, times 1 + ``rate_margin``);
     * reversal: None for FTR logs (giving one is an error); for mode-reversal logs ``reversal``
       (a ReversalConfig, used as is; or a dict, whose missing or None "combiner" / "order" are
-      DEFAULT_COMBINER / DEFAULT_ORDER, and "settle_s" DEFAULT_SETTLE_S for regress_first + pair,
-      else 0 s) or ReversalConfig(DEFAULT_COMBINER, settle_s=DEFAULT_SETTLE_S, order=DEFAULT_ORDER);
+      DEFAULT_COMBINER / DEFAULT_ORDER, "settle_s" DEFAULT_SETTLE_S for regress_first + pair,
+      else 0 s, and "max_stale_s" host_tools.golden.reversal.max_stale_for the logs: 300 s, or
+      longer when their dwell is) or the same defaults;
     * aux: ``aux`` (AuxConfig or dict) or AuxConfig() ('none').
     """
     logs = list(logs)
@@ -273,6 +305,8 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
             # (hdrg paper's combine_first and regression-alone rows get worse with 5 s)
             if "settle_s" not in kw:
                 kw["settle_s"] = DEFAULT_SETTLE_S if (kw["order"], kw["combiner"]) == ("regress_first", "pair") else 0.0
+            if "max_stale_s" not in kw:
+                kw["max_stale_s"] = max_stale_for(logs, fs)
             rev = ReversalConfig(**kw)
     if rate_estimator == "auto":
         raise ValueError("rate estimator 'auto' is chosen by fitting every candidate: use hdrg fit "

@@ -41,6 +41,7 @@ EXTRAPOLATION = {VOC.FLAG_PROXY_CLAMPED: "the proxy is outside the model's proxy
                  VOC.FLAG_AUX_CLAMPED: "the k7 regressor is outside its range"}
 WARN_FRACTION = 0.01   # warn when more than 1 % of the samples are clamped (extrapolation)
 AUX_INPUTS_KEY = "aux_inputs_clamped"   # metadata: 'column count, ...' of aux inputs outside the model's range
+STALE_KEY = "stale_by_age"   # metadata: 'N samples; ...' not valid only because the other mode's window was too old
 
 
 class CompensationWarning(UserWarning):
@@ -95,8 +96,9 @@ def _aux_inputs(out) -> dict:
 
 def problems(out) -> list:
     """The warnings a compensated log deserves: extrapolation above WARN_FRACTION (clamp flags, and
-    aux inputs outside the model's range: :func:`note_aux_inputs`), any saturation; each a sentence
-    with the count, the share and the source."""
+    aux inputs outside the model's range: :func:`note_aux_inputs`), samples lost to a window older
+    than the model's max_stale_s above WARN_FRACTION (STALE_KEY, host_tools.golden.compensate.
+    note_stale_by_age), any saturation; each a sentence with the count, the share and the source."""
     flags = np.asarray(out["flags"], np.int64)
     n = len(flags)
     msgs = []
@@ -110,6 +112,13 @@ def problems(out) -> list:
         if k > WARN_FRACTION * n:
             msgs.append(f"extrapolation: {k} of {n} samples ({100.0 * k / n:.1f} %) {FLAG_NAMES[bit]} "
                         f"({what}); the model is applied outside its training data there")
+    stale = str(out.metadata.get(STALE_KEY, "") or "").strip()
+    k = int(stale.split(" ", 1)[0]) if stale else 0
+    if k > WARN_FRACTION * n:
+        msgs.append(f"stale: {k} of {n} samples ({100.0 * k / n:.1f} %) are not valid only because the other "
+                    f"mode's window is older than the model's max_stale_s ({stale.split('; ', 1)[1]}): the log's "
+                    f"mode-reversal schedule has longer windows than the training runs'; refit on runs with this "
+                    f"schedule")
     k = int(np.count_nonzero(flags & SATURATION))
     if k:
         msgs.append(f"saturation: {k} of {n} samples saturated in fixed point (flags input_saturated/saturated); "

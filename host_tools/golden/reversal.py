@@ -73,6 +73,7 @@ passes the present rate through).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba
@@ -243,6 +244,41 @@ def combine_values(mode, x, ok, segments, cfg: ReversalConfig, fs_hz: float):
     seg_start[np.asarray(segments, np.int64)] = True
     return _combine_kernel(mode, x, ok, seg_start, int(round(cfg.settle_s * fs_hz)),
                            int(round(cfg.max_stale_s * fs_hz)), _KIND[cfg.combiner])
+
+
+def schedule_ages_s(mode, segments, fs_hz: float) -> np.ndarray:
+    """The window ages a log's mode schedule needs [s], one per mode-1/2 window that follows a window
+    of the other mode in its segment: (its last sample - the last sample of the other mode's latest
+    window) / ``fs_hz``, the age the pair/trend combiner's other-mode estimate reaches at the end of
+    the window.  Every sample of such a window can be valid only when max_stale_s >= its age (the
+    paper's 30 s exchange / 120 s dwell: 150 s).  ``segments``: RunLog.segments (ages restart)."""
+    mode = np.asarray(mode, np.int64)
+    starts = np.asarray(segments, np.int64)
+    bounds = np.union1d(np.flatnonzero(np.diff(mode)) + 1, starts)
+    ends = np.append(bounds[1:], len(mode)) - 1
+    seg_of = np.searchsorted(starts, bounds, side="right") - 1
+    last_end = {}
+    ages = []
+    for b, e, g in zip(bounds, ends, seg_of):
+        m = int(mode[b])
+        if m not in (1, 2):
+            continue
+        prev = last_end.get((int(g), 3 - m))
+        if prev is not None:
+            ages.append((e - prev) / fs_hz)
+        last_end[(int(g), m)] = e
+    return np.asarray(ages, np.float64)
+
+
+def max_stale_for(logs, fs_hz: float) -> float:
+    """The default max_stale_s for mode-reversal training ``logs`` [s]: DEFAULT_MAX_STALE_S, or 1.1 x
+    the median window age of their schedules (:func:`schedule_ages_s`) rounded up to 10 s when that
+    is longer (a dwell far above the paper's 120 s); a window longer than the logs' usual one still
+    goes stale, and hdrg compensate says so (metadata ``stale_by_age``)."""
+    ages = np.concatenate([schedule_ages_s(log.mode, log.segments, fs_hz) for log in logs] + [np.zeros(0)])
+    if not len(ages):
+        return DEFAULT_MAX_STALE_S
+    return max(DEFAULT_MAX_STALE_S, 10.0 * math.ceil(1.1 * float(np.median(ages)) / 10.0))
 
 
 def combine(log, combiner: str = "pair", max_stale_s: float | None = None, settle_s: float = 0.0,

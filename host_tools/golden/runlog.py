@@ -6,8 +6,11 @@ order, the file it came from, and the notes of every repair the reader made.
 
 Columns (units): ``t_s`` [s since power-on], ``rate_dph`` [deg/h, raw loop output; ``rate_dps``
 in a file is converted on read], ``mode`` [0 FTR, 1 mode 1, 2 mode 2, 3 exchange; default 0],
-``freq_hz`` [Hz, drive-mode frequency], ``temp_c`` [degC], ``aux_*`` [any]; every other column is
-kept as it is (e.g. ``bias_dph`` and ``valid`` of a compensated log).
+``freq_hz`` [Hz, drive-mode frequency], ``temp_c`` [degC], ``aux_*`` [any]; the columns hdrg writes
+(``bias_dph``, ``valid``, ``flags`` of a compensated log; hdrg capture's ``comp_*``, ``status``,
+``state``, ``seq``) are kept as they are.  Any other column in a CSV file is kept too, with a
+warning that names it (no tool uses it), and one that differs from a missing format column only in
+case or spaces (``Mode``) is an error.
 
 Bad input (each case is tested in tests/test_runlog.py):
 
@@ -57,6 +60,9 @@ GAP_FACTOR = 1.5
 PROXY_COLUMNS = {"freq": "freq_hz", "temp": "temp_c"}
 INT_COLUMNS = ("mode", "flags")   # integer columns (flags: compensated logs, docs/RUN_LOG.md)
 FS_META_TOLERANCE = 0.02          # metadata sample_rate_hz vs 1 / median t_s step
+FORMAT_COLUMNS = ("t_s", "rate_dph", "rate_dps", "mode", "freq_hz", "temp_c")   # shared/formats/run-log.md
+# columns hdrg itself writes (docs/RUN_LOG.md): a compensated log, and hdrg capture's device outputs
+HDRG_COLUMNS = ("bias_dph", "valid", "flags", "comp_rate_dph", "comp_bias_dph", "comp_valid", "status", "state", "seq")
 CAPTURE_KEY, CAPTURE_OPEN, CAPTURE_DONE = "capture", "in progress", "complete"
 
 
@@ -326,6 +332,28 @@ def read_csv(path) -> RunLog:
     return parse_csv_text(text, source)
 
 
+def _check_unknown_columns(names, source: str, header_line: int, notes: list) -> None:
+    """A header column that is neither in the format, nor ``aux_*``, nor one hdrg writes: an error
+    when it differs from a format column the header lacks only in case or spaces (``Mode`` for
+    ``mode``: names are matched exactly, so the log would be read without it, e.g. as FTR), else a
+    warning naming it (the column is kept and used by no tool)."""
+    known = set(FORMAT_COLUMNS) | set(HDRG_COLUMNS)
+    unknown = [c for c in names if c not in known and not c.startswith("aux_")]
+    for c in unknown:
+        near = next((k for k in FORMAT_COLUMNS if k not in names and k == c.lower().replace(" ", "")), None)
+        if near is not None:
+            raise RunLogError(source, header_line, f"column '{c}' is not '{near}' (column names are matched "
+                                                   f"exactly, shared/formats/run-log.md): as it stands the log would "
+                                                   f"be read without '{near}'; rename the column")
+    if unknown:
+        names_text = ", ".join(f"'{c}'" for c in unknown)
+        msg = (f"{source}:{header_line}: column(s) {names_text} not in the run-log format (t_s, rate_dph, mode, "
+               f"freq_hz, temp_c, aux_*): kept in the log but used by no tool; rename a logged channel to "
+               f"aux_<name> to offer it to the fit and the loop")
+        notes.append(msg)
+        warnings.warn(msg, RunLogWarning, stacklevel=5)
+
+
 def parse_csv_text(text: str, source: str = "<text>") -> RunLog:
     """Parse run-log CSV text (see :func:`read_csv`)."""
     if not text.strip():
@@ -356,6 +384,7 @@ def parse_csv_text(text: str, source: str = "<text>") -> RunLog:
     if "freq_hz" not in names and "temp_c" not in names:
         raise RunLogError(source, header_line,
                           f"missing temperature proxy: one of the columns 'freq_hz', 'temp_c' is required; header has {names}")
+    _check_unknown_columns(names, source, header_line, notes)
     data = lines[i + 1:]
     while data and not data[-1].strip():  # trailing blank lines are harmless
         data.pop()
