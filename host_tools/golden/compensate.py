@@ -51,7 +51,7 @@ The log's sample rate (``RunLog.sample_rate_hz``) must match the model's ``rate.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -64,7 +64,7 @@ from host_tools.golden.rate import RateConfig, parse_rate_range
 from host_tools.golden.regressors import AuxConfig, aux_inputs_clamped, aux_regressor
 from host_tools.golden import reversal as _reversal
 from host_tools.golden.reversal import (ReversalConfig, check_modes, combine, combine_values, max_stale_for,
-                                        schedule_ages_s, sign_of)
+                                        sign_of, window_ages)
 
 from firmware_ref.vocabulary import (FLAG_EXCHANGE, FLAG_PROXY_CLAMPED, FLAG_RATE_CLAMPED, FLAG_STALE,  # noqa: F401
                                      FLAG_WARMUP, GOLDEN_FLAG_NAMES as FLAG_NAMES)
@@ -73,7 +73,6 @@ from firmware_ref.vocabulary import (FLAG_EXCHANGE, FLAG_PROXY_CLAMPED, FLAG_RAT
 # Chosen on held-out runs at another temperature rate (docs/REGRESS_THEN_REVERSE.md "Defaults").
 DEFAULT_ORDER, DEFAULT_COMBINER = _reversal.DEFAULT_ORDER, _reversal.DEFAULT_COMBINER  # defined in host_tools.golden.reversal
 DEFAULT_SETTLE_S = _reversal.DEFAULT_SETTLE_S  # defined in host_tools.golden.reversal
-NO_AGE_LIMIT_S = 1e9   # max_stale_s of stale_by_age's reference: no window too old
 DEFAULT_RATE = {"estimator": "diff", "n": 8, "shift": 4}   # robust: no long warm-up, any fs, bursty logs
 DEFAULT_TERMS = "auto"
 DEFAULT_SIGNIFICANCE = 1.0   # of terms 'auto' in fit_logs: keep the smallest model within this many CV standard errors
@@ -191,30 +190,35 @@ def check_impl(impl: str) -> None:
         raise ValueError(f"--impl must be one of {IMPLS}, not {impl!r}")
 
 
-def stale_by_age(log, config, valid=None) -> tuple:
+def stale_by_age(log, config, prep: Prepared | None = None) -> tuple:
     """(samples, age_s): how many samples of mode-reversal ``log`` are not valid only because the
-    other mode's latest window is older than ``config``'s max_stale_s (they would be valid with no
-    age limit), and the longest window age its schedule needs [s] (host_tools.golden.reversal.
-    schedule_ages_s).  ``valid``: the valid column under ``config`` when already computed.  (0, 0.0)
-    for FTR."""
+    other mode's latest window is older than ``config``'s max_stale_s (exactly the samples that
+    would be valid with no age limit), and the oldest window age any used sample of it meets [s]
+    (host_tools.golden.reversal.window_ages: the windows the combiner commits, after settling and
+    warm-up).  ``prep``: :func:`prepare` of ``log`` under ``config`` when already computed.  (0, 0.0)
+    for FTR and for the 'none' combiner."""
     cfg = _config_of(config)
     if cfg.reversal is None or not log.reversal:
         return 0, 0.0
-    if valid is None:
-        valid = prepare(log, cfg).valid
-    unlimited = replace(cfg, reversal=replace(cfg.reversal, max_stale_s=NO_AGE_LIMIT_S))
-    k = int(np.count_nonzero(prepare(log, unlimited).valid & ~np.asarray(valid, bool)))
-    ages = schedule_ages_s(log.mode, log.segments, cfg.rate.fs)
-    return k, float(ages.max()) if len(ages) else 0.0
+    if prep is None:
+        prep = prepare(log, cfg)
+    warm = (prep.flags & FLAG_WARMUP) != 0
+    ok = ~warm if cfg.reversal.order == "regress_first" else np.ones(len(warm), bool)
+    ages = window_ages(prep.mode, ok, prep.segments, cfg.reversal, cfg.rate.fs)
+    seen = (ages >= 0) & ~warm & (prep.mode != rl.MODE_EXCHANGE)
+    k = int(np.count_nonzero(seen & (ages > int(round(cfg.reversal.max_stale_s * cfg.rate.fs)))))
+    return k, float(ages[seen].max()) / cfg.rate.fs if seen.any() else 0.0
 
 
-def note_stale_by_age(out, log, config, valid=None):
-    """Record :func:`stale_by_age` in the metadata of the compensated log ``out`` (STALE_KEY) when
-    some sample went stale by age, where host_tools.golden.flags.problems and the user find it."""
-    k, age = stale_by_age(log, config, valid)
+def note_stale_by_age(out, log, config, prep: Prepared | None = None):
+    """Record :func:`stale_by_age` in the metadata of the compensated log ``out`` (STALE_KEY: 'N
+    samples; ...') when some sample went stale by age, where host_tools.golden.flags.problems and
+    the user find it; a STALE_KEY copied from the input's metadata is dropped."""
+    out.metadata.pop(STALE_KEY, None)
+    k, age = stale_by_age(log, config, prep)
     if k:
-        out.metadata[STALE_KEY] = (f"{k} samples; the log's schedule needs max_stale_s >= {age:g} s, the model "
-                                   f"allows {_config_of(config).reversal.max_stale_s:g} s")
+        out.metadata[STALE_KEY] = (f"{k} samples; the log's windows reach {age:g} s before the other mode's is "
+                                   f"renewed, the model allows max_stale_s {_config_of(config).reversal.max_stale_s:g} s")
     return out
 
 
@@ -249,7 +253,7 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
         "compensation_valid": f"{nvalid} of {len(prep)} samples",
     })
     out = note_aux_inputs(add_flags(out, prep.flags), aux_inputs_clamped(log, model.config.aux))
-    return note_stale_by_age(out, log, model, prep.valid)
+    return note_stale_by_age(out, log, model, prep)
 
 
 def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: str | None = None,

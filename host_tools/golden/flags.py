@@ -28,6 +28,7 @@ is warned about (``--strict``: refused).
 """
 from __future__ import annotations
 
+import re
 import warnings
 
 import numpy as np
@@ -113,12 +114,16 @@ def problems(out) -> list:
             msgs.append(f"extrapolation: {k} of {n} samples ({100.0 * k / n:.1f} %) {FLAG_NAMES[bit]} "
                         f"({what}); the model is applied outside its training data there")
     stale = str(out.metadata.get(STALE_KEY, "") or "").strip()
-    k = int(stale.split(" ", 1)[0]) if stale else 0
-    if k > WARN_FRACTION * n:
+    m = re.match(r"(\d+)\s+samples?\b(?:\s*;\s*(.*))?$", stale)
+    if stale and m is None:
+        msgs.append(f"metadata '{STALE_KEY}: {stale}' is not 'N samples; ...': the samples lost to an old "
+                    f"mode-reversal window are not known")
+    elif m and int(m.group(1)) > WARN_FRACTION * n:
+        k = int(m.group(1))
         msgs.append(f"stale: {k} of {n} samples ({100.0 * k / n:.1f} %) are not valid only because the other "
-                    f"mode's window is older than the model's max_stale_s ({stale.split('; ', 1)[1]}): the log's "
-                    f"mode-reversal schedule has longer windows than the training runs'; refit on runs with this "
-                    f"schedule")
+                    f"mode's window is older than the model's max_stale_s" + (f" ({m.group(2)})" if m.group(2) else "")
+                    + ": the log's mode-reversal windows are longer than the training runs'; refit on runs with "
+                    "this schedule")
     k = int(np.count_nonzero(flags & SATURATION))
     if k:
         msgs.append(f"saturation: {k} of {n} samples saturated in fixed point (flags input_saturated/saturated); "

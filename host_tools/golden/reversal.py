@@ -144,11 +144,13 @@ class Combined:
 @numba.njit(cache=True)
 def _combine_kernel(mode, x, ok, seg_start, settle_n, max_stale_n, kind):
     """The combiner of the module doc on values x (c or r), kind 0 pair, 1 trend, 2 none.
-    Returns (out, valid, used)."""
+    Returns (out, valid, used, age): age[i] = i - end of the other mode's latest committed window
+    [samples] at a used sample of pair/trend once that mode has one, else -1."""
     n = mode.shape[0]
     out = np.zeros(n)
     valid = np.zeros(n, np.bool_)
     used = np.zeros(n, np.bool_)
+    age = np.full(n, -1, np.int64)
     W = np.zeros(3)
     Wprev = np.zeros(3)
     centre = np.zeros(3)
@@ -203,14 +205,17 @@ def _combine_kernel(mode, x, ok, seg_start, settle_n, max_stale_n, kind):
                     hold = c
                     valid[i] = True
                 elif ncommit[o] >= 1 and i - end[o] <= max_stale_n:
+                    age[i] = i - end[o]
                     other = W[o]
                     if kind == 1:
                         other += slope[o] * (i - centre[o])
                     hold = 0.5 * (c + other)
                     valid[i] = True
+                elif ncommit[o] >= 1:
+                    age[i] = i - end[o]
             pos += 1
         out[i] = hold
-    return out, valid, used
+    return out, valid, used, age
 
 
 def sign_of(mode) -> np.ndarray:
@@ -235,6 +240,18 @@ def combine_values(mode, x, ok, segments, cfg: ReversalConfig, fs_hz: float):
     residual r = c - B_mode for regress_first), with ``ok`` bool[n] (regress_first: rate estimator
     warm), ``segments`` the segment start indices (RunLog.segments).  Returns (out float64[n],
     valid bool[n], used bool[n])."""
+    return _combine_all(mode, x, ok, segments, cfg, fs_hz)[:3]
+
+
+def window_ages(mode, ok, segments, cfg: ReversalConfig, fs_hz: float) -> np.ndarray:
+    """Per sample, the age [samples] of the other mode's latest committed window where the pair or
+    trend combiner of ``cfg`` uses a sample and that mode has a window (-1 elsewhere, and
+    everywhere for 'none'): the sample is stale by age exactly where age > round(max_stale_s x
+    fs).  ``ok`` as in :func:`combine_values`."""
+    return _combine_all(mode, np.zeros(len(mode)), ok, segments, cfg, fs_hz)[3]
+
+
+def _combine_all(mode, x, ok, segments, cfg: ReversalConfig, fs_hz: float):
     mode = np.ascontiguousarray(mode, np.int64)
     x = np.ascontiguousarray(x, np.float64)
     ok = np.ascontiguousarray(ok, np.bool_)
@@ -246,19 +263,20 @@ def combine_values(mode, x, ok, segments, cfg: ReversalConfig, fs_hz: float):
                            int(round(cfg.max_stale_s * fs_hz)), _KIND[cfg.combiner])
 
 
-def schedule_ages_s(mode, segments, fs_hz: float) -> np.ndarray:
+def schedule_ages_s(mode, segments, fs_hz: float, with_modes: bool = False):
     """The window ages a log's mode schedule needs [s], one per mode-1/2 window that follows a window
     of the other mode in its segment: (its last sample - the last sample of the other mode's latest
     window) / ``fs_hz``, the age the pair/trend combiner's other-mode estimate reaches at the end of
     the window.  Every sample of such a window can be valid only when max_stale_s >= its age (the
-    paper's 30 s exchange / 120 s dwell: 150 s).  ``segments``: RunLog.segments (ages restart)."""
+    paper's 30 s exchange / 120 s dwell: 150 s).  ``segments``: RunLog.segments (ages restart).
+    ``with_modes``: also return the mode (1 or 2) of each window, int64."""
     mode = np.asarray(mode, np.int64)
     starts = np.asarray(segments, np.int64)
     bounds = np.union1d(np.flatnonzero(np.diff(mode)) + 1, starts)
     ends = np.append(bounds[1:], len(mode)) - 1
     seg_of = np.searchsorted(starts, bounds, side="right") - 1
     last_end = {}
-    ages = []
+    ages, modes = [], []
     for b, e, g in zip(bounds, ends, seg_of):
         m = int(mode[b])
         if m not in (1, 2):
@@ -266,19 +284,28 @@ def schedule_ages_s(mode, segments, fs_hz: float) -> np.ndarray:
         prev = last_end.get((int(g), 3 - m))
         if prev is not None:
             ages.append((e - prev) / fs_hz)
+            modes.append(m)
         last_end[(int(g), m)] = e
-    return np.asarray(ages, np.float64)
+    ages = np.asarray(ages, np.float64)
+    return (ages, np.asarray(modes, np.int64)) if with_modes else ages
 
 
 def max_stale_for(logs, fs_hz: float) -> float:
     """The default max_stale_s for mode-reversal training ``logs`` [s]: DEFAULT_MAX_STALE_S, or 1.1 x
-    the median window age of their schedules (:func:`schedule_ages_s`) rounded up to 10 s when that
-    is longer (a dwell far above the paper's 120 s); a window longer than the logs' usual one still
-    goes stale, and hdrg compensate says so (metadata ``stale_by_age``)."""
-    ages = np.concatenate([schedule_ages_s(log.mode, log.segments, fs_hz) for log in logs] + [np.zeros(0)])
-    if not len(ages):
+    the window age of their schedules rounded up to 10 s when that is longer (a dwell far above the
+    paper's 120 s).  The age: the larger of the two modes' median ages (:func:`schedule_ages_s`,
+    by the mode of the window), so that a schedule with a long mode-2 dwell and a short mode-1 one
+    gets the long one's, and a single stalled window does not set it; such a window still goes
+    stale, and hdrg compensate says so (metadata ``stale_by_age``)."""
+    per_mode = {1: [], 2: []}
+    for log in logs:
+        ages, modes = schedule_ages_s(log.mode, log.segments, fs_hz, with_modes=True)
+        for m in (1, 2):
+            per_mode[m].extend(ages[modes == m].tolist())
+    medians = [float(np.median(a)) for a in per_mode.values() if a]
+    if not medians:
         return DEFAULT_MAX_STALE_S
-    return max(DEFAULT_MAX_STALE_S, 10.0 * math.ceil(1.1 * float(np.median(ages)) / 10.0))
+    return max(DEFAULT_MAX_STALE_S, 10.0 * math.ceil(round(1.1 * max(medians), 6) / 10.0))
 
 
 def combine(log, combiner: str = "pair", max_stale_s: float | None = None, settle_s: float = 0.0,

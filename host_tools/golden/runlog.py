@@ -10,7 +10,7 @@ in a file is converted on read], ``mode`` [0 FTR, 1 mode 1, 2 mode 2, 3 exchange
 (``bias_dph``, ``valid``, ``flags`` of a compensated log; hdrg capture's ``comp_*``, ``status``,
 ``state``, ``seq``) are kept as they are.  Any other column in a CSV file is kept too, with a
 warning that names it (no tool uses it), and one that differs from a missing format column only in
-case or spaces (``Mode``) is an error.
+case, spaces, '_' or '-' (``Mode``, ``Freq Hz``) is an error.
 
 Bad input (each case is tested in tests/test_runlog.py):
 
@@ -332,24 +332,38 @@ def read_csv(path) -> RunLog:
     return parse_csv_text(text, source)
 
 
-def _check_unknown_columns(names, source: str, header_line: int, notes: list) -> None:
-    """A header column that is neither in the format, nor ``aux_*``, nor one hdrg writes: an error
-    when it differs from a format column the header lacks only in case or spaces (``Mode`` for
-    ``mode``: names are matched exactly, so the log would be read without it, e.g. as FTR), else a
-    warning naming it (the column is kept and used by no tool)."""
-    known = set(FORMAT_COLUMNS) | set(HDRG_COLUMNS)
-    unknown = [c for c in names if c not in known and not c.startswith("aux_")]
-    for c in unknown:
-        near = next((k for k in FORMAT_COLUMNS if k not in names and k == c.lower().replace(" ", "")), None)
+def _squash(name: str) -> str:
+    return re.sub(r"[\s_\-]", "", name.lower())
+
+
+def _check_near_miss_columns(names, source: str, header_line: int) -> None:
+    """Refuse a header column that is not a format column but equals one the header lacks once case,
+    spaces, '_' and '-' are ignored (``Mode`` or ``MODE`` for ``mode``, ``Freq Hz`` for ``freq_hz``):
+    names are matched exactly, so the log would be read without it (a mode-reversal log as FTR, a
+    frequency proxy replaced by temp_c).  ``rate_dph`` and ``rate_dps`` stand for each other."""
+    present = {_squash(c) for c in names if c in FORMAT_COLUMNS}
+    if "ratedph" in present or "ratedps" in present:
+        present |= {"ratedph", "ratedps"}
+    for c in names:
+        if c in FORMAT_COLUMNS or c in HDRG_COLUMNS or c.startswith("aux_"):
+            continue
+        near = next((k for k in FORMAT_COLUMNS if _squash(k) == _squash(c) and _squash(k) not in present), None)
         if near is not None:
             raise RunLogError(source, header_line, f"column '{c}' is not '{near}' (column names are matched "
                                                    f"exactly, shared/formats/run-log.md): as it stands the log would "
                                                    f"be read without '{near}'; rename the column")
+
+
+def _warn_unknown_columns(names, source: str, header_line: int, notes: list) -> None:
+    """Warn about (and note) every header column that is neither in the format, nor ``aux_*``, nor one
+    hdrg writes: it is kept in the log and used by no tool."""
+    known = set(FORMAT_COLUMNS) | set(HDRG_COLUMNS)
+    unknown = [c for c in names if c not in known and not c.startswith("aux_")]
     if unknown:
         names_text = ", ".join(f"'{c}'" for c in unknown)
-        msg = (f"{source}:{header_line}: column(s) {names_text} not in the run-log format (t_s, rate_dph, mode, "
-               f"freq_hz, temp_c, aux_*): kept in the log but used by no tool; rename a logged channel to "
-               f"aux_<name> to offer it to the fit and the loop")
+        msg = (f"{source}:{header_line}: column(s) {names_text} not in the run-log format (t_s, rate_dph or "
+               f"rate_dps, mode, freq_hz, temp_c, aux_*): kept in the log but used by no tool; rename a logged "
+               f"channel to aux_<name> to offer it to the fit and the loop")
         notes.append(msg)
         warnings.warn(msg, RunLogWarning, stacklevel=5)
 
@@ -377,6 +391,7 @@ def parse_csv_text(text: str, source: str = "<text>") -> RunLog:
         if c in seen:
             raise RunLogError(source, header_line, f"column '{c}' appears twice in the header")
         seen.add(c)
+    _check_near_miss_columns(names, source, header_line)
     for req, alt in (("t_s", None), ("rate_dph", "rate_dps")):
         if req not in names and (alt is None or alt not in names):
             need = f"'{req}'" + (f" (or '{alt}')" if alt else "")
@@ -384,7 +399,7 @@ def parse_csv_text(text: str, source: str = "<text>") -> RunLog:
     if "freq_hz" not in names and "temp_c" not in names:
         raise RunLogError(source, header_line,
                           f"missing temperature proxy: one of the columns 'freq_hz', 'temp_c' is required; header has {names}")
-    _check_unknown_columns(names, source, header_line, notes)
+    _warn_unknown_columns(names, source, header_line, notes)
     data = lines[i + 1:]
     while data and not data[-1].strip():  # trailing blank lines are harmless
         data.pop()
