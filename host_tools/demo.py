@@ -50,7 +50,7 @@ def run_demo(out_dir: str = "hdrg-demo", duration_s: float = 6 * 3600.0) -> None
         print(f"   {out_path}: {summary(out)}")
         for p in problems(out):
             print(f"   warning: {p}")
-        print("4. report: before / flight-stack baseline / 17-term model, on the held-out run")
+        print("4. report: before / flight-stack baseline / the model, on the held-out run")
         doc = report([test], model, os.path.join(out_dir, "report"), train_logs=[train])
         print(_table(doc["rows"]))
         print(f"   figures: {', '.join(doc.get('figures', []))} in {os.path.join(out_dir, 'report')}")

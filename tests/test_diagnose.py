@@ -419,6 +419,15 @@ def test_combiner_lines_are_the_reversal_cycle_and_its_chamber_sidebands():
     assert artifact_of(300.0, None) is None
 
 
+def test_the_structural_fix_offered_for_a_combiner_line_is_not_the_one_in_use():
+    from host_tools.fitting.diagnose_noise import _artifact_entry
+    line = {"period_s": 300.0, "amp_dph": 0.1, "ratio": 9.0}
+    cl = {"reversal_period_s": 300.0, "chamber_period_s": 2400.0, "combiner": "pair", "order": "combine_first"}
+    assert "regress-then-reverse (the bias model" in _artifact_entry(line, cl, "x")["structural_fix"]
+    fix = _artifact_entry(line, {**cl, "order": "regress_first"}, "x")["structural_fix"]
+    assert "already in use (residual combiner pair)" in fix and "(none or trend;" in fix
+
+
 def test_the_default_mode_reversal_run_never_gets_a_periodic_bias_at_a_combiner_line():
     """B_D on: the trend combiner's residual follows the mode sign; its lines are attributed to the
     combiner (named, with the structural fix), never fitted as a periodic bias."""

@@ -191,3 +191,14 @@ def test_mode_beside_Mode_is_only_a_warning(tmp_path):
     with pytest.warns(runlog.RunLogWarning, match="'Mode' not in the run-log format"):
         log = runlog.read(p)
     assert list(log.mode) == [1, 1, 2]
+
+
+def test_a_byte_order_mark_is_not_part_of_the_first_column(tmp_path):
+    """Spreadsheets write UTF-8 with a BOM; before, the first column became '\\ufefft_s' and the log was
+    refused as missing 't_s'."""
+    p = tmp_path / "bom.csv"
+    p.write_bytes("\ufefft_s,rate_dph,freq_hz\n0,1,2e4\n1,1,2e4\n2,1,2e4\n".encode("utf-8"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        log = runlog.read(p)
+    assert list(log.t_s) == [0.0, 1.0, 2.0]

@@ -226,7 +226,8 @@ def combiner_lines(train, cfg) -> dict | None:
     their sidebands with the chamber cycle m f_rev + k f_ch (|k| <= ARTIFACT_SIDEBANDS; f_ch: the
     strongest bin of the Hann periodogram of the mean-free proxy).  A residual the combiner leaves
     (a mode-sign term times a slowly varying envelope) is a square wave at f_rev modulated by the
-    chamber cycle: exactly these lines.  None for FTR logs or without two reversal cycles."""
+    chamber cycle: exactly these lines.  None for FTR logs or without two reversal cycles.  Keys:
+    reversal_period_s, chamber_period_s, tolerance_hz, combiner, order (of the model's reversal)."""
     if cfg.reversal is None:
         return None
     fs = cfg.rate.fs
@@ -248,7 +249,7 @@ def combiner_lines(train, cfg) -> dict | None:
     dur = max(float(log.t_s[-1] - log.t_s[0]) for log in train)
     tol = min(1.5 / dur, f_ch / 3.0) if f_ch > 0 else 1.5 / dur
     return {"reversal_period_s": t_rev, "chamber_period_s": 1.0 / f_ch if f_ch > 0 else None,
-            "tolerance_hz": tol, "combiner": cfg.reversal.combiner}
+            "tolerance_hz": tol, "combiner": cfg.reversal.combiner, "order": cfg.reversal.order}
 
 
 def artifact_of(period_s, cl) -> str | None:
@@ -266,8 +267,13 @@ def artifact_of(period_s, cl) -> str | None:
 
 
 def _artifact_entry(line, cl, why) -> dict:
-    fix = ("another combiner (--combiner pair or trend), or regress-then-reverse (the bias model applied "
-           "per mode before the combiner: order regress_first, combiner none)")
+    if cl.get("order") == "regress_first":    # already regress-then-reverse: only the residual's combiner is left
+        others = " or ".join(c for c in ("none", "pair", "trend") if c != cl["combiner"])
+        fix = (f"regress-then-reverse is already in use (residual combiner {cl['combiner']}): another residual "
+               f"combiner ({others}; the structure phase scores them)")
+    else:
+        fix = ("another combiner (--combiner pair or trend), or regress-then-reverse (the bias model applied "
+               "per mode before the combiner: order regress_first, combiner none)")
     return {"period_s": line["period_s"], "amp_dph": line["amp_dph"], "ratio": line["ratio"], "at": why,
             "cause": f"the mode-reversal combiner ({cl['combiner']}): a line at the reversal cycle "
                      f"({cl['reversal_period_s']:g} s), its harmonics or their sidebands with the chamber cycle "

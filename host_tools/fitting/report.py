@@ -4,7 +4,7 @@ For every run: the paper's figures of merit (host_tools.fitting.metrics: variati
 mean, at 1 s and 100 s averaging) of the uncompensated output (the FTR output, or the
 mode-reversal combined output under the model's combiner), of the flight-stack baseline (cubic in
 a temperature sensor, clamped: host_tools.fitting.baseline) fitted on the same training runs, and of the
-17-coefficient model; PNG figures: time series before/after (paper Figs. 6, 8, 9), bias vs proxy
+model (labelled with how many of the 17 terms it has); PNG figures: time series before/after (paper Figs. 6, 8, 9), bias vs proxy
 loops (Fig. 7: the hysteresis that the rate terms remove), Allan deviation before/after (invalid
 samples bridged by linear interpolation, host_tools.fitting.diagnose._allan_bridged, so a mode-reversal
 run reaches taus beyond one dwell).  Extrapolation/saturation of the model (host_tools.golden.flags) is
@@ -65,7 +65,12 @@ def _table(rows) -> str:
         f"{_fmt(r['std100_dph'])} | {_fmt(r['pp100_dph'])} |\n" for r in rows)
 
 
-def _plot(results, baseline_results, out_dir, proxy_unit):
+def model_label(model: BiasModel) -> str:
+    """The report's name of a model: how many of the 17 terms it has, e.g. 'model (8 of 17 terms)'."""
+    return f"model ({len(model.terms)} of 17 terms)"
+
+
+def _plot(results, baseline_results, out_dir, proxy_unit, label="model"):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -78,7 +83,7 @@ def _plot(results, baseline_results, out_dir, proxy_unit):
         ax.plot(t_h[r["before_valid"]], r["before"][r["before_valid"]], ",", alpha=0.5, label="before")
         if b is not None:
             ax.plot(t_h[b["after_valid"]], b["after"][b["after_valid"]], ",", alpha=0.5, label="baseline (cubic in temp)")
-        ax.plot(t_h[r["after_valid"]], r["after"][r["after_valid"]], ",", label="17-term model")
+        ax.plot(t_h[r["after_valid"]], r["after"][r["after_valid"]], ",", label=label)
         ax.set_title(os.path.basename(r["source"]), fontsize=9)
         ax.set_xlabel("time [h]")
         ax.set_ylabel("bias [deg/h]")
@@ -163,13 +168,13 @@ def report(logs, model: BiasModel, out_dir, train_logs=None, plots: bool = True,
         rows.append({"run": name, "output": "before (uncompensated)", **r["stats_before"]})
         if b is not None:
             rows.append({"run": name, "output": "baseline: cubic in temp_c, clamped", **b["stats_after"]})
-        rows.append({"run": name, "output": "17-coefficient model", **r["stats_after"]})
+        rows.append({"run": name, "output": model_label(model), **r["stats_after"]})
     doc = {"model": {"terms": list(model.terms), "coef_dph": list(map(float, model.coef)),
                      "config": model.config.to_dict() if hasattr(model.config, "to_dict") else None},
            "rows": rows, "notes": notes}
     unit = "Hz" if model.config.proxy.kind == "freq" else "degC"
     if plots:
-        doc["figures"] = [os.path.basename(f) for f in _plot(results, base_results, out_dir, unit)]
+        doc["figures"] = [os.path.basename(f) for f in _plot(results, base_results, out_dir, unit, model_label(model))]
     with atomic_open(os.path.join(out_dir, "report.json"), "w") as fh:
         json.dump(doc, fh, indent=1, default=float)
     with atomic_open(os.path.join(out_dir, "report.md"), "w") as fh:

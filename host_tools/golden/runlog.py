@@ -325,7 +325,7 @@ def read_csv(path) -> RunLog:
     """Read a CSV run log.  Raises :class:`RunLogError`; warns :class:`RunLogWarning` on repairs."""
     source = os.fspath(path)
     try:
-        with open(source, "r", encoding="utf-8", newline="") as fh:
+        with open(source, "r", encoding="utf-8-sig", newline="") as fh:   # -sig: a leading BOM (Excel) is not data
             text = fh.read()
     except UnicodeDecodeError as exc:
         raise RunLogError(source, None, f"not a text file (UTF-8 decoding failed at byte {exc.start})") from None
