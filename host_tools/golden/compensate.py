@@ -210,15 +210,18 @@ def stale_by_age(log, config, prep: Prepared | None = None) -> tuple:
     return k, float(ages[seen].max()) / cfg.rate.fs if seen.any() else 0.0
 
 
-def note_stale_by_age(out, log, config, prep: Prepared | None = None):
-    """Record :func:`stale_by_age` in the metadata of the compensated log ``out`` (STALE_KEY: 'N
-    samples; ...') when some sample went stale by age, where host_tools.golden.flags.problems and
-    the user find it; a STALE_KEY copied from the input's metadata is dropped."""
+def note_host_checks(out, log, model: BiasModel, prep: Prepared | None = None):
+    """The compensated log ``out`` (either impl) with the checks the firmware flags cannot make
+    recorded in its metadata, where host_tools.golden.flags.problems and the user find them: aux
+    inputs outside their fitted range (flags.note_aux_inputs) and :func:`stale_by_age` (STALE_KEY:
+    'N samples; ...', only when some sample went stale by age; one copied from the input's metadata
+    is dropped)."""
+    out = note_aux_inputs(out, aux_inputs_clamped(log, model.config.aux))
     out.metadata.pop(STALE_KEY, None)
-    k, age = stale_by_age(log, config, prep)
+    k, age = stale_by_age(log, model, prep)
     if k:
         out.metadata[STALE_KEY] = (f"{k} samples; the log's windows reach {age:g} s before the other mode's is "
-                                   f"renewed, the model allows max_stale_s {_config_of(config).reversal.max_stale_s:g} s")
+                                   f"renewed, the model allows max_stale_s {model.config.reversal.max_stale_s:g} s")
     return out
 
 
@@ -232,9 +235,7 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
     check_impl(impl)
     if impl == "fixed":
         from host_tools.fixed.fixed_point import compensate_log
-        out = note_aux_inputs(add_flags(*compensate_log(log, model, table=table, return_flags=True)),
-                              aux_inputs_clamped(log, model.config.aux))
-        return note_stale_by_age(out, log, model)
+        return note_host_checks(add_flags(*compensate_log(log, model, table=table, return_flags=True)), log, model)
     if table is not None:
         raise ValueError("a coefficient table is only used with --impl fixed")
     if str(log.metadata.get("compensated", "")).strip().lower() == "yes" or "bias_dph" in log:
@@ -252,8 +253,7 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
         "compensation_terms": ",".join(f"k{k}" for k in model.terms),
         "compensation_valid": f"{nvalid} of {len(prep)} samples",
     })
-    out = note_aux_inputs(add_flags(out, prep.flags), aux_inputs_clamped(log, model.config.aux))
-    return note_stale_by_age(out, log, model, prep)
+    return note_host_checks(add_flags(out, prep.flags), log, model, prep)
 
 
 def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: str | None = None,

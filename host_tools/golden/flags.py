@@ -99,7 +99,7 @@ def problems(out) -> list:
     """The warnings a compensated log deserves: extrapolation above WARN_FRACTION (clamp flags, and
     aux inputs outside the model's range: :func:`note_aux_inputs`), samples lost to a window older
     than the model's max_stale_s above WARN_FRACTION (STALE_KEY, host_tools.golden.compensate.
-    note_stale_by_age), any saturation; each a sentence with the count, the share and the source."""
+    note_host_checks), any saturation; each a sentence with the count, the share and the source."""
     flags = np.asarray(out["flags"], np.int64)
     n = len(flags)
     msgs = []

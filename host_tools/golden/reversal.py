@@ -267,27 +267,19 @@ def schedule_ages_s(mode, segments, fs_hz: float, with_modes: bool = False):
     """The window ages a log's mode schedule needs [s], one per mode-1/2 window that follows a window
     of the other mode in its segment: (its last sample - the last sample of the other mode's latest
     window) / ``fs_hz``, the age the pair/trend combiner's other-mode estimate reaches at the end of
-    the window.  Every sample of such a window can be valid only when max_stale_s >= its age (the
+    the window (:func:`window_ages` with no settling and every sample usable, at each window's last
+    sample).  Every sample of such a window can be valid only when max_stale_s >= its age (the
     paper's 30 s exchange / 120 s dwell: 150 s).  ``segments``: RunLog.segments (ages restart).
     ``with_modes``: also return the mode (1 or 2) of each window, int64."""
     mode = np.asarray(mode, np.int64)
-    starts = np.asarray(segments, np.int64)
-    bounds = np.union1d(np.flatnonzero(np.diff(mode)) + 1, starts)
-    ends = np.append(bounds[1:], len(mode)) - 1
-    seg_of = np.searchsorted(starts, bounds, side="right") - 1
-    last_end = {}
-    ages, modes = [], []
-    for b, e, g in zip(bounds, ends, seg_of):
-        m = int(mode[b])
-        if m not in (1, 2):
-            continue
-        prev = last_end.get((int(g), 3 - m))
-        if prev is not None:
-            ages.append((e - prev) / fs_hz)
-            modes.append(m)
-        last_end[(int(g), m)] = e
-    ages = np.asarray(ages, np.float64)
-    return (ages, np.asarray(modes, np.int64)) if with_modes else ages
+    n = len(mode)
+    age = window_ages(mode, np.ones(n, np.bool_), segments, ReversalConfig("pair", DEFAULT_MAX_STALE_S, 0.0), fs_hz)
+    last = np.ones(n, bool)                     # a window's last sample: the next one is another mode or a segment
+    last[:-1] = mode[1:] != mode[:-1]
+    last[np.asarray(segments, np.int64)[1:] - 1] = True
+    ends = np.flatnonzero(last & (age >= 0))
+    ages = age[ends] / fs_hz
+    return (ages, mode[ends]) if with_modes else ages
 
 
 def max_stale_for(logs, fs_hz: float) -> float:

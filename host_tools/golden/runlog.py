@@ -336,6 +336,11 @@ def _squash(name: str) -> str:
     return re.sub(r"[\s_\-]", "", name.lower())
 
 
+def _unknown_columns(names) -> list:
+    """The header columns that are neither in the format, nor ``aux_*``, nor one hdrg writes."""
+    return [c for c in names if c not in FORMAT_COLUMNS and c not in HDRG_COLUMNS and not c.startswith("aux_")]
+
+
 def _check_near_miss_columns(names, source: str, header_line: int) -> None:
     """Refuse a header column that is not a format column but equals one the header lacks once case,
     spaces, '_' and '-' are ignored (``Mode`` or ``MODE`` for ``mode``, ``Freq Hz`` for ``freq_hz``):
@@ -344,9 +349,7 @@ def _check_near_miss_columns(names, source: str, header_line: int) -> None:
     present = {_squash(c) for c in names if c in FORMAT_COLUMNS}
     if "ratedph" in present or "ratedps" in present:
         present |= {"ratedph", "ratedps"}
-    for c in names:
-        if c in FORMAT_COLUMNS or c in HDRG_COLUMNS or c.startswith("aux_"):
-            continue
+    for c in _unknown_columns(names):
         near = next((k for k in FORMAT_COLUMNS if _squash(k) == _squash(c) and _squash(k) not in present), None)
         if near is not None:
             raise RunLogError(source, header_line, f"column '{c}' is not '{near}' (column names are matched "
@@ -357,8 +360,7 @@ def _check_near_miss_columns(names, source: str, header_line: int) -> None:
 def _warn_unknown_columns(names, source: str, header_line: int, notes: list) -> None:
     """Warn about (and note) every header column that is neither in the format, nor ``aux_*``, nor one
     hdrg writes: it is kept in the log and used by no tool."""
-    known = set(FORMAT_COLUMNS) | set(HDRG_COLUMNS)
-    unknown = [c for c in names if c not in known and not c.startswith("aux_")]
+    unknown = _unknown_columns(names)
     if unknown:
         names_text = ", ".join(f"'{c}'" for c in unknown)
         msg = (f"{source}:{header_line}: column(s) {names_text} not in the run-log format (t_s, rate_dph or "
