@@ -480,7 +480,9 @@ def test_the_loops_base_model_is_hdrg_fits_default(mr, tmp_path):
     assert main(["fit", paths[0], "-o", str(tmp_path / "fit.json"), "--drop-unidentifiable"]) == 0
     want = BiasModel.from_json(tmp_path / "fit.json")
     rep, got = diagnose([runlog.read(paths[0])], [runlog.read(paths[1])], plots=False, max_iter=0)
-    if mr and comp.DEFAULT_RATE_SELECTION_MR == "auto":   # chosen by cross-validation, as hdrg fit does
+    if not want.fit["identifiability"]["rate_terms_identified"]:   # one cycle: the cubic, as hdrg fit writes
+        assert want.fit["guard"]["chosen"] == "cubic in the proxy" and tuple(got.terms) == (0, 1, 2, 3)
+    elif mr and comp.DEFAULT_RATE_SELECTION_MR == "auto":   # chosen by cross-validation, as hdrg fit does
         gs, ws = got.fit["rate_selection"], want.fit["rate_selection"]
         assert gs["candidates"] == ws["candidates"] and gs["preferred"] is None
         assert gs["chosen"] == min((r for r in gs["candidates"] if "cv_rms" in r), key=lambda r: r["cv_rms"])["estimator"]
@@ -539,7 +541,7 @@ def test_one_held_out_metric_compares_two_models_on_their_common_samples():
     from host_tools.golden.compensate import fit_config_from_logs
     train, hold = world(1), world(2)
     diff = base_model([train], base_options(rate_estimator="diff", reversal=True))[0]
-    cfg = fit_config_from_logs([train], rate_estimator="iir", shift=9, reversal={"settle_s": 0.0})
+    cfg = fit_config_from_logs([train], rate_estimator="lsq", n=32, reversal={"settle_s": 0.0})   # warm-up 31
     slow = fit_logs([train], cfg, diff.terms, drop_unidentifiable=True)[0]
     b, a = step_errors([hold], diff, slow)
     out_d, out_s = compensate(hold, diff), compensate(hold, slow)
@@ -556,6 +558,7 @@ def test_steps_keep_the_rate_estimator_hdrg_fit_chose():
     so a lag block was confirmed on the common samples while the bench scored it worse."""
     from host_tools.fitting.diagnose import base_model, base_options
     und, kw, _ = CASES["thermal_lag"]
+    kw = {**kw, "profile": TWO_CYCLES}     # two legs of each sign: the rate terms are identified (one cycle: the cubic)
     train, hold = world(1, und, **kw), world(2, und, **kw)
     # no surrogates: the threshold is g_min alone, so the best candidate makes a step (what it is does not matter here)
     rep, model = diagnose([train], [hold], plots=False, max_iter=1, n_surrogates=0)

@@ -12,6 +12,7 @@ import importlib
 import importlib.util
 
 BENCHMARKS = {"accuracy": ("host_tools.cli.bench_accuracy", "host_tools.bench.accuracy"),
+              "measured": ("host_tools.cli.bench_measured", "host_tools.bench.measured"),
               "loop": ("host_tools.cli.bench_loop", "host_tools.bench.loop")}
 
 

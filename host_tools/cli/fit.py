@@ -23,6 +23,25 @@ SEVERAL_RUNS_NOTE = (
     "held-out run (hdrg report)")
 
 
+def print_identifiability(fit: dict) -> None:
+    """What the training runs identify (model.fit["identifiability"]) and the guard's choice
+    (model.fit["guard"]), as `hdrg fit` prints them."""
+    ident = fit.get("identifiability")
+    if ident:
+        legs = ident.get("legs_per_sign", {})
+        print(f"what the training runs identify ({legs.get('rising', 0)} rising, {legs.get('falling', 0)} falling legs of "
+              f"the proxy):")
+        for group, g in ident["groups"].items():
+            print(f"  {group:15s} {'identified' if g['identified'] else 'NOT identified'}: {g['why']}"
+                  + (f"; to identify it, record {g['record']}" if g["record"] else ""))
+    guard = fit.get("guard")
+    if guard:
+        cv = guard.get("cv_rms")
+        scores = (" (leave-one-leg-out rms: " + ", ".join(f"{k} {v:.4g}" for k, v in cv.items()) + " deg/h; "
+                  f"{guard.get('out_of_range', 0)} held-out samples beyond the other legs' range not scored)") if cv else ""
+        print(f"model kept: {guard['chosen']}: {guard['why']}{scores}")
+
+
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs", metavar="RUN", nargs="+", help="training run logs (CSV or .npz)")
     parser.add_argument("-o", "--output", required=True, help="model JSON to write")
@@ -117,8 +136,11 @@ def run(args) -> int:
         print("warning: term selection kept only the offset k0: no temperature term held out in the "
               "cross-validation; the model does not compensate temperature (see the warnings above, or fix the "
               "terms with --terms)")
+    print_identifiability(model.fit)
     offs = model.fit.get("run_offsets")
-    if offs:
+    if offs and "why" in offs:
+        print(f"per-run offsets: not removed ({offs['why']})")
+    elif offs:
         print("per-run offsets removed before the fit [deg/h" + (", mode 1 / mode 2" if len(offs["offsets_dph"][0]) == 2
                                                                else "") + "]: " + "; ".join(
             f"{src} " + " / ".join(f"{o:+.4g}" for o in per) for src, per in zip(offs["runs"], offs["offsets_dph"])))

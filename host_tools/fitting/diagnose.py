@@ -195,6 +195,29 @@ def base_model(train, opts, terms=None):
     return fit_logs(train, cfg, terms, drop_unidentifiable=True)[0], cfg
 
 
+FLOOR_RATIO = 1.05   # the final model's held-out error may exceed the flight stack's cubic's by this factor at most
+
+
+def cubic_floor(train, hold, model) -> dict:
+    """The loop's floor: the flight stack's cubic in the temperature sensor
+    (host_tools.fitting.baseline.fit_baseline on the training runs, ``model``'s reversal
+    settings) against ``model`` on the held-out runs, the same metric as every step
+    (host_tools.fitting.diagnose_confirm.HELDOUT_METRIC, samples valid under both).
+    {"cubic_dph", "model_dph", "limit", "replaced" (model_dph > limit x cubic_dph), "_model"
+    (the cubic, when replaced)}; {"error": why} when the cubic cannot be fitted (no temp_c)."""
+    from host_tools.fitting.baseline import fit_baseline
+    if not all("temp_c" in log for log in train + hold):
+        return {"error": "no temp_c column: no flight-stack cubic to compare with"}
+    try:
+        cubic = fit_baseline(train, model.config)
+        c = _score(error_stats(hold, cubic, model))[0]
+        m = _score(error_stats(hold, model, cubic))[0]
+    except ValueError as exc:
+        return {"error": str(exc)}
+    replaced = bool(c is not None and m is not None and m > FLOOR_RATIO * c)
+    return {"cubic_dph": c, "model_dph": m, "limit": FLOOR_RATIO, "replaced": replaced, "_model": cubic if replaced else None}
+
+
 def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, rate_n=None, rate_shift=None,
              terms=None, combiner=None, order=None, settle_s=None, proxy_range=None, rate_range=None,
              max_iter=MAX_ITER, n_surrogates=N_SURROGATES, g_min=G_MIN, cv_blocks=CV_BLOCKS,
@@ -357,6 +380,13 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                     say(f"structural: {entry['effect']} {entry['params']}: {entry['status']}")
         stops[phase] = stopped
     stopped = stops.get("effect") or stops.get("structure")
+    floor = cubic_floor(train, hold, model) if hold else None
+    if floor and floor.get("replaced"):
+        model = floor.pop("_model")
+        say(f"the final model's held-out error {floor['model_dph']:.4g} deg/h is above {FLOOR_RATIO:g} x the "
+            f"flight stack's cubic ({floor['cubic_dph']:.4g} deg/h): the cubic is the final model")
+    elif floor:
+        floor.pop("_model", None)
     final = error_stats(evals, model)
     verdict = verdict_of(iterations)
     final_train = error_stats(train, model) if hold else final
@@ -365,9 +395,10 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                    "generalization": generalization(_score(final_train)[0], _score(final)[0]) if hold else None,
                    "several_runs": several_runs_caveat(len(train)),
                    "extrapolation": extrapolation(final) if hold else [],
-                   "verdict": verdict, "verdict_detail": _verdict_detail(iterations, hold),
+                   "verdict": verdict, "verdict_detail": _verdict_detail(iterations, hold), "cubic_floor": floor,
                    "artifacts": artifacts, "stopped": stopped, "characterization": characterization})
-    model.fit["diagnose"] = {"effects": [{"effect": a.family, "params": a.params} for a in accepted],
+    model.fit["diagnose"] = {"effects": [] if floor and floor.get("replaced") else
+                             [{"effect": a.family, "params": a.params} for a in accepted],
                              "verdict": report["verdict"]}
     if out_dir is not None:
         write_report(report, model, out_dir, train, hold, plots=plots)

@@ -189,6 +189,11 @@ def markdown(doc, model) -> str:
         lines.append(f"| {k} | {it['effect']} | {params} | {_stats_line(it['after'])} | "
                      f"{fmt_value(it['cv_gain'])} | {fmt_value(it['threshold'])} | {it['status']} |")
     lines += ["", f"{doc['verdict_detail']}.  Confirmation: {doc['confirm_rule']}."]
+    fl = doc.get("cubic_floor") or {}
+    if fl.get("cubic_dph") is not None and fl.get("model_dph") is not None:
+        lines += ["", f"Floor: the flight stack's cubic in temperature gives {fmt_value(fl['cubic_dph'])} deg/h on the held-out "
+                      f"runs, the loop's model {fmt_value(fl['model_dph'])} deg/h (std of 100-s averages, samples valid under both)"
+                  + (f"; above {fl['limit']:g} x the cubic, so the cubic is the final model." if fl["replaced"] else ".")]
     if (doc.get("generalization") or {}).get("warning"):
         lines += ["", f"**Warning:** {doc['generalization']['warning']}."]
     for m in doc.get("holdout_in_training") or []:

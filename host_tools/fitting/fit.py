@@ -295,6 +295,22 @@ def _heldout_sse(coef, G, b, yy):
     return max(heldout_sse(_A @ coef, yy, b, G), 0.0)
 
 
+def heldout_error(train: Accumulator, test: Accumulator, terms, *, demean: bool = False, rcond=RCOND) -> float:
+    """sum w (y - X c)^2 [(deg/h)^2 x weight] over the samples of ``test`` of the coefficients
+    of ``terms`` fitted on ``train`` (terms unidentifiable on ``train`` dropped).  ``demean``:
+    the test samples' weighted mean residual is removed first (the held-out part's own offset,
+    which its power-on sets and a stability figure does not see)."""
+    G, b, yy = test.system()
+    if test.n == 0:
+        return 0.0
+    coef = _solve_terms(_factor(train), tuple(sorted(terms)), rcond, explain=False)["coef"] if train.n else np.zeros(N_TERMS)
+    a = _A @ coef
+    sse = _heldout_sse(coef, G, b, yy)
+    if demean and G[0, 0] > 0:
+        sse -= (b[0] - float(G[0] @ a)) ** 2 / G[0, 0]
+    return max(sse, 0.0)
+
+
 def _banks_of(group) -> tuple:
     """A CV group as a tuple of per-bank Accumulators (an Accumulator is one bank)."""
     return group if isinstance(group, tuple) else (group,)
@@ -549,7 +565,7 @@ def design_matrix(u, v, z=None, terms=range(N_TERMS)) -> np.ndarray:
 # -- run-log glue and the `hdrg fit` command ------------------------------------------------------
 
 def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8, significance=None,
-             min_gain=0.02, blocks=None, masks=None):
+             min_gain=0.02, blocks=None, masks=None, candidates=None):
     """Fit a :class:`host_tools.golden.model.BiasModel` with ``config`` (a ModelConfig) to RunLogs.
 
     Each log goes through the golden pipeline (:func:`host_tools.golden.compensate.prepare`): only its
@@ -564,7 +580,8 @@ def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8
     'auto'.  ``significance`` of the 'auto' selection (:func:`select_terms`): None ->
     host_tools.golden.compensate.DEFAULT_SIGNIFICANCE.  ``masks``: None, or one bool array per log
     (its length) AND-ed with the used samples (e.g. the samples valid for several rate estimators,
-    :func:`fit_auto_rate`).  Returns (model, FitResult)."""
+    :func:`fit_auto_rate`).  ``candidates``: the terms 'auto' may select from (None: all).
+    Returns (model, FitResult)."""
     from host_tools.golden.compensate import DEFAULT_SIGNIFICANCE, DEFAULT_TERMS, prepare
     from host_tools.golden.model import BiasModel
 
@@ -593,7 +610,7 @@ def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8
             banks = tuple(Accumulator().add(pr.u, pr.v, pr.z, pr.y, w) for w in bank_w)
             accs[f"{log.source}#{i}"] = banks if two else banks[0]
     res = fit_accumulators(accs, terms, drop_unidentifiable=drop_unidentifiable,
-                           significance=significance, min_gain=min_gain)
+                           significance=significance, min_gain=min_gain, candidates=candidates)
     info = res.to_dict()
     info["train"] = [log.source for log in logs]
     # terms the data do not support: |coef| < 2 standard errors (the standard errors are already
@@ -618,7 +635,8 @@ def _rate_label(est, n, shift):
 
 
 def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, significance=None, min_gain=0.02,
-                  drop_unidentifiable=True, samples="own", prefer="default", prefer_margin=None, **config_kw):
+                  drop_unidentifiable=True, samples="own", prefer="default", prefer_margin=None, candidates_terms=None,
+                  **config_kw):
     """Rate estimator 'auto': for every candidate (estimator, n, shift) build the config
     (host_tools.golden.compensate.fit_config_from_logs with ``config_kw``), fit ``terms`` with
     cross-validation over the runs (one run: ``cv_blocks`` time blocks, see :func:`fit_logs`), and
@@ -650,7 +668,7 @@ def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, 
     preferred = None if prefer is None else _rate_label(*prefer)
     logs = list(logs)
     kw = dict(cv_blocks=cv_blocks, blocks=True, drop_unidentifiable=drop_unidentifiable,
-              significance=significance, min_gain=min_gain)
+              significance=significance, min_gain=min_gain, candidates=candidates_terms)
     rows, cfgs, unidentifiable = {}, {}, None
     for est, n, shift in candidates:
         label = _rate_label(est, n, shift)

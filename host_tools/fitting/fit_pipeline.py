@@ -16,7 +16,116 @@ RUN_OFFSET_PASSES = 2   # backfitting passes of the per-run offsets (docs/ACCURA
 
 
 def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, cv_blocks=8, rate_prefer="default",
-                run_offsets="auto", **config_kw):
+                run_offsets="auto", guard="auto", **config_kw):
+    """What `hdrg fit RUN` does without rate flags: :func:`fit_model` (the 17-term pipeline) on
+    what the training runs identify, then the guard against the flight stack's cubic.
+
+    1. What the runs identify (host_tools.fitting.legs.identifiability): unless the training
+       runs hold at least two legs of each sign of dT/dt (a cooling-only run, or one cooling
+       and one heating leg, cannot show that a rate term generalizes to a leg it was not
+       fitted on), ``terms`` None / 'auto' gives the cubic in the proxy (k0..k3), clamped to
+       the calibrated range (no margin): what the data identify.  model.fit["identifiability"]
+       says which term groups the runs identify and what chamber run would identify the rest.
+    2. Else :func:`fit_model` (rate estimator, term selection, lag block, per-run offsets).
+    3. ``guard`` 'auto' and ``terms`` None / 'auto' (terms given are the caller's): the model is compared, by leave-one-leg-out cross-validation
+       (host_tools.fitting.legs.leg_cv: legs of the training runs, samples beyond the other
+       legs' range counted, not scored), with the candidates
+       :data:`GUARD_CANDIDATES`: the flight stack's cubic in the temperature sensor
+       (host_tools.fitting.baseline) and the cubic in the model's proxy.  The 17-term model is
+       kept when its cross-validated rms is below (1 - GUARD_MARGIN) x the best cubic's, else
+       that cubic is the model.  'off': step 3 skipped.
+       model.fit["guard"]: the candidates' cross-validated rms and the choice.
+    Returns (model, FitResult of the model kept)."""
+    from host_tools.fitting.legs import PROXY_TERMS, identifiability
+
+    if guard not in ("auto", "off"):
+        raise ValueError(f"guard must be 'auto' or 'off', not {guard!r}")
+    logs = list(logs)
+    probe = compensate.fit_config_from_logs(logs, **{k: v for k, v in config_kw.items() if k != "aux"})
+    calibrated = probe if config_kw.get("proxy_range") is not None else compensate.fit_config_from_logs(
+        logs, **{**{k: v for k, v in config_kw.items() if k != "aux"}, "proxy_margin": 0.0})
+    ident = identifiability(logs, calibrated)
+    auto_terms = terms is None or (isinstance(terms, str) and terms.strip().lower() == "auto")
+    if not ident["rate_terms_identified"] and auto_terms:
+        model, res = _cubic(logs, probe, config_kw)
+        ident["restricted_to"] = list(PROXY_TERMS)
+        model.fit["identifiability"] = ident
+        model.fit["guard"] = {"chosen": GUARD_CANDIDATES[1], "why": "the rate terms are not identified: the cubic in "
+                              "the proxy, clamped to the calibrated range"}
+        return model, res
+    model, res = fit_model(logs, terms, drop_unidentifiable=drop_unidentifiable, lag_block=lag_block, cv_blocks=cv_blocks,
+                           rate_prefer=rate_prefer, run_offsets=run_offsets, **config_kw)
+    ident["restricted_to"] = None
+    model.fit["identifiability"] = ident
+    if guard == "auto" and auto_terms:
+        model, res = _guard(logs, model, res, config_kw)
+    return model, res
+
+
+GUARD_MARGIN = 0.05   # the 17-term model must beat the best cubic's leave-one-leg-out rms by this fraction
+GUARD_CANDIDATES = ("cubic in the temperature sensor (flight stack)", "cubic in the proxy")
+
+
+def _guard(logs, model, res, config_kw):
+    """Step 3 of :func:`fit_default`."""
+    from host_tools.fitting.baseline import BASELINE_TERMS, baseline_config
+    from host_tools.fitting.fit import fit_logs
+    from host_tools.fitting.legs import leg_cv
+
+    cfg = model.config
+    cands = {}
+    if all("temp_c" in log for log in logs):
+        cands[GUARD_CANDIDATES[0]] = baseline_config(logs, cfg)
+    cands[GUARD_CANDIDATES[1]] = _cubic_config(logs, cfg, config_kw)
+    if cands.get(GUARD_CANDIDATES[0]) is not None and cands[GUARD_CANDIDATES[0]].proxy == cands[GUARD_CANDIDATES[1]].proxy:
+        del cands[GUARD_CANDIDATES[1]]      # the proxy is the temperature sensor: one cubic
+    label = "17-term model"
+    scores = leg_cv(logs, {label: (cfg, model.terms), **{k: (c, BASELINE_TERMS) for k, c in cands.items()}},
+                    cfg.proxy.kind)
+    info = {"method": "leave-one-leg-out cross-validation (host_tools.fitting.legs.leg_cv)",
+            "margin": GUARD_MARGIN}
+    if scores is None:
+        best = GUARD_CANDIDATES[1] if GUARD_CANDIDATES[1] in cands else GUARD_CANDIDATES[0]
+        info.update(chosen=best, why="one leg: nothing to cross-validate across legs; the cubic, clamped to the "
+                                     "calibrated range, is what the data support")
+    else:
+        info.update({k: scores[k] for k in ("folds", "scored", "out_of_range")}, cv_rms=scores["cv_rms"])
+        cubic = min(cands, key=lambda k: scores["cv_rms"][k])
+        keep = scores["cv_rms"][label] < (1.0 - GUARD_MARGIN) * scores["cv_rms"][cubic]
+        best = label if keep else cubic
+        info.update(chosen=best, why=(f"its cross-validated rms is below {1 - GUARD_MARGIN:g} x the {cubic}'s" if keep else
+                                      f"the 17-term model's cross-validated rms is not below {1 - GUARD_MARGIN:g} x the {cubic}'s"))
+    if best != label:
+        fitted = model
+        model, res = fit_logs(logs, cands[best], list(BASELINE_TERMS))
+        model.fit["identifiability"] = fitted.fit.get("identifiability")
+        info["replaced"] = {"terms": list(fitted.terms), "fit": {k: fitted.fit[k] for k in ("rate_selection", "lag_block", "run_offsets")
+                                                                 if k in fitted.fit}}
+    model.fit["guard"] = info
+    return model, res
+
+
+def _cubic_config(logs, like, config_kw):
+    """The config of the cubic in ``like``'s proxy: the proxy range of the training runs (or the
+    given one) with no margin (clamped to the calibrated range), ``like``'s rate estimator and
+    reversal settings."""
+    kw = {"reversal": like.reversal} if like.reversal is not None else {}
+    if config_kw.get("proxy_range") is not None:
+        kw["proxy_range"] = config_kw["proxy_range"]
+    return compensate.fit_config_from_logs(logs, proxy_kind=like.proxy.kind, proxy_margin=0.0,
+                                           rate_estimator=like.rate.estimator, n=like.rate.n, shift=like.rate.shift,
+                                           fs=like.rate.fs, **kw)
+
+
+def _cubic(logs, probe, config_kw):
+    """The cubic in the proxy (k0..k3) fitted to ``logs``, as :func:`_cubic_config` of ``probe``."""
+    from host_tools.fitting.baseline import BASELINE_TERMS
+    from host_tools.fitting.fit import fit_logs
+    return fit_logs(logs, _cubic_config(logs, probe, config_kw), list(BASELINE_TERMS))
+
+
+def fit_model(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, cv_blocks=8, rate_prefer="default",
+              run_offsets="auto", candidates=None, **config_kw):
     """What `hdrg fit` does without rate flags: mode-reversal logs with
     host_tools.golden.compensate.DEFAULT_RATE_SELECTION_MR 'auto' -> :func:`fit_auto_rate`, else
     :func:`fit_logs` with the default configuration (host_tools.golden.compensate.fit_config_from_logs
@@ -31,9 +140,9 @@ def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, c
         raise ValueError(f"run_offsets must be 'auto' or 'off', not {run_offsets!r}")
     logs = list(logs)
     if run_offsets == "auto":
-        return fit_without_run_offsets(logs, lambda lg: fit_default(
+        return fit_without_run_offsets(logs, lambda lg: fit_model(
             lg, terms, drop_unidentifiable=drop_unidentifiable, lag_block=lag_block, cv_blocks=cv_blocks,
-            rate_prefer=rate_prefer, run_offsets="off", **config_kw))
+            rate_prefer=rate_prefer, run_offsets="off", candidates=candidates, **config_kw))
     lag_block = compensate.DEFAULT_LAG_BLOCK if lag_block is None else lag_block
     if lag_block not in ("auto", "off"):
         raise ValueError(f"lag_block must be 'auto' or 'off', not {lag_block!r}")
@@ -43,10 +152,10 @@ def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, c
     rate_given = any(config_kw.get(k) is not None for k in ("rate_estimator", "n", "shift"))
     if selection == "auto" and logs and not rate_given:
         model, res = fit_auto_rate(logs, terms, drop_unidentifiable=drop_unidentifiable is not False,
-                                   cv_blocks=cv_blocks, prefer=rate_prefer, **config_kw)
+                                   cv_blocks=cv_blocks, prefer=rate_prefer, candidates_terms=candidates, **config_kw)
     else:
         model, res = fit_logs(logs, compensate.fit_config_from_logs(logs, **config_kw), terms, blocks=True if lag else None,
-                              drop_unidentifiable=bool(drop_unidentifiable), cv_blocks=cv_blocks)
+                              drop_unidentifiable=bool(drop_unidentifiable), cv_blocks=cv_blocks, candidates=candidates)
     if lag:
         model, res = add_lag_block(logs, model, res, terms, cv_blocks=cv_blocks,
                                    drop_unidentifiable=drop_unidentifiable is not False)
@@ -85,6 +194,24 @@ def _shifted(log, offsets):
     return log.with_columns(rate_dph=rate)
 
 
+MIN_OFFSET_OVERLAP = 0.5   # each run's proxy range must overlap the other runs' by this share of its width
+
+
+def offsets_identifiable(logs, proxy_kind) -> str | None:
+    """None when every run's proxy range overlaps the union of the other runs' ranges by at
+    least MIN_OFFSET_OVERLAP of its own width (an offset per run can be told from the proxy
+    terms); else why not (which run, how much overlap)."""
+    rng = [(float(np.min(p)), float(np.max(p))) for p in (log.proxy(proxy_kind)[1] for log in logs)]
+    for i, (lo, hi) in enumerate(rng):
+        olo = min(r[0] for j, r in enumerate(rng) if j != i)
+        ohi = max(r[1] for j, r in enumerate(rng) if j != i)
+        share = max(0.0, min(hi, ohi) - max(lo, olo)) / (hi - lo) if hi > lo else 1.0
+        if share < MIN_OFFSET_OVERLAP:
+            return (f"{logs[i].source}: its proxy range overlaps the other runs' on {100 * share:.0f} % of its width "
+                    f"(< {100 * MIN_OFFSET_OVERLAP:.0f} %): no offset per run (it could not be told from the proxy terms)")
+    return None
+
+
 def fit_without_run_offsets(logs, fit):
     """Several training runs share one coefficient set, but each power-on moves the bias by its own
     offset (the damping change's offset, the turn-on offset).  Backfitting: ``fit(logs)`` ->
@@ -93,10 +220,17 @@ def fit_without_run_offsets(logs, fit):
     The model's k0 stays the level of all runs together; every fit decision (rate estimator, lag
     block, terms, cross-validation over runs) is taken on the shifted runs.  model.fit
     ``run_offsets``: {"passes", "offsets_dph": per run the total offset removed per bank, "runs"}.
-    One run: ``fit(logs)`` as it is (no offset to tell from the model's k0).
-    Measured on foreign devices (docs/ACCURACY.md "Several training runs")."""
+    One run: ``fit(logs)`` as it is (no offset to tell from the model's k0).  Runs whose proxy
+    ranges do not overlap (:func:`offsets_identifiable`): ``fit(logs)`` as it is too, since an
+    offset per run is then a step in the proxy that the polynomial cannot be told from (two
+    legs of one chamber cycle: the offset would eat the temperature dependence); model.fit
+    ``run_offsets`` says why.  Measured on foreign devices (docs/ACCURACY.md "Several training runs")."""
     model, res = fit(logs)
     if len(logs) < 2:
+        return model, res
+    overlap = offsets_identifiable(logs, model.config.proxy.kind)
+    if overlap is not None:
+        model.fit["run_offsets"] = {"passes": 0, "why": overlap}
         return model, res
     total = 0.0
     shifted = logs
