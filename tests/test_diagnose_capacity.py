@@ -1,5 +1,5 @@
-"""The loop never builds a model the firmware cannot hold (issue #11: "carries the winner to the
-firmware path").
+"""The loop never builds a model the firmware cannot hold: the winner is carried to the
+firmware path.
 
 The k7 aux sum of the firmware holds at most AUX_MAX_TERMS (6) terms.  Two lag-state blocks of the
 proxy (3 terms each) fill it; before, the loop went on adding candidates and confirmed models of 7 to

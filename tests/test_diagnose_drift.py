@@ -1,4 +1,4 @@
-"""The loop tells a drift in time (aging) from a long thermal lag of the proxy (issue #11).
+"""The loop tells a drift in time (aging) from a long thermal lag of the proxy.
 
 A slow drift A (1 - exp(-t/tau)) over a chamber cycle is fitted as well by a lag of the proxy of
 thousands of seconds, which the structure phase offers first: aging runs of the loop benchmark were

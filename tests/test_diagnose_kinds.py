@@ -1,4 +1,4 @@
-"""The closed loop's structural candidates added for issue #11 (loop3): the exchange settling of per-mode
+"""The closed loop's structural candidates: the exchange settling of per-mode
 banks and the higher powers of the proxy are kind 'structure' (host_tools.fitting.effects,
 host_tools.fitting.diagnose_scan.kind_of)."""
 import warnings

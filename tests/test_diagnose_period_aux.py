@@ -1,4 +1,4 @@
-"""Two effects the loop missed on the loop benchmark (issue #11), each on the run that showed it.
+"""Two effects the loop missed on the loop benchmark, each on the run that showed it.
 
 * A periodic bias of two cycles per training run: the period grid stopped at a third of the run,
   so a 2696-s line in a 5909-s run had no candidate ("no confirmed effect" at effect_ratio 8.9).

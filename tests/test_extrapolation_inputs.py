@@ -1,4 +1,4 @@
-"""Extrapolation said where the user looks, beyond the clamp flags (round 2 session 12 review):
+"""Extrapolation said where the user looks, beyond the clamp flags:
 
 * an aux input outside the range its k7 term was fitted on (clamped alone: the aux_clamped flag,
   which sees the sum z, cannot fire) -> metadata, warning, ``--strict`` refuses; float and fixed;

@@ -1,4 +1,4 @@
-"""Two silent answers of the session-12 review, closed (round 2 session 13):
+"""Two answers that were silent, now said:
 
 * a mode-reversal schedule with windows longer than max_stale_s allows (a 400-s dwell): ``hdrg fit``
   derives max_stale_s from the training runs' schedule, and ``hdrg compensate`` counts the samples

@@ -653,7 +653,7 @@ def test_cli_device_on_pty_capture_and_ctrl_c(tmp_path):
 
 
 def test_device_refuses_a_table_of_the_other_mode(run, tmp_path, capsys):
-    """issue 13 item 8: an FTR table on a mode-reversal run is refused with NACK R_TABLE_MODE and a
+    """An FTR table on a mode-reversal run is refused with NACK R_TABLE_MODE and a
     reason (offline `hdrg compensate` refuses the same pairing); the CLI says so in one line."""
     from host_tools import cli
 

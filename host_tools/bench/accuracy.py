@@ -18,7 +18,7 @@ below 1 is possible for MR, whose combined output averages two modes).  ``*/raw`
 model (FTR raw output; MR the combiner alone).
 
 Options: ``ftr/EST``, ``mr-pair/EST``, ``mr-trend/EST`` (combine first: the combiner, then one
-bias), and, when host_tools.golden.reversal.ReversalConfig has an ``order`` field (branch rtr),
+bias), and, when host_tools.golden.reversal.ReversalConfig has an ``order`` field,
 ``rf-none/EST``, ``rf-pair/EST``, ``rf-trend/EST`` (regress first: per-mode banks, residuals
 combined); ``+auto`` variants for EST in AUTO_ESTIMATORS.  EST: ``diff``, ``diffn4``, ``diffn16``, ``lsq8``, ``lsq32``, ``iir4``, ``iir7``,
 ``iir9`` (host_tools.golden.rate).  A fit or compensation that fails is counted per option, never
@@ -50,7 +50,7 @@ ESTIMATORS = {"diff": ("diff", 8, 4), "diffn4": ("diffn", 4, 4), "diffn16": ("di
               "iir9": ("iir", 8, 9)}
 AUTO_ESTIMATORS = ("diff", "iir9")   # 'auto' costs ~0.5 s per fit (forward selection): two estimators only
 # est 'auto': the rate estimator chosen by host_tools.fitting.fit.fit_auto_rate (fits every RATE_CANDIDATE)
-# variants of the defaults (issue #10 tuning): settle_s after each exchange, stricter term selection
+# variants of the defaults: settle_s after each exchange, stricter term selection
 VARIANTS = ((("rf-pair", "diff", "auto"), ({"settle": 3.0}, {"settle": 5.0}, {"settle": 10.0}, {"sig": 2.0})),
             (("rf-pair", "auto", "auto"), ({}, {"settle": 5.0}, {"sig": 2.0})),
             (("ftr", "diff", "auto"), ({"sig": 2.0},)),
@@ -94,7 +94,7 @@ class Option:
 
 
 def has_order() -> bool:
-    """True when the pipeline has the regress_first order (ReversalConfig.order, branch rtr)."""
+    """True when the pipeline has the regress_first order (ReversalConfig.order)."""
     return "order" in {f.name for f in dataclasses.fields(ReversalConfig)}
 
 
@@ -147,13 +147,13 @@ def heldout_valid(model, holdout) -> np.ndarray:
 
 
 def heldout_ratio(model, holdout, floor) -> float:
-    """np.std of :func:`heldout_valid` over ``floor``: the held-out ratio the docs/lag measurement
-    scripts record (the benchmark's ratio, without its guard for fewer than two valid samples)."""
+    """np.std of :func:`heldout_valid` over ``floor``: the held-out ratio the study scripts
+    (docs/studies) record (the benchmark's ratio, without its guard for fewer than two valid samples)."""
     return float(np.std(heldout_valid(model, holdout)) / floor)
 
 
 def set_devices(seeds, reversals=(False, True)):
-    """For the docs/lag measurement scripts: per seed of ``seeds`` a pair (rec, cases), rec =
+    """For the study scripts (docs/studies): per seed of ``seeds`` a pair (rec, cases), rec =
     {'seed', 'dc': :func:`damping_change_dph`}, cases = a lazy iterator over ``reversals`` of
     (key 'ftr' / 'mr', train, hold, floor) from :func:`device_runs` (consume it before the next seed)."""
     for seed in seeds:

@@ -8,7 +8,7 @@ check-impl set by set and reads the testbench's cycle file (``+cycles=``: clock 
 ``start`` to ``done`` of every sample request; worst case and mean per set).  Within one process
 a check is run once per (simulator, sets, defines, content of the RTL, testbench and vector files;
 ``once``, which cost_fpga's evaluator-alone simulations use too):
-`hdrg cost --target ice40` and `--target xc7` check the same RTL, so a test session that measures
+`hdrg cost --target ice40` and `--target xc7` check the same RTL, so a test run that measures
 both (tests/test_cost.py, tests/test_rtl.py) simulates it once.
 """
 from __future__ import annotations

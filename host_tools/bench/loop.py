@@ -24,7 +24,7 @@ power-ons and noise: the foreign simulator draws the noise independently of the 
 error: the runs where the loop must find it.  Error = std of 100-s averages of the compensated
 output (diagnose.error_stats).
 
-Summary (the targets of issue #11):
+Summary (the loop's targets):
 
 * ``detection``: among effect runs with effect_ratio >= 2, the fraction whose CONFIRMED, MATERIAL
   EFFECT steps (diagnose.EFFECT_RULE: held-out error down by >= 18 %, the steps that make the verdict
@@ -81,7 +81,7 @@ DETECTION_RULE = ("detection: effect runs with effect_ratio >= 2 whose CONFIRMED
                   "confirmed steps (either kind) name the family, the false-positive side of the same count")
 IDENTIFIABLE_RULE = ("*_identifiable: the same counts over the effect runs whose oracle_fit_ratio is also >= 2: "
                      "the base model plus the TRUE effect signal as one k7 term, fitted on the training run, "
-                     "halves the held-out error (issue #11's 'adding the true effect halves the error'); "
+                     "halves the held-out error ('adding the true effect halves the error'); "
                      "effect_ratio alone removes the effect from the physics, which no model fitted on one "
                      "temperature rate may be able to do (u^4 absorbed by the cross terms of the 17)")
 

@@ -1,4 +1,4 @@
-"""The lag-state block of the default fit (issue #10): a thermal node that lags the proxy
+"""The lag-state block of the default fit: a thermal node that lags the proxy
 differently from what one proxy u and its rate v can represent, modelled as a low-order polynomial
 of the proxy, or of the temperature sensor, through first-order filters, carried to the firmware
 as the k7 auxiliary regressor.
