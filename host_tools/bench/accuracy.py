@@ -40,7 +40,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from host_tools.golden.compensate import compensate, fit_config_from_logs
-from host_tools.fitting.fit import fit_auto_rate, fit_logs
+from host_tools.fitting.fit import fit_logs
+from host_tools.fitting.fit_rate import fit_auto_rate
 from host_tools.fitting.fit_pipeline import fit_default
 from host_tools.golden.reversal import ReversalConfig, combine
 from host_tools.simulation.sim_foreign import ForeignDevice, damping_bias, foreign_device, simulate_foreign
@@ -49,7 +50,7 @@ ESTIMATORS = {"diff": ("diff", 8, 4), "diffn4": ("diffn", 4, 4), "diffn16": ("di
               "lsq8": ("lsq", 8, 4), "lsq32": ("lsq", 32, 4), "iir4": ("iir", 8, 4), "iir7": ("iir", 8, 7),
               "iir9": ("iir", 8, 9)}
 AUTO_ESTIMATORS = ("diff", "iir9")   # 'auto' costs ~0.5 s per fit (forward selection): two estimators only
-# est 'auto': the rate estimator chosen by host_tools.fitting.fit.fit_auto_rate (fits every RATE_CANDIDATE)
+# est 'auto': the rate estimator chosen by host_tools.fitting.fit_rate.fit_auto_rate (fits every RATE_CANDIDATE)
 # variants of the defaults: settle_s after each exchange, stricter term selection
 VARIANTS = ((("rf-pair", "diff", "auto"), ({"settle": 3.0}, {"settle": 5.0}, {"settle": 10.0}, {"sig": 2.0})),
             (("rf-pair", "auto", "auto"), ({}, {"settle": 5.0}, {"sig": 2.0})),

@@ -7,7 +7,8 @@ import numpy as np
 
 from firmware_ref.terms import TERM_NAMES
 from host_tools.cli.options import add_model_options
-from host_tools.fitting.fit import MIN_SAMPLES_PER_TERM, UnidentifiableError, fit_auto_rate, fit_logs
+from host_tools.fitting.fit import MIN_SAMPLES_PER_TERM, UnidentifiableError, fit_logs
+from host_tools.fitting.fit_rate import fit_auto_rate
 from host_tools.fitting.fit_pipeline import fit_default, fit_without_run_offsets
 from host_tools.golden.reversal import DEFAULT_MAX_STALE_S, schedule_ages_s
 

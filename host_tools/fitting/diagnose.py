@@ -181,7 +181,7 @@ def base_model(train, opts, terms=None):
     k7 is rebuilt from the generators it accepts, and its structure phase offers the lag-state
     block itself under the same CV and held-out confirmation as every other step.  The start's rate
     estimator is the candidate of least CV rms (``rate_prefer=None``), not `hdrg fit`'s preference
-    for iir 9 (host_tools.fitting.fit.RATE_PREFERRED): the loop's thresholds were calibrated from
+    for iir 9 (host_tools.fitting.fit_rate.RATE_PREFERRED): the loop's thresholds were calibrated from
     that start, and from the preferred start the loop bench's MR control got an "effect found"
     (seed 2, run 33: periodic 1153 s; docs/LOOP.md "Rate preference").  The structure phase still
     offers the rate estimator, iir 9 included, under CV and held-out confirmation.  No per-run offsets

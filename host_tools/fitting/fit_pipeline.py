@@ -9,7 +9,8 @@ import numpy as np
 
 from host_tools.golden import compensate
 from host_tools.golden.regressors import regressor_matrix
-from host_tools.fitting.fit import fit_auto_rate, fit_logs
+from host_tools.fitting.fit import fit_logs
+from host_tools.fitting.fit_rate import fit_auto_rate
 from host_tools.fitting.fit_lag import add_lag_block
 
 RUN_OFFSET_PASSES = 2   # backfitting passes of the per-run offsets (docs/ACCURACY.md "Several training runs")
@@ -133,7 +134,7 @@ def fit_model(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, cv_
     'off' skips it) and no aux given, the lag-state block of the proxy as k7 when cross-validation
     supports it (host_tools.fitting.fit_lag.add_lag_block).  ``drop_unidentifiable`` None: each path's own default
     (auto True, else False); ``cv_blocks``: the time blocks of cross-validation on a single run;
-    ``rate_prefer``: fit_auto_rate's ``prefer`` ('default': host_tools.fitting.fit.RATE_PREFERRED;
+    ``rate_prefer``: fit_auto_rate's ``prefer`` ('default': host_tools.fitting.fit_rate.RATE_PREFERRED;
     None: plain least CV rms, the start of `hdrg diagnose`).  ``run_offsets`` 'auto': with several
     runs, :func:`fit_without_run_offsets` around all of this; 'off': never.  Returns (model, FitResult)."""
     if run_offsets not in ("auto", "off"):
