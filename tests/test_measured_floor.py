@@ -172,3 +172,15 @@ def test_hdrg_fit_says_what_the_runs_identify(tmp_path):
     assert "model kept: cubic in the proxy" in r.stdout
     model = json.loads((tmp_path / "m.json").read_text())
     assert model["fit"]["identifiability"]["rate_terms_identified"] is False
+
+
+@pytest.mark.parametrize("blocks", [100000, 1, 0, -3, 2.5, True])
+def test_cv_blocks_outside_its_range_is_refused_at_once(blocks):
+    """`hdrg fit --cv-blocks 100000` ran for minutes: the fit and the loop refuse it with the range."""
+    from host_tools.fitting.diagnose import diagnose
+    from host_tools.fitting.fit_pipeline import fit_default
+    log = _cycle(1)
+    with pytest.raises(ValueError, match=r"2\.\.64"):
+        fit_default([log], cv_blocks=blocks)
+    with pytest.raises(ValueError, match=r"2\.\.64"):
+        diagnose([log], cv_blocks=blocks, plots=False)

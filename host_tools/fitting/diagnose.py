@@ -138,7 +138,7 @@ from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, DRIFT_MARGIN,
                                       NULL_QUANTILE, PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, TRIES_PER_STEP, _Accepted,
                                       _config, _poly_terms, _scan, _step_key, kind_of, refit_with, rivals)
 from host_tools.fitting.diagnose_structure import _order_step, _settle_step
-from host_tools.fitting.fit import fit_logs
+from host_tools.fitting.fit import check_cv_blocks, fit_logs
 from host_tools.fitting.fit_pipeline import fit_default
 from host_tools.golden.checks import check_distinct_runs, same_runs
 from host_tools.golden.model import jsonable
@@ -229,6 +229,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     there (:func:`write_report`).  ``progress``: a callable(str) told what is being done.
     ``phases``: the phases to run (default both, structure first; ``("effect",)`` searches the
     effects on the starting model as it is, e.g. to test one effect family)."""
+    check_cv_blocks(cv_blocks)
     say = progress or (lambda msg: None)
     train = list(train_logs)
     hold = list(holdout_logs)

@@ -587,6 +587,7 @@ def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8
 
     terms = DEFAULT_TERMS if terms is None else terms
     significance = DEFAULT_SIGNIFICANCE if significance is None else significance
+    check_cv_blocks(cv_blocks)
     auto = isinstance(terms, str) and terms.strip().lower() == "auto"
     two = config.reversal is not None and config.reversal.order == "regress_first"
     accs = {}
@@ -620,6 +621,15 @@ def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8
     model = BiasModel(config, tuple(res.terms), np.asarray(res.coef, np.float64), info,
                       coef_mode2=None if res.coef_mode2 is None else np.asarray(res.coef_mode2, np.float64))
     return model, res
+
+
+MAX_CV_BLOCKS = 64   # more time blocks than this: each is seconds long, the fit slows with no gain
+
+
+def check_cv_blocks(cv_blocks) -> None:
+    """Refuse a number of cross-validation time blocks outside 2..MAX_CV_BLOCKS (ValueError)."""
+    if isinstance(cv_blocks, bool) or not isinstance(cv_blocks, (int, np.integer)) or not 2 <= cv_blocks <= MAX_CV_BLOCKS:
+        raise ValueError(f"cv_blocks (--cv-blocks) must be an integer in 2..{MAX_CV_BLOCKS}, not {cv_blocks!r}")
 
 
 MIN_SAMPLES_PER_TERM = 10   # `hdrg fit` refuses fewer valid samples per coefficient unless --force

@@ -9,7 +9,7 @@ import numpy as np
 
 from host_tools.golden import compensate
 from host_tools.golden.regressors import regressor_matrix
-from host_tools.fitting.fit import fit_logs
+from host_tools.fitting.fit import check_cv_blocks, fit_logs
 from host_tools.fitting.fit_rate import fit_auto_rate
 from host_tools.fitting.fit_lag import add_lag_block
 
@@ -41,6 +41,7 @@ def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, c
 
     if guard not in ("auto", "off"):
         raise ValueError(f"guard must be 'auto' or 'off', not {guard!r}")
+    check_cv_blocks(cv_blocks)
     logs = list(logs)
     probe = compensate.fit_config_from_logs(logs, **{k: v for k, v in config_kw.items() if k != "aux"})
     calibrated = probe if config_kw.get("proxy_range") is not None else compensate.fit_config_from_logs(
