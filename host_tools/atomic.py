@@ -24,7 +24,9 @@ marks an unfinished capture in its metadata (docs/RUN_LOG.md).
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
+import stat
 import signal
 import tempfile
 import threading
@@ -33,6 +35,21 @@ import threading
 def _special(path: str) -> bool:
     """True for an existing non-regular file (a terminal, /dev/stdout, a FIFO): written in place."""
     return os.path.exists(path) and not os.path.isfile(path) and not os.path.isdir(path)
+
+
+def _fifo_probe(path: str):
+    """For a FIFO: a write end opened without blocking (held while the caller writes, so its
+    reader sees one stream), or OSError when no process reads it (writing would wait forever);
+    None for any other special file."""
+    if not stat.S_ISFIFO(os.stat(path).st_mode):
+        return None
+    try:
+        return os.open(path, os.O_WRONLY | os.O_NONBLOCK)
+    except OSError as exc:
+        if exc.errno == errno.ENXIO:
+            raise OSError(f"{path}: is a FIFO that no process is reading (writing would wait forever); "
+                                       f"start the reader first or write to a file") from None
+        raise
 
 
 def _tmp_in_dir(path: str) -> tuple[int, str]:
@@ -99,7 +116,12 @@ def atomic_path(path):
     """Yield a temporary path next to ``path``; on success fsync it and rename it to ``path``."""
     path = os.path.realpath(os.fspath(path))    # a symlink: its target is replaced, the link kept
     if _special(path):
-        yield path
+        probe = _fifo_probe(path)
+        try:
+            yield path
+        finally:
+            if probe is not None:
+                os.close(probe)
         return
     fd, tmp = _tmp_in_dir(path)
     os.close(fd)

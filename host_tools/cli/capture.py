@@ -6,18 +6,20 @@ import argparse
 import sys
 import time
 
-from host_tools.cli.options import add_port_options
-from host_tools.link.capture import CaptureResult, capture, check_output_path
+from host_tools.cli.options import add_port_options, seconds_type, writable_output
+from host_tools.link.capture import MAX_DURATION_S, CaptureResult, capture, check_output_path
 from host_tools.link.host import open_port
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     add_port_options(parser)
     parser.add_argument("-o", "--output", required=True, help="run log (CSV) to write")
-    parser.add_argument("--duration", type=float, default=None, metavar="S",
-                        help="stop after S seconds of device time (default: until the device stops or Ctrl-C)")
-    parser.add_argument("--idle-timeout", type=float, default=30.0, metavar="S",
-                        help="stop when no frame arrives for S seconds (default 30; 0: never)")
+    parser.add_argument("--duration", type=seconds_type("--duration", MAX_DURATION_S), default=None, metavar="S",
+                        help="stop after S seconds of device time, S > 0 (default: until the device stops or Ctrl-C)")
+    parser.add_argument("--idle-timeout", type=seconds_type("--idle-timeout", MAX_DURATION_S, zero="never"),
+                        default=30.0, metavar="S",
+                        help="stop when no frame arrives for S seconds (default 30; 0: never stop for silence, "
+                             "wait until --duration, the device's end of run or Ctrl-C)")
     parser.add_argument("--flush-every", type=int, default=256, metavar="N", help="flush every N rows (and every second)")
     parser.add_argument("--quiet", action="store_true", help="no live progress line")
 
@@ -42,12 +44,15 @@ def run(args) -> int:
     import serial
 
     check_output_path(args.output)
+    writable_output(args.output)
+    if args.flush_every < 1:
+        raise ValueError(f"--flush-every {args.flush_every}: must be at least 1 row")
     try:
         port = open_port(args.port, args.baud)
     except serial.SerialException as exc:
         print(f"hdrg capture: error: cannot open {args.port}: {exc}", file=sys.stderr)
         return 2
-    idle = None if not args.idle_timeout or args.idle_timeout <= 0 else args.idle_timeout
+    idle = None if args.idle_timeout == 0 else args.idle_timeout      # 0: never stop for silence
     prog = None if args.quiet else _Progress()
     try:
         res = capture(port, args.output, duration_s=args.duration, idle_timeout_s=idle,

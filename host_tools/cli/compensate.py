@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 
+from host_tools.cli.options import regular_input, writable_output
 from host_tools.golden.compensate import IMPLS, check_impl, compensate
+from host_tools.link.capture import meta_text
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -30,6 +32,9 @@ def run(args) -> int:
 
     check_impl(args.impl)
     refuse_overwrite(args.output, [args.run, args.model, args.table])
+    for path, what in ((args.run, "run log"), (args.model, "model"), (args.table, "table")):
+        regular_input(path, what)       # /dev/zero, a FIFO: refused before anything reads them
+    writable_output(args.output)
     model = BiasModel.from_json(args.model)
     table = None
     if args.table:
@@ -40,6 +45,9 @@ def run(args) -> int:
     log = rl.read(args.run)
     out = compensate(log, model, impl=args.impl, table=table)
     flags.report(out, strict=args.strict)
+    if not args.output.lower().endswith(".npz"):
+        # a metadata value with a newline (an NPZ's, a file name's) must not end its '# key: value' line
+        out.metadata = {meta_text(k, key=True): meta_text(v) for k, v in out.metadata.items()}
     rl.write(out, args.output)
     print(f"{args.output}: {flags.summary(out)}")
     return 0

@@ -4,7 +4,8 @@ from __future__ import annotations
 import argparse
 import os
 
-from host_tools.fixed.export import DEFAULT_NAME, EXTENSIONS, FORMATS, LAYOUT_VERSION, export, load
+from host_tools.cli.options import distinct_outputs, regular_input, writable_output
+from host_tools.fixed.export import DEFAULT_NAME, EXTENSIONS, FORMATS, LAYOUT_VERSION, check_name, export, load
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -21,7 +22,13 @@ def run(args) -> int:
     from host_tools.atomic import refuse_overwrite
 
     formats = FORMATS if args.format == "all" else (args.format,)
-    refuse_overwrite([os.path.join(args.output, args.name + EXTENSIONS[f]) for f in formats], args.table)
+    check_name(args.name)
+    outputs = {f"--format {f}": os.path.join(args.output, args.name + EXTENSIONS[f]) for f in formats}
+    distinct_outputs(outputs)
+    refuse_overwrite(list(outputs.values()), args.table)
+    regular_input(args.table, "table")
+    for opt, path in outputs.items():
+        writable_output(path, opt)
     table, info = load(args.table)
     paths = export(table, args.output, formats, args.name, info)
     print(f"{args.table}: layout version {LAYOUT_VERSION}, {len(table.to_words())} words, CRC-32 0x{table.crc:08x}")

@@ -1,9 +1,14 @@
 """Option groups shared by several commands: the model options (`hdrg fit`, `hdrg diagnose`),
-the serial port (`hdrg capture`, `hdrg upload`) and the random simulator family (`hdrg simulate`).
+the serial port (`hdrg capture`, `hdrg upload`) and the random simulator family (`hdrg simulate`);
+and the checks of values and paths the commands share: durations in seconds (:func:`seconds_type`:
+negative, NaN and inf refused with the allowed range), outputs of one command that are one file
+(:func:`distinct_outputs`), special files as inputs (:func:`regular_input`: /dev/zero, a FIFO)
+and outputs that would block (:func:`writable_output`: a FIFO nobody reads).
 """
 from __future__ import annotations
 
 import argparse
+import atexit
 
 from firmware_ref.vocabulary import ESTIMATORS, PROXY_KINDS
 
@@ -69,3 +74,102 @@ def add_random_family_options(parser: argparse.ArgumentParser) -> None:
                         help="random family: the noise-only floor run (every bias term zeroed)")
     parser.add_argument("--describe", action="store_true",
                         help="random family: print the device's parameters as JSON, then exit")
+
+
+# -- checked values and paths ------------------------------------------------------------------------
+
+def positive_seconds(text, option: str, upper: float) -> float:
+    """``text`` as a number of seconds in (0, upper]; ValueError naming ``option`` and the allowed
+    range for anything else (negative, zero, NaN, inf, not a number)."""
+    import math
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        raise ValueError(f"{option} {text!r}: not a number of seconds") from None
+    if not (math.isfinite(value) and 0 < value <= upper):
+        raise ValueError(f"{option} {text}: must be a number of seconds in (0, {upper:g}]")
+    return value
+
+
+def seconds_type(option: str, upper: float, zero: str | None = None):
+    """An argparse ``type`` for a duration option: seconds in (0, upper], or also 0 when ``zero``
+    (its meaning, e.g. "never") is given; argparse turns the ValueError into a usage error that names
+    the option, the value and the range."""
+    def parse(text):
+        try:
+            if zero is not None and float(text) == 0.0:
+                return 0.0
+            return positive_seconds(text, option, upper)
+        except ValueError as exc:
+            extra = f" or 0 ({zero})" if zero is not None else ""
+            raise argparse.ArgumentTypeError(f"{exc}{extra}") from None
+    parse.__name__ = "seconds"
+    return parse
+
+
+def distinct_outputs(outputs: dict) -> None:
+    """ValueError when two outputs of one command (option -> path; None entries ignored) resolve
+    to the same file (existing: os.path.samefile; else the resolved real paths): the second would
+    overwrite the first."""
+    from host_tools.atomic import same_file
+    named = [(opt, path) for opt, path in outputs.items() if path is not None]
+    for i, (opt_a, a) in enumerate(named):
+        for opt_b, b in named[i + 1:]:
+            if same_file(a, b):
+                raise ValueError(f"{opt_a} {a} and {opt_b} {b} are the same file: one output would overwrite "
+                                 f"the other (give each its own file)")
+
+
+def regular_input(path, option: str = "input") -> None:
+    """ValueError unless the existing ``path`` is a regular file (a FIFO, a device such as
+    /dev/zero, a socket or a directory would block or never end); a missing path is left to the
+    reader's own message."""
+    from host_tools.jsonread import check_regular
+    if path is not None:
+        check_regular(path, option)
+
+
+def writable_output(path, option: str = "-o") -> None:
+    """ValueError for an output that would block or is not a file: a directory, a FIFO that no
+    process is reading (writing to it would wait forever), a socket.  A regular file, a missing
+    path, a terminal or a device such as /dev/null, and a FIFO with a reader are accepted (the
+    FIFO's probe stays open until the process exits, so the reader sees one stream)."""
+    import errno
+    import os
+    import stat
+    if path is None:
+        return
+    path = os.fspath(path)
+    try:
+        st = os.stat(path)
+    except OSError:
+        return
+    if stat.S_ISDIR(st.st_mode):
+        raise ValueError(f"{option} {path}: is a directory, not a file to write")
+    if stat.S_ISSOCK(st.st_mode):
+        raise ValueError(f"{option} {path}: is a socket, not a file to write")
+    if stat.S_ISFIFO(st.st_mode):
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK)
+        except OSError as exc:
+            if exc.errno == errno.ENXIO:
+                raise ValueError(f"{option} {path}: is a FIFO that no process is reading (writing would wait "
+                                 f"forever); start the reader first or write to a file") from None
+            raise
+        _HELD_WRITERS.append(fd)    # kept open until exit: closing it now would end the reader's input
+        #                             (EOF) before the real writer opens, which would then wait forever
+
+
+_HELD_WRITERS: list = []
+
+
+def _close_held() -> None:
+    import os
+    while _HELD_WRITERS:
+        try:
+            os.close(_HELD_WRITERS.pop())
+        except OSError:
+            pass
+
+
+atexit.register(_close_held)

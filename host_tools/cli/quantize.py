@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 
 from firmware_ref import formats as F
+from host_tools.cli.options import distinct_outputs, regular_input, writable_output
 from host_tools.fixed.quantize import quantize
 
 
@@ -24,7 +25,12 @@ def run(args) -> int:
     from host_tools.atomic import atomic_open, refuse_overwrite
     from host_tools.golden.model import BiasModel
 
-    refuse_overwrite([args.output, args.memh, args.header, args.bin], args.model)
+    outputs = {"-o": args.output, "--memh": args.memh, "--header": args.header, "--bin": args.bin}
+    distinct_outputs(outputs)
+    refuse_overwrite(list(outputs.values()), args.model)
+    regular_input(args.model, "model")
+    for opt, path in outputs.items():
+        writable_output(path, opt)
     model = BiasModel.from_json(args.model)
     q = quantize(model, exchange_s=args.exchange_s, dwell_s=args.dwell_s, power_on_s=args.power_on_s,
                  max_error_dph=args.max_error)

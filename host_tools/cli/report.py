@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import os
 
+from host_tools.cli.options import regular_input
 from host_tools.fitting.report import REPORT_FILES, _table, report
 
 
@@ -23,6 +24,8 @@ def run(args) -> int:
 
     refuse_overwrite([os.path.join(args.out, f) for f in REPORT_FILES], list(args.runs) + [args.model]
                      + list(args.train or []))
+    for path in args.runs:
+        regular_input(path, "run log")      # /dev/zero, a FIFO: refused before anything reads them
     model = BiasModel.from_json(args.model)
     train = args.train
     notes = []
@@ -36,6 +39,8 @@ def run(args) -> int:
         if missing and train:
             notes.append(f"baseline fitted on {len(train)} of the model's {len(recorded)} recorded training runs; not "
                          f"found from {os.getcwd()}: {', '.join(missing)} (give them with --train)")
+    for path in train or []:
+        regular_input(path, "training run log")
     logs = [runlog.read(p) for p in args.runs]
     train_logs = [runlog.read(p) for p in train] if train else None
     doc = report(logs, model, args.out, train_logs, plots=not args.no_plots, notes=notes)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from host_tools.cli.options import seconds_type
+from host_tools.vectors.runner import DEFAULT_TIMEOUT_S, MAX_TIMEOUT_S
 from host_tools.vectors.spec import FORMAT_VERSION, GENERATOR_VERSION, O_NAMES
 
 
@@ -23,7 +25,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     c.add_argument("--sets", default=None, help="comma list of sets (default all)")
     c.add_argument("--fields", default=None, help=f"compare only these O fields of the pipeline sets "
                                                   f"(default all: {','.join(O_NAMES)})")
-    c.add_argument("--timeout", type=float, default=600.0, help="seconds per set (default 600)")
+    c.add_argument("--timeout", type=seconds_type("--timeout", MAX_TIMEOUT_S), default=DEFAULT_TIMEOUT_S, metavar="S",
+                   help=f"seconds per set; the program is killed after it (default {DEFAULT_TIMEOUT_S:g})")
+    c.add_argument("--max-output", type=int, default=None, metavar="BYTES",
+                   help="bytes of answers read per set before the program is killed (default: 4 x the expected "
+                        "answers, at least 1 MiB)")
 
 
 def _names(text):
@@ -48,7 +54,10 @@ def run(args) -> int:
             print(f"MISMATCH: {p}")
         print("vectors OK" if not problems else f"{len(problems)} problem(s)")
         return 0 if not problems else 1
-    rep = check_impl(args.cmd, args.directory, _names(args.sets), _names(args.fields), args.timeout)
+    if args.max_output is not None and args.max_output <= 0:
+        raise ValueError(f"--max-output {args.max_output}: must be a positive number of bytes")
+    rep = check_impl(args.cmd, args.directory, _names(args.sets), _names(args.fields), args.timeout,
+                     max_output=args.max_output)
     total = sum(s["rows"] for s in rep["sets"].values())
     if rep["mismatches"]:
         print(f"FAIL: {rep['mismatches']} mismatching answers ({total} vectors); first mismatch:\n{rep['first']}")

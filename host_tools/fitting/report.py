@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 
 import numpy as np
 
@@ -58,10 +59,23 @@ def _fmt(x):
     return "   n/a" if x is None else f"{x:9.4f}"
 
 
+_MD_SPECIAL = re.compile(r"([\\`|\[\]])")
+
+
+def md_text(text) -> str:
+    """``text`` as inline Markdown text that renders as itself: one line (control characters,
+    newlines included, become spaces), HTML special characters as entities (``&lt;`` ...: no tag
+    or comment can start), ``\\ ` | [ ]`` backslash-escaped (``\\|`` cannot end a table cell,
+    ``\\[`` cannot start a link, a backtick cannot open code)."""
+    s = re.sub(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]", " ", str(text))
+    s = s.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;").replace('"', "&quot;")
+    return _MD_SPECIAL.sub(r"\\\1", s)
+
+
 def _table(rows) -> str:
     head = "| run | output | std 1 s | p-p 1 s | std 100 s | p-p 100 s |\n|---|---|---:|---:|---:|---:|\n"
     return head + "".join(
-        f"| {r['run']} | {r['output']} | {_fmt(r['std1_dph'])} | {_fmt(r['pp1_dph'])} | "
+        f"| {md_text(r['run'])} | {md_text(r['output'])} | {_fmt(r['std1_dph'])} | {_fmt(r['pp1_dph'])} | "
         f"{_fmt(r['std100_dph'])} | {_fmt(r['pp100_dph'])} |\n" for r in rows)
 
 
@@ -182,9 +196,9 @@ def report(logs, model: BiasModel, out_dir, train_logs=None, plots: bool = True,
                  "variation = peak-to-peak, of non-overlapping 1-s and 100-s averages of valid samples.\n\n")
         fh.write(_table(rows))
         for note in notes:
-            fh.write(f"\n* {note}\n")
+            fh.write(f"\n* {md_text(note)}\n")
         for f in doc.get("figures", []):
-            fh.write(f"\n![{f}]({f})\n")
+            fh.write(f"\n![{f}]({f})\n")       # the figures' own fixed names
     return doc
 
 

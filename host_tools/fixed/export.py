@@ -21,7 +21,15 @@ JSON adds ``coef_quantized_mode2_dph``).  A version-1 TABLE (``.memh``/``.bin`` 
 export) is read as combine_first with one bank and written as version 2.
 
 TABLE is a table.json (``hdrg quantize``), a binary ``.bin`` or a ``.memh``/``.hex``/``.mem``
-file; it is checked (magic, version, length, CRC, field ranges) before anything is written.
+file; it is checked (magic, version, length, CRC, field ranges, the JSON's field types) before
+anything is written.
+
+Nothing from a file reaches the header as code: ``--name`` must be a C identifier (a letter, then
+letters, digits, ``_``; at most 63 characters; not a name C or <stdint.h> reserves, e.g. one that
+starts with ``_`` or upper-cases to ``UINT32_MAX``); free text (the model's file name, a table's
+``model_source``) is quoted only inside one-line comments by :func:`comment_text` (printable
+ASCII, escapes for anything else, no ``*/``, ``/*`` or ``??``), so the header defines the table's
+array, its four macros and its include guard and nothing else.
 """
 from __future__ import annotations
 
@@ -33,7 +41,7 @@ from pathlib import Path
 from firmware_ref import formats as F
 from firmware_ref.table import LAYOUT, MAGIC, N_FIXED, VERSION as LAYOUT_VERSION, Table
 from firmware_ref.terms import K_AUX, TERM_NAMES, TERM_POWERS
-from host_tools.fixed.quantize import FORMAT, VERSION, quantized_coef, read_table
+from host_tools.fixed.quantize import FORMAT, VERSION, quantized_coef, read_table, read_table_json
 
 FORMATS = ("c", "json", "mem")
 EXTENSIONS = {"c": ".h", "json": ".json", "mem": ".memh"}
@@ -43,13 +51,7 @@ DEFAULT_NAME = "hdrg_table"
 def load(path) -> tuple[Table, dict | None]:
     """``(table, table_json_dict)``: the checked table of ``path`` and, for a table.json, its
     dict (the float originals and the quantizer's report), else None."""
-    path = os.fspath(path)
-    table = read_table(path)
-    info = None
-    if os.path.splitext(path)[1].lower() not in (".bin", ".memh", ".hex", ".mem"):
-        with open(path, "r", encoding="utf-8") as fh:
-            info = json.load(fh)
-    return table, info
+    return read_table_json(path)
 
 
 def _group_exponent(table: Table, k: int, bank: int = 1) -> int:
@@ -57,21 +59,59 @@ def _group_exponent(table: Table, k: int, bank: int = 1) -> int:
     return b.e_7 if k == K_AUX else b.e_row[TERM_POWERS[k][0]]
 
 
-def _check_name(name: str) -> str:
-    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
-        raise ValueError(f"--name {name!r}: must be a C identifier (letters, digits, '_')")
+# upper-cased names that <stdint.h> or the C implementation own (a clash would not compile, or
+# would redefine a macro): the limits and constant macros, and every name beginning with '_'
+_RESERVED = re.compile(r"_.*|U?INT\w*_(MAX|MIN|C)|(SIZE|PTRDIFF|SIG_ATOMIC|WCHAR|WINT)_(MAX|MIN)")
+COMMENT_LIMIT = 200         # characters of free text (a file name) quoted in a comment
+
+
+def check_name(name: str) -> str:
+    """``name`` when it can be the header's symbol (see the module doc), else ValueError."""
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]{0,62}", name):
+        raise ValueError(f"--name {name!r}: must be a C identifier of at most 63 characters (a letter, then "
+                         f"letters, digits, '_')")
+    if _RESERVED.fullmatch(name.upper()):
+        raise ValueError(f"--name {name!r}: {name.upper()} is reserved by C or <stdint.h>; choose another name")
     return name
+
+
+def comment_text(text, limit: int = COMMENT_LIMIT) -> str:
+    """``text`` made safe inside a C block comment on one line: printable ASCII only (any other
+    character, newlines included, as a Python escape ``\\n``, ``\\x1b``, ``\\u00e9``), no ``*/`` or
+    ``/*`` (``* /``, ``/ *``: a comment cannot be closed or warned about), no ``??`` (a trigraph), at
+    most ``limit`` characters (then ``...``)."""
+    s = str(text).encode("unicode_escape").decode("ascii")
+    s = "".join(c if " " <= c <= "~" else "?" for c in s)
+    while "*/" in s or "/*" in s or "??" in s:
+        s = s.replace("*/", "* /").replace("/*", "/ *").replace("??", "? ?")
+    if len(s) > limit:
+        s = s[:limit - 3].rstrip("\\") + "..."
+    return s
+
+
+def _coef_list(info: dict | None, key: str):
+    """``info[key]`` (a table.json's float originals) as floats, or None when absent; ValueError
+    naming the field when it is not a list of numbers."""
+    value = (info or {}).get(key)
+    if value is None:
+        return None
+    if not isinstance(value, list) or not all(isinstance(c, (int, float)) and not isinstance(c, bool)
+                                              for c in value):
+        raise ValueError(f"table.json field {key!r}: must be a list of numbers (the float coefficients), not "
+                         f"{type(value).__name__}")
+    return [float(c) for c in value]
 
 
 def c_header(table: Table, name: str = DEFAULT_NAME, info: dict | None = None) -> str:
     """The C99 header text (see the module doc); ``name`` gives the guard and the symbols
     (upper-cased), ``info`` a table.json dict for the float originals in the comments."""
-    sym = _check_name(name).upper()
+    sym = check_name(name).upper()
     words = table.to_words()
     vals = table.field_values()
-    coef = (info or {}).get("coef_dph")
-    coef2 = (info or {}).get("coef_mode2_dph")
+    coef = _coef_list(info, "coef_dph")
+    coef2 = _coef_list(info, "coef_mode2_dph")
     src = (info or {}).get("model_source")
+    src = None if src is None else comment_text(src)
     frac_p = F.FREQ_FRAC if table.proxy_kind == 0 else F.TEMP_FRAC
     aux_names = table.param_names()          # aux parameter words (FORMATS.md "Aux generators")
     lines = [
@@ -128,7 +168,7 @@ def c_header(table: Table, name: str = DEFAULT_NAME, info: dict | None = None) -
             text = f"{i:2d} {aux_names[i - N_FIXED]:<12s} int32  {w - (1 << 32) if w >= 1 << 31 else w}"
         else:
             text = f"{i:2d} crc32        uint32 CRC-32 of words 0..{i - 1}"
-        text = text.replace("*/", "* /")
+        text = comment_text(text, limit=1000)
         lines.append(f"    0x{w:08x}u, /* {text} */")
     lines += ["};", "", f"#endif /* {sym}_H_INCLUDED */", ""]
     return "\n".join(lines)
@@ -169,7 +209,7 @@ def json_dict(table: Table, info: dict | None = None) -> dict:
 def export(table: Table, outdir, formats=FORMATS, name: str = DEFAULT_NAME, info: dict | None = None) -> dict:
     """Write the exports of ``table`` into ``outdir`` (created if missing); returns
     ``{format: Path}``.  ``formats``: any of 'c', 'json', 'mem'."""
-    _check_name(name)
+    check_name(name)
     bad = [f for f in formats if f not in FORMATS]
     if bad:
         raise ValueError(f"unknown export format(s) {', '.join(bad)}; choose from {', '.join(FORMATS)}")

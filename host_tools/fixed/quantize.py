@@ -72,6 +72,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from dataclasses import dataclass, field
 from fractions import Fraction
 
@@ -235,35 +236,62 @@ def quantize(model, exchange_s: float = 30.0, dwell_s: float = 120.0, power_on_s
     return Quantized(table, model, report)
 
 
+MAX_TABLE_BYTES = 4 << 20        # a table.json is ~20 kB, a .bin/.memh under 1 kB; larger is refused unread
+
+
 def read_table(path) -> Table:
     """A table from table.json (checks CRC and that its fields agree with its words), a binary
-    ``.bin`` or a ``.memh``/``.hex`` memory file."""
+    ``.bin`` or a ``.memh``/``.hex`` memory file.  TableError (naming the file) for a file that is
+    not a regular file, is over 4 MiB, is not UTF-8 or JSON, repeats a key, nests too deep, or
+    holds a field of the wrong type."""
+    return read_table_json(path)[0]
+
+
+def read_table_json(path) -> tuple:
+    """``(table, dict)``: the table of ``path`` (see :func:`read_table`) and, for a table.json,
+    its checked dict (else None)."""
+    from host_tools.jsonread import InputFileError, check_regular, parse_json, read_text
+
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()
-    if ext == ".bin":
-        with open(path, "rb") as fh:
-            return Table.from_bytes(fh.read(), path)
-    with open(path, "r", encoding="utf-8") as fh:
-        text = fh.read()
-    if ext in (".memh", ".hex", ".mem"):
-        return Table.from_memh(text, path)
     try:
-        d = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise TableError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+        if ext == ".bin":
+            check_regular(path, "table")
+            with open(path, "rb") as fh:
+                data = fh.read(MAX_TABLE_BYTES + 1)
+            if len(data) > MAX_TABLE_BYTES:
+                raise TableError(f"{path}: more than the {MAX_TABLE_BYTES}-byte limit of a table")
+            return Table.from_bytes(data, path), None
+        text = read_text(path, "table", MAX_TABLE_BYTES)
+        if ext in (".memh", ".hex", ".mem"):
+            return Table.from_memh(text, path), None
+        d = parse_json(text, path, "table.json", max_depth=32)
+    except InputFileError as exc:
+        raise TableError(str(exc)) from None
     if not isinstance(d, dict) or d.get("format") != FORMAT:
         raise TableError(f"{path}: not an hdrg table (format {d.get('format') if isinstance(d, dict) else None!r}, "
                          f"expected {FORMAT!r})")
-    if d.get("version") != VERSION:
+    if d.get("version") != VERSION or isinstance(d.get("version"), bool):
         raise TableError(f"{path}: unsupported table.json version {d.get('version')!r}")
-    try:
-        words = [int(w, 16) for w in d["words"]]
-    except (KeyError, TypeError, ValueError):
-        raise TableError(f"{path}: field 'words' missing or not a list of hex words") from None
-    table = Table.from_words(words, path)
+    words = d.get("words")
+    if not isinstance(words, list) or not all(isinstance(w, str) and re.fullmatch(r"(0[xX])?[0-9a-fA-F]{1,8}", w)
+                                              for w in words):
+        raise TableError(f"{path}: field 'words' missing or not a list of hex words (strings of 1 to 8 hex digits)")
+    table = Table.from_words([int(w, 16) for w in words], path)
     fields_ = d.get("fields", {})
+    if not isinstance(fields_, dict):
+        raise TableError(f"{path}: field 'fields' must be an object (field name -> value), not "
+                         f"{type(fields_).__name__}")
     vals = table.field_values()
-    bad = [k for k, v in fields_.items() if vals.get(k) != v]
+    bad = [k for k, v in fields_.items() if vals.get(k) != v or isinstance(v, bool)]
     if bad:
         raise TableError(f"{path}: fields {', '.join(bad)} disagree with the words (edited by hand?)")
-    return table
+    for key in ("coef_dph", "coef_mode2_dph", "coef_quantized_dph", "coef_quantized_mode2_dph"):
+        v = d.get(key)
+        if v is not None and not (isinstance(v, list) and all(isinstance(c, (int, float)) and not isinstance(c, bool)
+                                                              for c in v)):
+            raise TableError(f"{path}: field '{key}' must be a list of numbers or null, not {type(v).__name__}")
+    src = d.get("model_source")
+    if src is not None and not isinstance(src, str):
+        raise TableError(f"{path}: field 'model_source' must be a string or null, not {type(src).__name__}")
+    return table, d

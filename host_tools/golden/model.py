@@ -41,9 +41,10 @@ read, their reversal as ``order: "combine_first"``)::
 
 Floats are written in shortest round-trip form, so a model survives write/read bit for bit.
 Reading refuses (:class:`ModelError`, a ValueError whose message names the file and the field)
-a non-JSON file, another ``format``, a missing or unknown ``version``, a missing field, a wrong
-type or an out-of-range value, a non-zero coefficient of a disabled term, a missing or unexpected
-second bank.
+a non-JSON file, a file that is not a regular file or is over 16 MiB, a key repeated in one
+object, nesting over 32 levels (host_tools.jsonread), another ``format``, a missing or unknown
+``version``, a missing field, a wrong type or an out-of-range value, a non-zero coefficient of a
+disabled term, a missing or unexpected second bank, a ``fit.train`` that is not a list of paths.
 """
 from __future__ import annotations
 
@@ -63,6 +64,8 @@ from host_tools.golden.reversal import ReversalConfig
 FORMAT = "hdrg-model"
 VERSION = 2
 READ_VERSIONS = (1, 2)
+MAX_BYTES = 16 << 20        # a model file is a few kB; larger is refused before it is parsed
+MAX_DEPTH = 32              # a model nests 4 deep (its fit info a few more); deeper is refused
 
 
 class ModelError(ValueError):
@@ -209,19 +212,22 @@ class BiasModel:
         if version == 1 and "coef_mode2_dph" in d:
             raise ModelError(source, "coef_mode2_dph", "not a field of model format version 1")
         config = ModelConfig.from_dict(d["config"], source)
+        fit = d.get("fit", {})
+        train = fit.get("train") if isinstance(fit, dict) else None
+        if train is not None and not (isinstance(train, list) and all(isinstance(p, str) for p in train)):
+            raise ModelError(source, "fit.train", "must be a list of run-log paths (strings)")
         return cls(config, d["terms"], d["coef_dph"], d.get("fit", {}) or {}, source,
                    d.get("coef_mode2_dph"))
 
     @classmethod
     def from_json(cls, path) -> "BiasModel":
+        from host_tools.jsonread import InputFileError, read_json
+
         source = os.fspath(path)
         try:
-            with open(source, "r", encoding="utf-8") as fh:
-                d = json.load(fh)
-        except json.JSONDecodeError as exc:
-            raise ModelError(source, None, f"not valid JSON (line {exc.lineno} column {exc.colno}: {exc.msg})") from None
-        except UnicodeDecodeError:
-            raise ModelError(source, None, "not a text file (UTF-8 decoding failed)") from None
+            d = read_json(source, "model file", MAX_BYTES, MAX_DEPTH)
+        except InputFileError as exc:
+            raise ModelError(source, None, str(exc).removeprefix(f"{source}: ")) from None
         return cls.from_dict(d, source)
 
 

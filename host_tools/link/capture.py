@@ -5,7 +5,9 @@ as a run log of CAPTURE_COLUMNS (shared/formats/run-log.md).
 """
 from __future__ import annotations
 
+import math
 import os
+import re
 import time
 from dataclasses import dataclass
 
@@ -32,6 +34,17 @@ def check_output_path(path) -> None:
         raise CaptureOutputError(f"{path}: the directory {directory} is not writable")
 
 
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]")
+
+
+def meta_text(value, key: bool = False) -> str:
+    """``value`` as one metadata line's text: control characters (newlines included) written as
+    Python escapes (``\\n``, ``\\x1b``), so a device name or a port cannot end the line, forge a
+    metadata line or a row; in a key, ``:`` (the key/value separator) becomes ``_``."""
+    text = _CONTROL.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), str(value))
+    return text.replace(":", "_").strip() if key else text
+
+
 CAPTURE_COLUMNS = ("t_s", "freq_hz", "rate_dph", "mode", "temp_c", "comp_rate_dph", "comp_bias_dph", "comp_valid",
                    "status", "state", "seq")
 
@@ -40,22 +53,31 @@ class RunLogWriter:
     """Writes a run log (shared/formats/run-log.md) row by row: metadata and header with the first
     rows, then appended rows; flushed (and fsync'ed) every ``flush_every`` rows, every
     ``flush_interval_s`` seconds and at :meth:`close`, always at a line boundary, so the file is a
-    valid run log at every flush.  Its first metadata line is ``# capture: in progress`` until
-    :meth:`close` rewrites it in place (same length) to ``# capture: complete``: a file left by a
-    killed capture says so, and the run-log reader warns about it (docs/RUN_LOG.md)."""
+    valid run log at every flush.  The file is created (truncating an existing one) only with the
+    first row: a capture that records nothing leaves an existing file as it was.  Metadata keys and
+    values pass through :func:`meta_text` (no newline can end a line early).  Its first metadata
+    line is ``# capture: in progress`` until :meth:`close` rewrites it in place (same length) to
+    ``# capture: complete``: a file left by a killed capture says so, and the run-log reader warns
+    about it (docs/RUN_LOG.md)."""
 
     def __init__(self, path, metadata: dict, columns=CAPTURE_COLUMNS, flush_every: int = 256,
                  flush_interval_s: float = 1.0):
         self.path = os.fspath(path)
-        self.metadata = {CAPTURE_KEY: CAPTURE_OPEN, **{k: v for k, v in metadata.items() if k != CAPTURE_KEY}}
+        self.metadata = {meta_text(k, key=True): meta_text(v) for k, v in
+                         {CAPTURE_KEY: CAPTURE_OPEN, **{k: v for k, v in metadata.items() if k != CAPTURE_KEY}}.items()}
         self.columns = tuple(columns)
         self.flush_every = max(1, int(flush_every))
         self.flush_interval_s = flush_interval_s
         self.rows = 0
         self._pending = []
-        self._fh = open(self.path, "w", encoding="utf-8", newline="\n")
+        self._fh = None             # opened with the first row: a capture of nothing leaves an existing file as it was
         self._header_written = False
         self._last_flush = time.monotonic()
+
+    @property
+    def opened(self) -> bool:
+        """True once the file was created (it holds the metadata, the header and at least one row)."""
+        return self._fh is not None
 
     def append(self, line: str) -> None:
         self._pending.append(line)
@@ -66,6 +88,11 @@ class RunLogWriter:
         if not self._pending:
             return
         parts = []
+        if self._fh is None:
+            try:
+                self._fh = open(self.path, "w", encoding="utf-8", newline="\n")
+            except OSError as exc:   # the output, not the port: never reported as "port error"
+                raise CaptureOutputError(f"cannot write the run log {self.path}: {exc.strerror or exc}") from None
         if not self._header_written:
             parts += [f"# {k}: {v}\n" for k, v in self.metadata.items()]
             parts.append(",".join(self.columns) + "\n")
@@ -82,6 +109,10 @@ class RunLogWriter:
         self._last_flush = time.monotonic()
 
     def close(self) -> None:
+        if self._fh is None and self._pending:
+            self.flush()
+        if self._fh is None:
+            return
         if self._fh.closed:
             return
         try:
@@ -142,7 +173,7 @@ class CaptureResult:
             span = "" if self.first_t_s is None else f", t = {self.first_t_s:.6g} .. {self.last_t_s:.6g} s"
             lines.append(f"  {self.path}: {self.samples} samples{span}")
         else:
-            lines.append(f"  {self.path}: not written (no sample could be converted)")
+            lines.append(f"  {self.path}: not written (no sample recorded; an existing file is left as it was)")
         lines.append(f"  frames {self.frames} in {self.elapsed_s:.1f} s; CRC errors {self.crc_errors} (frame) + "
                      f"{self.header_errors} (header); resyncs {self.resyncs} ({self.garbage_bytes} bytes discarded); "
                      f"sequence gaps {self.seq_gaps} frame(s) in {self.gap_events} place(s)")
@@ -180,6 +211,24 @@ class _SampleFormatter:
                    f"{s[4] * self.lo!r},{s[5] * self.lo!r},{s[9]},{s[8]},{s[6]},{seq}\n")
 
 
+MAX_DURATION_S = 1e8        # about 3 years: a longer duration or idle timeout is a typo
+
+
+def check_limits(duration_s, idle_timeout_s, max_samples=None) -> None:
+    """ValueError naming the limit unless ``duration_s`` and ``idle_timeout_s`` are None or a number
+    of seconds in (0, MAX_DURATION_S] (negative, zero, NaN and inf refused), and ``max_samples`` None
+    or a positive integer."""
+    for name, value in (("duration", duration_s), ("idle timeout", idle_timeout_s)):
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                or not 0 < value <= MAX_DURATION_S:
+            raise ValueError(f"capture {name} {value!r}: must be a number of seconds in (0, {MAX_DURATION_S:g}]")
+    if max_samples is not None and (isinstance(max_samples, bool) or not isinstance(max_samples, int)
+                                    or max_samples <= 0):
+        raise ValueError(f"capture max_samples {max_samples!r}: must be a positive integer")
+
+
 def capture(port, path, duration_s: float | None = None, idle_timeout_s: float | None = 10.0,
             max_samples: int | None = None, flush_every: int = 256, flush_interval_s: float = 1.0,
             progress=None, extra_metadata: dict | None = None, stop=None) -> CaptureResult:
@@ -194,6 +243,7 @@ def capture(port, path, duration_s: float | None = None, idle_timeout_s: float |
     import serial
 
     check_output_path(path)
+    check_limits(duration_s, idle_timeout_s, max_samples)
     own = isinstance(port, (str, os.PathLike))
     if own:
         port = open_port(os.fspath(port))
@@ -223,12 +273,8 @@ def capture(port, path, duration_s: float | None = None, idle_timeout_s: float |
                 "capture_started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                 "table_crc": f"0x{info.table_crc:08x}", "boot_id": f"0x{info.boot_id:08x}"}
         meta.update(extra_metadata or {})
-        try:
-            writer = RunLogWriter(path, meta, flush_every=flush_every, flush_interval_s=flush_interval_s)
-        except OSError as exc:   # the output, not the port: never reported as "port error"
-            raise CaptureOutputError(f"cannot write the run log {os.fspath(path)}: {exc.strerror or exc}") from None
+        writer = RunLogWriter(path, meta, flush_every=flush_every, flush_interval_s=flush_interval_s)
         fmt = _SampleFormatter(info)
-        res.written = True
 
     def take(s: tuple, seq: int) -> bool:
         """Write one sample; False when the capture should end."""
@@ -337,6 +383,7 @@ def capture(port, path, duration_s: float | None = None, idle_timeout_s: float |
             res.dropped_no_info += len(pending)
             if writer is not None:
                 writer.close()
+                res.written = writer.opened
             if own:
                 try:
                     port.close()

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -158,17 +159,99 @@ def render_all(sets, config) -> dict:
     return files
 
 
+MAX_MANIFEST_BYTES = 64 << 20       # the committed manifest is ~0.5 MB
+_HEX64 = re.compile(r"[0-9a-f]{64}")
+_HEX8 = re.compile(r"[0-9a-fA-F]{8}")
+
+
 def read_manifest(directory) -> dict:
+    """The checked ``manifest.json`` of ``directory``: VectorsError (naming the file and the field)
+    for a file that is not a regular file or is over 64 MiB, not JSON, a repeated key, nesting too
+    deep, another format or version, or a field of the wrong type or range (a file name that leaves
+    the directory, a case whose rows or table are outside its set)."""
+    from host_tools.jsonread import InputFileError, read_json
+
     path = Path(directory) / "manifest.json"
     if not path.is_file():
         raise VectorsError(f"{path}: no manifest (generate the vectors with `hdrg vectors generate -o DIR`)")
     try:
-        m = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise VectorsError(f"{path}: not JSON ({exc})") from None
+        m = read_json(path, "vectors manifest", MAX_MANIFEST_BYTES, max_depth=32)
+    except InputFileError as exc:
+        raise VectorsError(str(exc)) from None
+    if not isinstance(m, dict):
+        raise VectorsError(f"{path}: not an hdrg vectors manifest (the top level is {type(m).__name__}, not an object)")
     if m.get("format") != "hdrg-vectors":
         raise VectorsError(f"{path}: format {m.get('format')!r} is not 'hdrg-vectors'")
-    if m.get("format_version") != FORMAT_VERSION:
-        raise VectorsError(f"{path}: format_version {m.get('format_version')} is not supported (this reads "
+    if m.get("format_version") != FORMAT_VERSION or isinstance(m.get("format_version"), bool):
+        raise VectorsError(f"{path}: format_version {m.get('format_version')!r} is not supported (this reads "
                            f"{FORMAT_VERSION})")
+    _check_manifest(m, str(path))
     return m
+
+
+def _check_manifest(m: dict, src: str) -> None:
+    """The types and ranges the readers of the manifest rely on (see :func:`read_manifest`)."""
+    def need(cond, fld, what):
+        if not cond:
+            raise VectorsError(f"{src}: field '{fld}': {what}")
+
+    def is_int(v, lo=0):
+        return isinstance(v, int) and not isinstance(v, bool) and v >= lo
+
+    def is_name(v):
+        return isinstance(v, str) and v != "" and "/" not in v and "\\" not in v and not v.startswith(".")
+
+    def str_list(v):
+        return isinstance(v, list) and all(isinstance(x, str) for x in v)
+
+    files = m.get("files")
+    need(isinstance(files, dict), "files", "must be an object (file name -> sha256, bytes)")
+    for name, meta in files.items():
+        need(is_name(name), f"files.{name}", "a file name in the vectors directory (no '/', not hidden)")
+        need(isinstance(meta, dict) and isinstance(meta.get("sha256"), str) and _HEX64.fullmatch(meta["sha256"])
+             and is_int(meta.get("bytes")), f"files.{name}", "must be an object with sha256 (64 hex digits) and "
+             "bytes (an integer >= 0)")
+    for key in ("sources",):
+        if key in m:
+            need(isinstance(m[key], dict) and all(isinstance(v, str) for v in m[key].values()), key,
+                 "must be an object of path -> sha256")
+    if "sources_sha256" in m:
+        need(isinstance(m["sources_sha256"], str), "sources_sha256", "must be a string")
+    sets = m.get("sets")
+    need(isinstance(sets, dict), "sets", "must be an object (set name -> description)")
+    for name, meta in sets.items():
+        at = f"sets.{name}"
+        need(isinstance(meta, dict), at, "must be an object")
+        need(isinstance(meta.get("description", ""), str), f"{at}.description", "must be a string")
+        need(is_int(meta.get("rows")), f"{at}.rows", "must be an integer >= 0")
+        for key in ("csv", "mem"):
+            need(is_name(meta.get(key)) and meta[key] in files, f"{at}.{key}", "must name a file of 'files'")
+        tm = meta.get("tables_mem")
+        need(tm is None or (is_name(tm) and tm in files), f"{at}.tables_mem", "must be null or name a file of 'files'")
+        need(str_list(meta.get("columns")), f"{at}.columns", "must be a list of column names")
+        need(str_list(meta.get("inputs")) and set(meta["inputs"]) <= set(meta["columns"]), f"{at}.inputs",
+             "must be a list of names of 'columns'")
+        rec = meta.get("mem_record")
+        need(isinstance(rec, list) and all(isinstance(f, dict) and isinstance(f.get("name"), str)
+                                           and is_int(f.get("bits"), 4) and f["bits"] % 4 == 0 and f["bits"] <= 64
+                                           for f in rec), f"{at}.mem_record",
+             "must be a list of {name, bits (4..64, a multiple of 4)}")
+        tables = meta.get("tables", [])
+        need(isinstance(tables, list) and all(isinstance(t, dict) and isinstance(t.get("words"), list)
+                                              and all(isinstance(w, str) and _HEX8.fullmatch(w) for w in t["words"])
+                                              for t in tables), f"{at}.tables",
+             "must be a list of {words: [8-digit hex words]}")
+        need(tm is not None or not tables, f"{at}.tables_mem", "missing, but the set has tables")
+        cases = meta.get("cases", [])
+        need(isinstance(cases, list), f"{at}.cases", "must be a list")
+        for k, case in enumerate(cases):
+            cat = f"{at}.cases[{k}]"
+            need(isinstance(case, dict), cat, "must be an object")
+            need(isinstance(case.get("name", ""), str), f"{cat}.name", "must be a string")
+            rows = case.get("rows")
+            need(rows is None and not tables or (isinstance(rows, list) and len(rows) == 2 and all(is_int(r) for r in rows)
+                                                 and rows[0] <= rows[1] <= meta["rows"]), f"{cat}.rows",
+                 f"must be [first, end] with 0 <= first <= end <= {meta['rows']} (the set's rows)")
+            if tables or "table" in case:
+                need(is_int(case.get("table")) and case["table"] < len(tables), f"{cat}.table",
+                     f"must be a table index 0..{len(tables) - 1}")

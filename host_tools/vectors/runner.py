@@ -3,8 +3,15 @@ protocol (vectors/README.md) and compares its answers with the vectors.
 """
 from __future__ import annotations
 
+import contextlib
+import math
+import os
+import select
 import shlex
+import signal
 import subprocess
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -49,9 +56,114 @@ def requests(vs: VectorSet, fields) -> list:
     return reqs
 
 
-def check_impl(cmd, directory=DEFAULT_DIR, names=None, fields=None, timeout: float = 600.0, log=print) -> dict:
+MAX_TIMEOUT_S = 86400.0           # one day: a longer --timeout is a typo
+DEFAULT_TIMEOUT_S = 60.0          # per set; the C twin answers every set in well under a second
+STDERR_KEEP = 64 << 10            # bytes of the child's stderr kept (its end) for the report
+
+
+def exit_text(returncode: int) -> str:
+    """'exit status N' or 'killed by signal NAME (N)' for a child's return code."""
+    if returncode is not None and returncode < 0:
+        try:
+            name = signal.Signals(-returncode).name
+        except ValueError:
+            name = "?"
+        return f"killed by signal {name} ({-returncode})"
+    return f"exit status {returncode}"
+
+
+def expected_bytes(reqs) -> int:
+    """Bytes of the expected answers to ``reqs``."""
+    return sum(len(" ".join(r[1])) + 1 for r in reqs)
+
+
+def output_cap(reqs) -> int:
+    """Bytes of answers read from the child for ``reqs``: 4 x the expected answers, at least 1 MiB."""
+    return max(1 << 20, 4 * expected_bytes(reqs))
+
+
+def run_bounded(argv, data: bytes, timeout_s: float, max_bytes: int) -> tuple:
+    """Run ``argv`` (in its own process group) with ``data`` on stdin; ``(stdout, stderr_tail,
+    returncode, problem)``.  It is killed (its whole group, SIGKILL) when ``timeout_s`` seconds pass
+    or its stdout exceeds ``max_bytes``; ``problem`` then says which (else None).  stdout holds at
+    most ``max_bytes``, stderr its last STDERR_KEEP bytes: memory stays bounded whatever it writes."""
+    proc = subprocess.Popen(argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    err = bytearray()
+
+    def feed():
+        try:
+            proc.stdin.write(data)
+        except OSError:               # the child exited or closed stdin without reading everything
+            pass
+        finally:
+            with contextlib.suppress(OSError):
+                proc.stdin.close()
+
+    def drain_err():
+        while True:
+            chunk = proc.stderr.read1(65536) if hasattr(proc.stderr, "read1") else proc.stderr.read(65536)
+            if not chunk:
+                return
+            err.extend(chunk)
+            if len(err) > STDERR_KEEP:
+                del err[:len(err) - STDERR_KEEP]
+
+    threads = [threading.Thread(target=feed, daemon=True), threading.Thread(target=drain_err, daemon=True)]
+    for t in threads:
+        t.start()
+    out = bytearray()
+    problem = None
+    deadline = time.monotonic() + timeout_s
+    fd = proc.stdout.fileno()
+    try:
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                problem = f"did not finish within {timeout_s:g} s"
+                break
+            ready, _, _ = select.select([fd], [], [], min(left, 1.0))
+            if not ready:
+                continue
+            chunk = os.read(fd, 65536)
+            if not chunk:
+                break
+            out.extend(chunk)
+            if len(out) > max_bytes:
+                del out[max_bytes:]
+                problem = f"wrote more than {max_bytes} bytes"
+                break
+    except BaseException:                 # Ctrl-C, SIGTERM: the child's new session would not get it
+        with contextlib.suppress(OSError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        raise
+    if problem is not None:
+        with contextlib.suppress(OSError):
+            os.killpg(proc.pid, signal.SIGKILL)
+    try:
+        proc.wait(timeout=max(0.0, deadline - time.monotonic()) + 5.0)
+    except subprocess.TimeoutExpired:     # stdout closed but the program still runs
+        with contextlib.suppress(OSError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        problem = problem or f"closed its output but did not exit within {timeout_s:g} s"
+    with contextlib.suppress(OSError):     # a grandchild that kept stderr open: do not wait for it
+        os.killpg(proc.pid, signal.SIGKILL)
+    for t in threads:
+        t.join(timeout=2.0)
+    proc.stdout.close()
+    proc.stderr.close()
+    return bytes(out), bytes(err), proc.returncode, problem
+
+
+def check_impl(cmd, directory=DEFAULT_DIR, names=None, fields=None, timeout: float = DEFAULT_TIMEOUT_S, log=print,
+               max_output: int | None = None) -> dict:
     """Drive the program ``cmd`` (a command line, split like a POSIX shell; one process per set)
     through the protocol with every set's requests and compare its answers with the vectors.
+    Each set's process is bounded (:func:`run_bounded`): killed after ``timeout`` seconds (ValueError
+    naming the set) or when it writes more than ``max_output`` bytes (default :func:`output_cap`:
+    4 x the expected answers, at least 1 MiB); its exit status or signal is reported.
     ``fields``: compare only these O fields of the pipeline sets (default all 16).  Returns
     ``{"sets": {name: {"requests", "rows", "mismatches", "first"}}, "mismatches": total,
     "first": text of the first mismatch or None}``."""
@@ -59,6 +171,10 @@ def check_impl(cmd, directory=DEFAULT_DIR, names=None, fields=None, timeout: flo
     argv = shlex.split(cmd) if isinstance(cmd, str) else list(cmd)
     if not argv:
         raise ValueError("--cmd is empty")
+    if not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and 0 < timeout <= MAX_TIMEOUT_S):
+        raise ValueError(f"--timeout {timeout!r}: must be a number of seconds in (0, {MAX_TIMEOUT_S:g}]")
+    if max_output is not None and not (isinstance(max_output, int) and max_output > 0):
+        raise ValueError(f"max_output {max_output!r}: must be a positive number of bytes")
     if fields is not None:
         bad = [f for f in fields if f not in O_NAMES]
         if bad:
@@ -76,12 +192,17 @@ def check_impl(cmd, directory=DEFAULT_DIR, names=None, fields=None, timeout: flo
         reqs = requests(vs, fields)
         data = "".join(r[0] + "\n" for r in reqs) + "QUIT\n"
         try:
-            pr = subprocess.run(argv, input=data.encode(), capture_output=True, timeout=timeout)
+            stdout, stderr, rc, problem = run_bounded(argv, data.encode(), timeout,
+                                                      output_cap(reqs) if max_output is None else max_output)
         except FileNotFoundError:
             raise ValueError(f"--cmd: program {argv[0]!r} not found") from None
-        except subprocess.TimeoutExpired:
-            raise ValueError(f"--cmd: {argv[0]} did not finish set {name} within {timeout:g} s") from None
-        got = pr.stdout.decode(errors="replace").splitlines()
+        except PermissionError:
+            raise ValueError(f"--cmd: program {argv[0]!r} is not executable") from None
+        if problem is not None:
+            size = f" (its answers are {expected_bytes(reqs)} bytes)" if problem.startswith("wrote") else ""
+            raise ValueError(f"--cmd: {argv[0]} {problem} on set {name}{size}: stopped it ({exit_text(rc)})"
+                             + (f"; stderr: {stderr.decode(errors='replace').strip()[-300:]!r}" if stderr.strip() else ""))
+        got = stdout.decode(errors="replace").splitlines()
         nbad, first = 0, None
         for k, (line, exp, row, pos) in enumerate(reqs):
             ans = got[k].split() if k < len(got) else None
@@ -93,8 +214,9 @@ def check_impl(cmd, directory=DEFAULT_DIR, names=None, fields=None, timeout: flo
                 where = (_describe_row(name, meta, vs.columns, row) if row is not None
                          else f"set {name}, table request {k}")
                 if ans is None:
-                    gtxt = (f"(no answer: the program exited with status {pr.returncode}; stderr: "
-                            f"{pr.stderr.decode(errors='replace').strip()[-300:]!r})")
+                    gtxt = (f"(no answer: the program exited with status {rc}"
+                            + (f", {exit_text(rc)}" if rc < 0 else "")
+                            + f"; stderr: {stderr.decode(errors='replace').strip()[-300:]!r})")
                 else:
                     gtxt = got[k]
                 first = f"{where}\n  request:  {line[:200]}\n  expected: {' '.join(exp)}\n  got:      {gtxt}"
@@ -108,5 +230,6 @@ def check_impl(cmd, directory=DEFAULT_DIR, names=None, fields=None, timeout: flo
         if report["first"] is None and first is not None:
             report["first"] = first
         log(f"{name}: {len(reqs)} requests ({rows} vectors), {nbad} mismatches"
-            + (f" (exit status {pr.returncode})" if pr.returncode not in (0,) else ""))
+            + (f" ({exit_text(rc)})" if rc != 0 else ""))
+        report["sets"][name]["exit"] = exit_text(rc)
     return report
