@@ -105,8 +105,8 @@ def test_easy_device_reaches_the_floor_so_the_family_adds_no_unfittable_artefact
     for d in (easy, dev):
         train, hold = simulate_foreign(d, 4.0, False, 0, 0), simulate_foreign(d, 2.0, False, 1, 1)
         floor = ba.floor_of(simulate_foreign(d, 2.0, False, 1, 1, thermal=False))
-        std, err = ba.evaluate_option(ba.Option("ftr", "diff"), train, hold)
-        assert not err
+        std, err, share = ba.evaluate_option(ba.Option("ftr", "diff"), train, hold)
+        assert not err and share >= ba.MIN_VALID_SHARE
         ratios.append(std / floor)
     assert ratios[0] < 1.3 < 3.0 < ratios[1]
 
@@ -174,3 +174,31 @@ def test_variant_options_and_split_runs_merge_to_the_whole():
     other = ba.run_benchmark(1, patterns=["ftr/raw"], duration_s=2500.0, start=2)
     with pytest.raises(ValueError, match="differ in options"):
         ba.merge([parts[0], other])
+
+
+def test_servable_samples_start_at_power_on_and_skip_exchanges():
+    """The availability-counting metric: an MR run is servable from power-on + 180 s except the
+    exchanges and 10 s after each; an option valid on < 99 % of them fails with the share named."""
+    log = simulate_foreign(3, 4.0, True, 0, 0, 3000.0)
+    serve = ba.servable(log)
+    t = log.t_s - log.t_s[0]
+    assert not serve[t < 180].any() and serve.any()
+    assert not serve[log.mode == 3].any()
+    ends = np.flatnonzero((log.mode[:-1] == 3) & (log.mode[1:] != 3)) + 1
+    for e in ends:
+        after = (t >= t[e]) & (t < t[e] + ba.SETTLE_AFTER_EXCHANGE_S)
+        assert not serve[after].any()
+        assert serve[(t >= t[e] + ba.SETTLE_AFTER_EXCHANGE_S) & (t < t[e] + 60) & (t >= 180)].all()
+    ftr = simulate_foreign(3, 4.0, False, 0, 0, 600.0)
+    assert ba.servable(ftr).sum() == np.count_nonzero(ftr.t_s - ftr.t_s[0] >= 10.0)
+    # a rate estimator whose warm-up blanks the first 20 minutes fails the option
+    train = simulate_foreign(3, 4.0, True, 0, 0, 6000.0)
+    hold = simulate_foreign(3, 2.0, True, 1, 1, 6000.0)
+    std, err, share = ba.evaluate_option(ba.Option("mr-pair", "diffn16"), train, hold)
+    assert not err and share >= ba.MIN_VALID_SHARE
+    from host_tools.golden.compensate import fit_config_from_logs
+    from host_tools.fitting.fit import fit_logs
+    cfg = fit_config_from_logs([train], rate_estimator="diffn", n=1200, reversal={"combiner": "pair"})
+    model, _ = fit_logs([train], cfg, terms=(0, 1, 4))
+    x, share = ba.heldout_output(model, hold)
+    assert share < ba.MIN_VALID_SHARE and len(x) > 0

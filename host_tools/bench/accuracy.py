@@ -14,7 +14,11 @@ For every option: ModelConfig from the training run (host_tools.golden.compensat
 with the option's rate estimator and reversal settings), 17 terms fitted (host_tools.fitting.fit.fit_logs,
 terms 'all', or the cross-validated selection 'auto' in the '+auto' options), the held-out run compensated (float golden model); **metric = std at 1 s of the
 compensated output over its valid samples / floor** (dimensionless; 1 = down to the noise floor;
-below 1 is possible for MR, whose combined output averages two modes).  ``*/raw`` rows: no
+below 1 is possible for MR, whose combined output averages two modes), scored from power-on:
+every sample from power-on + 180 s (MR) / + 10 s (FTR) is servable except exchanges and 10 s
+after each (:func:`servable`); an option valid on less than 99 % of them fails (what is not
+served is not scored, so a start-up blanked by a warm-up must not win); the summary gives each
+option's lowest valid share.  ``*/raw`` rows: no
 model (FTR raw output; MR the combiner alone).
 
 Options: ``ftr/EST``, ``mr-pair/EST``, ``mr-trend/EST`` (combine first: the combiner, then one
@@ -140,11 +144,40 @@ def floor_of(floor_log) -> float:
     return _std(floor_log.rate_dph)
 
 
+SERVED_FROM_S = {"mr": 180.0, "ftr": 10.0}   # power-on + this: the output must exist (the paper's MR ~180 s)
+SETTLE_AFTER_EXCHANGE_S = 10.0               # after an exchange, at most this long without output
+MIN_VALID_SHARE = 0.99                       # of the servable samples, or the option fails
+
+
+def servable(log) -> np.ndarray:
+    """bool[n]: the samples a user expects an output for: from power-on (the log's first sample)
+    + SERVED_FROM_S, except mode exchanges and the SETTLE_AFTER_EXCHANGE_S after each."""
+    t = np.asarray(log.t_s, np.float64) - float(log.t_s[0])
+    mode = np.asarray(log.mode)
+    ok = t >= SERVED_FROM_S["mr" if log.reversal else "ftr"]
+    if log.reversal:
+        exch = mode == 3
+        ends = np.flatnonzero(exch[:-1] & ~exch[1:]) + 1          # first sample after each exchange
+        last_end = np.full(len(t), -np.inf)
+        last_end[ends] = t[ends]
+        last_end = np.maximum.accumulate(last_end)
+        ok &= ~exch & (t - last_end >= SETTLE_AFTER_EXCHANGE_S)
+    return ok
+
+
 def heldout_valid(model, holdout) -> np.ndarray:
-    """The compensated output [deg/h] of ``holdout`` under ``model`` at its valid samples: the
-    benchmark's metric is its std at 1 s (over the run's floor, :func:`floor_of`)."""
+    """The compensated output [deg/h] of ``holdout`` under ``model`` at its valid servable samples
+    (:func:`servable`): the benchmark's metric is its std at 1 s (over the run's floor,
+    :func:`floor_of`)."""
+    return heldout_output(model, holdout)[0]
+
+
+def heldout_output(model, holdout) -> tuple:
+    """(output at the valid servable samples [deg/h], valid share of the servable samples)."""
     out = compensate(holdout, model)
-    return out.rate_dph[out["valid"] > 0]
+    serve = servable(holdout)
+    valid = (out["valid"] > 0) & serve
+    return out.rate_dph[valid], float(valid.sum() / max(serve.sum(), 1))
 
 
 def heldout_ratio(model, holdout, floor) -> float:
@@ -163,15 +196,19 @@ def set_devices(seeds, reversals=(False, True)):
                (("mr" if rev else "ftr",) + device_runs(dev, rev) for rev in reversals))
 
 
-def evaluate_option(opt: Option, train, holdout) -> tuple[float, str]:
-    """(held-out std at 1 s over valid samples [deg/h], error text or '')."""
+def evaluate_option(opt: Option, train, holdout) -> tuple[float, str, float]:
+    """(held-out std at 1 s over the valid servable samples [deg/h], error text or '', valid share
+    of the servable samples).  A share below MIN_VALID_SHARE is an error: what is not served is
+    not scored, so an option that blanks the start-up must not win by it."""
+    serve = servable(holdout)
     try:
         rev = opt.reversal_config()
         if opt.est == "raw":
             if rev is None:
-                return _std(holdout.rate_dph), ""
+                return _std(holdout.rate_dph[serve]), "", 1.0
             c = combine(holdout, rev.combiner)
-            return _std(c.out_dph[c.valid]), ""
+            v = np.asarray(c.valid, bool) & serve
+            return _std(c.out_dph[v]), "", float(v.sum() / max(serve.sum(), 1))
         if opt.est == "default":   # exactly `hdrg fit RUN` without options
             model, _ = fit_default([train])
         elif opt.est == "auto":
@@ -180,12 +217,16 @@ def evaluate_option(opt: Option, train, holdout) -> tuple[float, str]:
             est, n, shift = ESTIMATORS[opt.est]
             cfg = fit_config_from_logs([train], rate_estimator=est, n=n, shift=shift, reversal=rev)
             model, _ = fit_logs([train], cfg, terms=opt.terms, significance=opt.sig)
-        x = heldout_valid(model, holdout)
+        x, share = heldout_output(model, holdout)
         if len(x) < 2:
-            return float("nan"), "no valid held-out sample"
-        return _std(x), ""
+            return float("nan"), "no valid held-out sample", share
+        if share < MIN_VALID_SHARE:
+            return _std(x), (f"valid on {100 * share:.1f} % of the servable held-out samples (< "
+                             f"{100 * MIN_VALID_SHARE:g} %: from power-on + {SERVED_FROM_S['mr' if holdout.reversal else 'ftr']:g} s, "
+                             f"exchanges and {SETTLE_AFTER_EXCHANGE_S:g} s after them excepted)"), share
+        return _std(x), "", share
     except (ValueError, np.linalg.LinAlgError) as exc:
-        return float("nan"), f"{type(exc).__name__}: {exc}"
+        return float("nan"), f"{type(exc).__name__}: {exc}", 0.0
 
 
 def damping_change_dph(dev, holdout_rate=2.0, duration_s=None) -> float:
@@ -211,7 +252,7 @@ def evaluate_device(seed, options, train_rate=4.0, holdout_rate=2.0, duration_s=
     'std': {option: deg/h}, 'ratio': {option: std/floor}, 'errors': {option: text}}."""
     dev = seed if isinstance(seed, ForeignDevice) else foreign_device(seed)
     seed = dev.seed
-    rec = {"seed": seed, "device": dev.describe(), "floor": {}, "std": {}, "ratio": {}, "errors": {}}
+    rec = {"seed": seed, "device": dev.describe(), "floor": {}, "std": {}, "ratio": {}, "errors": {}, "valid_share": {}}
     rec["damping_change_dph"] = damping_change_dph(dev, holdout_rate, duration_s)
     for reversal in (False, True):
         opts = [o for o in options if o.reversal == reversal]
@@ -220,9 +261,10 @@ def evaluate_device(seed, options, train_rate=4.0, holdout_rate=2.0, duration_s=
         train, hold, floor = device_runs(dev, reversal, train_rate, holdout_rate, duration_s)
         rec["floor"]["mr" if reversal else "ftr"] = floor
         for opt in opts:
-            std, err = evaluate_option(opt, train, hold)
+            std, err, share = evaluate_option(opt, train, hold)
             rec["std"][opt.name] = std
-            rec["ratio"][opt.name] = std / floor
+            rec["ratio"][opt.name] = std / floor if not err else float("nan")   # an error fails the option
+            rec["valid_share"][opt.name] = share
             if err:
                 rec["errors"][opt.name] = err
     return rec
@@ -239,7 +281,9 @@ def summarize(records, options) -> dict:
             ok = vals[np.isfinite(vals)]
             row[label] = {"n": int(ok.size), "failed": int(vals.size - ok.size),
                           "median": float(np.median(ok)) if ok.size else float("nan"),
-                          "p90": float(np.percentile(ok, 90)) if ok.size else float("nan")}
+                          "p90": float(np.percentile(ok, 90)) if ok.size else float("nan"),
+                          "min_valid_share": min((r.get("valid_share", {}).get(opt.name, float("nan")) for r in recs),
+                                                 default=float("nan"))}
         out[opt.name] = row
     return out
 
@@ -302,12 +346,13 @@ def format_table(result: dict) -> str:
     damping-change subset, failures."""
     s = result["summary"]
     nbig = sum(r["damping_change_dph"] > DAMPING_CHANGE_DPH for r in result["records"])
-    lines = [f"| option | median | p90 | damping-change subset ({nbig}) median | p90 | failed |",
-             "|---|---|---|---|---|---|"]
+    lines = [f"| option | median | p90 | damping-change subset ({nbig}) median | p90 | failed | min valid share |",
+             "|---|---|---|---|---|---|---|"]
     for name, row in s.items():
         a, b = row["all"], row["damping_change"]
+        share = a.get("min_valid_share", float("nan"))
         lines.append(f"| {name} | {a['median']:.2f} | {a['p90']:.2f} | {b['median']:.2f} | {b['p90']:.2f} | "
-                     f"{a['failed']} |")
+                     f"{a['failed']} | {100 * share:.1f} % |")
     return "\n".join(lines)
 
 
