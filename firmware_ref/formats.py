@@ -153,12 +153,14 @@ SIGNALS = (
     Fmt("history", "n+1 proxy words", "as P", "as P", "as P", "-", "-", "rate"),
     Fmt("S (estimator sum)", "int64", f"as P (iir: +{IIR_FRAC})", "P LSB (iir: 2^-24 P LSB)", "|S| < 2^57",
         "exact (iir: RHU per update)", "clamp +-(2^SB - 1), then v clamps", "rate"),
-    Fmt("y (iir state)", "int64", f"P + {IIR_FRAC}", "2^-24 P LSB", "|y| < 2^56", "RHU (y += RHU(d 2^24 - y, shift))",
-        "cannot overflow (|d| < 2^32)", "rate"),
+    Fmt("y (iir state)", "int64", f"P + {IIR_FRAC}", "2^-24 P LSB", "|y| < 2^56",
+        "RHU (y += RHU(d 2^24 - y, e), gear e = min(shift, floor(log2 k)))",
+        "cannot overflow (|d| < 2^32; y stays a convex combination of the d 2^24)", "rate"),
     Fmt("G_V, SH_V (rate gain)", "int32 > 0, uint8", "-", "v = RHU(S G_V, SH_V)", "G_V < 2^min(31, 62-SB)",
         "RHU from 2^(30+SH_V) / S_span", "quantizer refuses (see quantize)", "table"),
     Fmt("v", "int32", str(Q), "2^-30", "[-2^30, 2^30]", "RHU (1 shift)", "clamp, FLAG_RATE_CLAMPED", "rate"),
-    Fmt("k (warm-up counter)", "uint32", "0", "1 sample", "0 .. W", "-", "saturates at W", "rate"),
+    Fmt("k (samples since restart)", "uint32", "0", "1 sample", "0 .. K_SAT", "-",
+        "saturates at K_SAT = max(W, 2^shift) (iir), W (others)", "rate"),
     # aux generators (aux_gen 1)
     Fmt("REF, G, OFF, SH (input term)", "int32, int32 > 0, int32, uint8", "-", "q = RHU(dX G + OFF, SH)",
         "as P_REF, G_U, U_OFF, SH_U", "RHU from ref, 2^(30+SH) LSB/span", "quantizer refuses", "table"),
@@ -308,6 +310,7 @@ def op_counts(estimator: str = "diff", n: int = 1, combiner: str = "pair", order
         add(add=2 * n, mul=n, mem=n + 2)                # n differences, n weight products, n sums
     elif estimator == "iir":
         add(add=3, shift=2, mem=4)                      # d, d<<24 - y, RHU add, y += ...; y (2 words), P[i-1]
+        add(cmp=1)                                      # the gear: k >= 2^shift (past the start-up)
     else:
         raise ValueError(f"unknown estimator {estimator!r}")
     add(cmp=1, add=1, mem=1)                            # warm-up counter compare + increment

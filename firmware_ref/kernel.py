@@ -407,10 +407,13 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
                 kk = a_k[jb]
                 if kk == 0:
                     iy = np.int64(0)
-                elif kk == 1:
-                    iy = (np.int64(p[i]) - p[i - 1]) << 24
                 else:
-                    iy += _rshr(((np.int64(p[i]) - p[i - 1]) << 24) - iy, rshift)
+                    e = rshift                       # the gear min(shift, floor(log2 k)); 0 at k = 1
+                    if kk < (np.int64(1) << rshift):
+                        e = 0
+                        while (kk >> (e + 1)) != 0:
+                            e += 1
+                    iy += _rshr(((np.int64(p[i]) - p[i - 1]) << 24) - iy, e)
                 a_s[jb] = iy
         if detail:
             for jb in range(m_blk):

@@ -4,11 +4,13 @@ Copies host_tools.golden.rate (its module doc is the spec) with integer sums of 
 
 * ``diff``  ``S = P[i] - P[i-1]``; ``diffn`` ``S = P[i] - P[i-n]``;
 * ``lsq``   ``S = sum_{j=0}^{n-1} (2j - (n-1)) (P[i-n+1+j] - P[i])``, summed in order j = 0..n-1;
-* ``iir``   state y with IIR_FRAC = 24 extra fractional bits: at k = 0 ``y = 0``; at k = 1
-  ``y = d << 24``; at k >= 2 ``y += RHU((d << 24) - y, shift)``, d = P[i] - P[i-1]; ``S = y``.
+* ``iir``   state y with IIR_FRAC = 24 extra fractional bits: at k = 0 ``y = 0``; at k >= 1
+  ``y += RHU((d << 24) - y, e)`` with the gear ``e = min(shift, floor(log2 k))``, d = P[i] - P[i-1]
+  (at k = 1, e = 0: ``y = d << 24``); ``S = y``.
 
-k counts samples since the last restart (saturating at the warm-up W); a restart (segment start)
-resets k and y as at power-on, and past words are only read within the segment.  Then::
+k counts samples since the last restart, saturating at ``K_SAT = max(W, 2^shift)`` for iir (the
+gear needs k up to 2^shift) and at W otherwise; a restart (segment start) resets k and y as at
+power-on, and past words are only read within the segment.  Then::
 
     warm-up (k < W):  v = 0, warmup, not clamped
     else:             Sc = clamp(S, +-(2^SB - 1));  v_raw = RHU(Sc * G_V, SH_V)
@@ -28,12 +30,23 @@ from firmware_ref.arith import clamp, mul_rshift_round, rshift_round
 DIFF, DIFFN, LSQ, IIR = range(4)
 
 
+def iir_gear(k: int, shift: int) -> int:
+    """The iir's shift at segment index k >= 1: ``min(shift, floor(log2 k))`` (0 at k = 1)."""
+    return min(shift, k.bit_length() - 1)
+
+
+def k_saturation(rate_est: int, rate_shift: int, rate_warmup: int) -> int:
+    """K_SAT, where the sample counter k stops: ``max(W, 2^shift)`` for iir, W otherwise."""
+    return max(rate_warmup, 1 << rate_shift) if rate_est == IIR else rate_warmup
+
+
 class RateState:
     """The estimator state: history of the last n + 1 words (within the segment), k, iir y."""
 
     def __init__(self, table):
         self.table = table
         self.n = table.rate_n if table.rate_est in (DIFFN, LSQ) else 1
+        self.k_sat = k_saturation(table.rate_est, table.rate_shift, table.rate_warmup)
         self.reset()
 
     def reset(self):
@@ -57,12 +70,10 @@ class RateState:
                 for j in range(n):
                     s += (2 * j - (n - 1)) * (self.hist[-n + j] - p)
         else:
-            if k == 1:
-                self.y = (p - self.hist[-2]) << F.IIR_FRAC
-            elif k >= 2:
-                self.y += rshift_round(((p - self.hist[-2]) << F.IIR_FRAC) - self.y, t.rate_shift)
+            if k >= 1:
+                self.y += rshift_round(((p - self.hist[-2]) << F.IIR_FRAC) - self.y, iir_gear(k, t.rate_shift))
             s = self.y
-        self.k = min(k + 1, t.rate_warmup)
+        self.k = min(k + 1, self.k_sat)
         if k < t.rate_warmup:
             return 0, False, True, s
         sc, s_clamped = clamp(s, -((1 << t.s_bits) - 1), (1 << t.s_bits) - 1)

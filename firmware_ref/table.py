@@ -43,9 +43,9 @@ from firmware_ref.terms import K_AUX, N_TERMS, POLY_INDEX, TERM_NAMES
 # coefficient groups sharing one exponent: the Horner rows u^0..u^3 (c_i0..c_i3), then k7
 COEF_GROUPS = tuple(tuple(POLY_INDEX[i][j] for j in range(4)) for i in range(4)) + ((K_AUX,),)
 # smallest rate warm-up that makes the estimator's history complete (the reference and the
-# numba kernel agree only from there): diff 1, diffn n, lsq n - 1, iir 2
+# numba kernel agree only from there): diff 1, diffn n, lsq n - 1, iir 1 (its state starts at k = 1)
 def min_rate_warmup(rate_est: int, rate_n: int) -> int:
-    return (1, rate_n, rate_n - 1, 2)[rate_est]
+    return (1, rate_n, rate_n - 1, 1)[rate_est]
 
 
 def _rhu_shift(a: int, s: int) -> int:
@@ -63,14 +63,17 @@ def horner_bounds(e_row, e_7, e_acc, mant) -> list:
     return rows, bounds
 
 MAGIC = 0x47524448
-VERSION = 2
-VERSIONS_READ = (1, 2)
+VERSION = 3
+VERSIONS_READ = (1, 2, 3)
+# the first layout version whose iir starts with the gear (firmware_ref.rate); an older table with
+# the iir estimator was quantized for the blanked start-up and is refused
+IIR_GEAR_VERSION = 3
 ORDER_COMBINE_FIRST, ORDER_REGRESS_FIRST = 0, 1
 
 # (field, type, meaning) of words 0..46
 LAYOUT = (
     ("magic", "uint32", "0x47524448 ('HDRG')"),
-    ("version", "uint32", "layout version (2; 1 is read as order 0, one bank)"),
+    ("version", "uint32", "layout version (3; 2 and 1 (order 0, one bank) are read unless iir)"),
     ("length", "uint32", "words including the CRC"),
     ("proxy_kind", "uint32", "0 freq (P = F word, uint32), 1 temp (P = T word, int32)"),
     ("p_ref", "int32", "proxy centre P_REF in proxy-word LSB (freq: uint32 bit pattern)"),
@@ -469,7 +472,7 @@ class Table:
             raise TableError(f"{source}: bad magic 0x{words[0]:08x} (expected 0x{MAGIC:08x}, 'HDRG')")
         if words[1] not in VERSIONS_READ:
             raise TableError(f"{source}: unsupported table version {words[1]} (this reads {VERSIONS_READ})")
-        n_fixed = N_FIXED if words[1] == 2 else N_FIXED_V1
+        n_fixed = N_FIXED if words[1] >= 2 else N_FIXED_V1
         if len(words) < n_fixed + 1:
             raise TableError(f"{source}: {len(words)} words, a version-{words[1]} table has at least {n_fixed + 1}")
         if words[2] != len(words):
@@ -483,6 +486,10 @@ class Table:
             vals[name] = w - (1 << 32) if (typ == "int32" and w >= 1 << 31) else w
         if vals["proxy_kind"] == 0:
             vals["p_ref"] &= 0xFFFFFFFF
+        if words[1] < IIR_GEAR_VERSION and vals["rate_est"] == 3:
+            raise TableError(f"{source}: a version-{words[1]} table with the iir rate estimator was quantized for "
+                             f"its old start-up (no output for 2^(shift+1) samples); the iir now starts at "
+                             f"power-on (version {IIR_GEAR_VERSION}): quantize the model again (hdrg quantize)")
         npar = vals["aux_nparams"]
         if n_fixed + npar + 1 != len(words):
             raise TableError(f"{source}: aux_nparams {npar} does not match the length {len(words)}")

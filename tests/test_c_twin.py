@@ -488,7 +488,10 @@ def table_cases():
 
     cases = [
         ("magic", [w[0] ^ 1] + w[1:], "MAGIC", 0),
-        ("version", recrc([w[0], 3] + w[2:]), "VERSION", 1),
+        ("version", recrc([w[0], 4] + w[2:]), "VERSION", 1),
+        ("version_0", recrc([w[0], 0] + w[2:]), "VERSION", 1),
+        # an iir table of layout version 2 was quantized for the blanked start-up: refused
+        ("iir_v2", recrc([w[0], 2] + w[2:FI["rate_est"]] + [3] + w[FI["rate_est"] + 1:]), "VERSION", 1),
         ("short", w[:-2] + [w[-1]], "LENGTH", 2),
         ("length_word", recrc(w[:2] + [72] + w[3:]), "LENGTH", 2),
         ("crc", w[:-1] + [w[-1] ^ 0x80000000], "CRC", 72),

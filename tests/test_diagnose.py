@@ -541,7 +541,7 @@ def test_one_held_out_metric_compares_two_models_on_their_common_samples():
     from host_tools.golden.compensate import fit_config_from_logs
     train, hold = world(1), world(2)
     diff = base_model([train], base_options(rate_estimator="diff", reversal=True))[0]
-    cfg = fit_config_from_logs([train], rate_estimator="lsq", n=32, reversal={"settle_s": 0.0})   # warm-up 31
+    cfg = fit_config_from_logs([train], rate_estimator="diffn", n=600, reversal={"settle_s": 0.0})   # warm-up 600
     slow = fit_logs([train], cfg, diff.terms, drop_unidentifiable=True)[0]
     b, a = step_errors([hold], diff, slow)
     out_d, out_s = compensate(hold, diff), compensate(hold, slow)

@@ -53,9 +53,9 @@ def test_three_exports_hold_the_same_words(quantized, table_json, tmp_path, caps
     assert all(len(line) == 8 for line in memh.splitlines()) and len(memh.splitlines()) == len(words)
     assert [int(w, 16) for w in js["words"]] == words
     assert f"#define HDRG_TABLE_CRC32 0x{crc:08x}u" in header
-    assert f"#define HDRG_TABLE_MAGIC 0x{MAGIC:08x}u" in header and "#define HDRG_TABLE_LAYOUT_VERSION 2u" in header
+    assert f"#define HDRG_TABLE_MAGIC 0x{MAGIC:08x}u" in header and "#define HDRG_TABLE_LAYOUT_VERSION 3u" in header
     assert f"#define HDRG_TABLE_WORDS {len(words)}u" in header
-    assert js["crc32"] == f"0x{crc:08x}" and js["layout_version"] == 2
+    assert js["crc32"] == f"0x{crc:08x}" and js["layout_version"] == 3
     # each decodes to the same table through the readers
     assert read_table(tmp_path / "out" / "hdrg_table.json") == quantized.table
     assert read_table(tmp_path / "out" / "hdrg_table.memh") == quantized.table
@@ -217,4 +217,4 @@ def test_two_bank_exports(tmp_path):
     (tmp_path / "old.memh").write_text("".join(f"{x:08x}\n" for x in v1 + [crc32_words(v1)]))
     cli([str(tmp_path / "old.memh"), "--format", "mem", "-o", str(tmp_path / "exp1")])
     words = [int(x, 16) for x in (tmp_path / "exp1" / "hdrg_table.memh").read_text().split()]
-    assert words[1] == 2 and len(words) == N_FIXED + 1 and Table.from_words(words) == one
+    assert words[1] == 3 and len(words) == N_FIXED + 1 and Table.from_words(words) == one

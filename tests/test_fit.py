@@ -279,7 +279,8 @@ def test_bench_fit_time_rate_auto_vs_fixed(benchmark, how):
     against rate estimator 'auto' (every RATE_CANDIDATE fitted).  Run:
     python -m pytest tests/test_fit.py -m benchmark -k rate_auto"""
     from host_tools.golden.compensate import fit_config_from_logs
-    from host_tools.fitting.fit import fit_auto_rate, fit_logs
+    from host_tools.fitting.fit import fit_logs
+    from host_tools.fitting.fit_rate import fit_auto_rate
     from host_tools.simulation.sim_foreign import foreign_device, simulate_foreign
 
     log = simulate_foreign(foreign_device(3), 4.0, True, 0, 0)
@@ -300,7 +301,7 @@ def test_rate_auto_keeps_the_preferred_candidate_unless_another_beats_it_by_the_
     the least-CV candidate's CV rms is below (1 - margin) x the preferred one's.  The preferred one
     here is the worse of two in CV; a margin on either side of their ratio flips the choice, and the
     rule is written in model.json."""
-    from host_tools.fitting.fit import RATE_CANDIDATES, RATE_PREFER_MARGIN, RATE_PREFERRED, fit_auto_rate
+    from host_tools.fitting.fit_rate import RATE_CANDIDATES, RATE_PREFER_MARGIN, RATE_PREFERRED, fit_auto_rate
     from host_tools.simulation.sim_foreign import foreign_device, simulate_foreign
 
     assert RATE_PREFERRED in RATE_CANDIDATES and 0.0 < RATE_PREFER_MARGIN < 1.0
@@ -330,16 +331,17 @@ def test_rate_auto_on_common_samples_scores_every_candidate_on_the_same_samples(
     used by every candidate (fit_logs masks), the least one is chosen and then refitted on all its
     own samples; 'own' (the default) scores each on its own samples.  Bad options are refused."""
     from host_tools.golden.compensate import fit_config_from_logs, prepare
-    from host_tools.fitting.fit import RATE_CANDIDATES, fit_auto_rate, fit_logs
+    from host_tools.fitting.fit import fit_logs
+    from host_tools.fitting.fit_rate import RATE_CANDIDATES, fit_auto_rate
     from host_tools.simulation.sim_foreign import foreign_device, simulate_foreign
 
     log = simulate_foreign(foreign_device(3), 4.0, True, 0, 0, 3000.0)
-    cands = (RATE_CANDIDATES[0], RATE_CANDIDATES[-1])          # diff (warm-up 1), iir 9 (1024)
+    cands = (RATE_CANDIDATES[0], ("diffn", 600, 4))            # diff (warm-up 1), diffn 600 (600)
     terms = (0, 1, 4, 5)
     cfgs = [fit_config_from_logs([log], rate_estimator=e, n=n, shift=s) for e, n, s in cands]
     used = [prepare(log, c).used for c in cfgs]
     common = used[0] & used[1]
-    assert common.sum() < used[0].sum()                        # the iir warm-up removes samples
+    assert common.sum() < used[0].sum()                        # the long warm-up removes samples
     own = [fit_logs([log], c, terms, blocks=True)[1] for c in cfgs]
     com = [fit_logs([log], c, terms, blocks=True, masks=[common])[1] for c in cfgs]
     assert com[0].n == common.sum() == com[1].n and own[0].n == used[0].sum()
@@ -348,7 +350,7 @@ def test_rate_auto_on_common_samples_scores_every_candidate_on_the_same_samples(
         sel = model.fit["rate_selection"]
         assert [r["cv_rms"] for r in sel["candidates"]] == pytest.approx([r.cv["cv_rms"] for r in want], rel=1e-12)
         k = int(np.argmin([r.cv["cv_rms"] for r in want]))
-        assert sel["chosen"] == ("diff", "iir shift=9")[k] and sel["samples"] == samples
+        assert sel["chosen"] == ("diff", "diffn n=600")[k] and sel["samples"] == samples
         assert res.n == used[k].sum()                          # the chosen one on all its own samples
         assert res.cv["cv_rms"] == pytest.approx(own[k].cv["cv_rms"], rel=1e-12)
     with pytest.raises(ValueError, match="samples"):

@@ -50,7 +50,7 @@ def test_vocabulary_names_every_stage_and_code():
 def test_formats_md_states_the_algorithm_constants():
     text = docgen.formats_md_path().read_text(encoding="utf-8")
     for needle in ("div_round_scaled(acc, cnt, 10)", "RHU(slope[o] * d, 16)", "RHU(y_hold - B, 11)",
-                   "RHU(dP * T.g_u + T.u_off, T.sh_u)", "iy += RHU(((P - P[i-1]) << 24) - iy, T.rate_shift)",
+                   "RHU(dP * T.g_u + T.u_off, T.sh_u)", "iy += RHU(((P - P[i-1]) << 24) - iy, e)", "e = min(T.rate_shift, floor(log2(k)))",
                    "min(2*age[o] + span[o], 2^22 - 1)", "clamp(div_round_scaled(mean - W[cur], dc2, 16), +-(2^40 - 1))"):
         assert needle in text, needle
     assert F.W_FRAC - F.RATE_FRAC == F.MEAN_EXTRA == 10 and F.SLOPE_EXTRA == 16 and F.OUT_SHIFT == 11

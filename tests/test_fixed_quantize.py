@@ -149,7 +149,7 @@ def table():
 
 def test_table_roundtrips(table):
     words = table.to_words()
-    assert words[0] == MAGIC and words[1] == 2 and words[2] == len(words) == N_FIXED + 1 == 73
+    assert words[0] == MAGIC and words[1] == 3 and words[2] == len(words) == N_FIXED + 1 == 73
     assert Table.from_words(words) == table
     data = table.to_bytes()
     assert data[:4] == b"HDRG" and len(data) == 4 * len(words)
@@ -163,7 +163,7 @@ def test_table_roundtrips(table):
 
 def test_table_readers_refuse_damage(table):
     words = table.to_words()
-    for i, bad, match in [(0, 0x12345678, "magic"), (1, 3, "version"), (2, 99, "length"), (30, words[30] ^ 1, "CRC")]:
+    for i, bad, match in [(0, 0x12345678, "magic"), (1, 4, "version"), (1, 0, "version"), (2, 99, "length"), (30, words[30] ^ 1, "CRC")]:
         w = list(words)
         w[i] = bad
         with pytest.raises(TableError, match=match):
@@ -192,7 +192,7 @@ def test_version_1_table_reads_as_combine_first_one_bank(table):
     v1 = _v1_words(table)
     t = Table.from_words(v1, "old.memh")
     assert t == table and t.order == 0 and t.n_banks == 1
-    assert t.to_words()[1] == 2                         # written back as version 2
+    assert t.to_words()[1] == 3                         # written back as version 3
     bad = list(v1)
     bad[2] += 25                                        # a version-1 length that only v2 would fit
     with pytest.raises(TableError, match="length"):

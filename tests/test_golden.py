@@ -17,9 +17,9 @@ from host_tools.golden.regressors import AuxConfig, aux_regressor, bias_horner, 
 from host_tools.golden.reversal import ReversalConfig, combine
 
 EST_PARAMS = [("diff", 8, 4), ("diffn", 1, 4), ("diffn", 5, 4), ("lsq", 2, 4), ("lsq", 7, 4),
-              ("iir", 8, 0), ("iir", 8, 3)]
+              ("iir", 8, 0), ("iir", 8, 3), ("iir", 8, 5)]
 DOC_WARMUP = {"diff": lambda n, s: 1, "diffn": lambda n, s: n, "lsq": lambda n, s: n - 1,
-              "iir": lambda n, s: 2 ** (s + 1)}
+              "iir": lambda n, s: 1}
 
 
 # -- reference implementations written from the module docs, sample by sample ---------------------
@@ -30,11 +30,10 @@ def ref_slope_per_sample(p, i, start, est, n, shift, state):
     if est == "iir":
         if k == 0:
             state["y"] = 0.0
-        elif k == 1:
-            state["y"] = p[i] - p[i - 1]
-        else:
-            state["y"] += ((p[i] - p[i - 1]) - state["y"]) * 2.0 ** -shift
-        return state["y"] if k >= 2 ** (shift + 1) else None
+            return None
+        gear = min(shift, int(np.floor(np.log2(k))))   # a running mean at first, then 2**-shift
+        state["y"] += ((p[i] - p[i - 1]) - state["y"]) * 2.0 ** -gear
+        return state["y"]
     m = 1 if est == "diff" else n
     if est in ("diff", "diffn"):
         return (p[i] - p[i - m]) / m if k >= m else None
@@ -328,8 +327,9 @@ def test_compensate_removes_known_polynomial_ftr():
     ok = out["valid"] == 1.0
     assert ok.sum() == 598
     np.testing.assert_allclose(out.rate_dph[ok], true_rate[ok], atol=1e-12 * np.abs(model.coef).sum())
-    # invalid samples hold the last valid value (0.0 before the first valid one)
-    assert out.rate_dph[0] == 0.0 and out.rate_dph[350] == out.rate_dph[349]
+    # invalid samples carry no number (NaN), in both columns
+    assert np.isnan(out.rate_dph[[0, 350]]).all() and np.isnan(out["bias_dph"][[0, 350]]).all()
+    assert np.isfinite(out.rate_dph[ok]).all() and out["valid"].dtype == np.int64
     assert out.metadata["compensated"] == "yes" and out.metadata["compensation_impl"] == "float"
     with pytest.raises(ValueError, match="already compensated"):
         comp.compensate(out, model)

@@ -660,7 +660,7 @@ int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, uns
         *bad = HDRG_W_MAGIC;
         return HDRG_ERR_MAGIC;
     }
-    if (words[HDRG_W_VERSION] != HDRG_LAYOUT_VERSION && words[HDRG_W_VERSION] != 1u) {
+    if (words[HDRG_W_VERSION] < 1u || words[HDRG_W_VERSION] > HDRG_LAYOUT_VERSION) {
         *bad = HDRG_W_VERSION;
         return HDRG_ERR_VERSION;
     }
@@ -686,6 +686,10 @@ int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, uns
     t->rate_n = words[HDRG_W_RATE_N];
     t->rate_shift = words[HDRG_W_RATE_SHIFT];
     t->rate_warmup = words[HDRG_W_RATE_WARMUP];
+    if (words[HDRG_W_VERSION] < HDRG_IIR_GEAR_VERSION && t->rate_est == 3u) {
+        *bad = HDRG_W_VERSION;                      /* an iir table of the blanked start-up */
+        return HDRG_ERR_VERSION;
+    }
     t->s_bits = words[HDRG_W_S_BITS];
     t->g_v = (int32_t)s32(words[HDRG_W_G_V]);
     t->sh_v = words[HDRG_W_SH_V];
@@ -748,6 +752,7 @@ int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, uns
         return err;
     }
     t->s_lim = P2(t->s_bits) - 1;
+    t->k_sat = t->rate_est == 3u && (1u << t->rate_shift) > t->rate_warmup ? 1u << t->rate_shift : t->rate_warmup;
     t->p_ref_ob = t->proxy_kind == 0u ? words[HDRG_W_P_REF] : words[HDRG_W_P_REF] ^ 0x80000000u;
     t->u_add = I64(t->u_off) + (t->sh_u == 0u ? 0 : HALF(t->sh_u));
     t->v_half = t->sh_v == 0u ? 0 : HALF(t->sh_v);
@@ -956,21 +961,19 @@ static HDRG_INLINE int32_t rate_step(hdrg_state_t *st, uint32_t pw, int restart,
                 idx = idx == n ? 0u : idx + 1u;
             }
         }
-    } else {                                        /* iir: |y| < 2^56 */
-        if (k == 1u) {
-            st->iy = (p - pword(st, prev)) * P2(HDRG_IIR_FRAC);      /* iir: n = 1 */
-        } else if (k >= 2u) {
-            st->iy += hdrg_rhu((p - pword(st, prev)) * P2(HDRG_IIR_FRAC) - st->iy, t->rate_shift);
+    } else {                                        /* iir: |y| < 2^56; n = 1 */
+        if (k >= 1u) {                              /* the gear e = min(shift, floor(log2 k)); 0 at k = 1 */
+            unsigned e = k >= (1u << t->rate_shift) ? t->rate_shift : 31u - nlz32(k);
+            st->iy += hdrg_rhu((p - pword(st, prev)) * P2(HDRG_IIR_FRAC) - st->iy, e);
         }
         s = st->iy;
     }
     *s_out = s;
+    st->k = k < t->k_sat ? k + 1u : k;              /* saturates at k_sat */
     if (k < t->rate_warmup) {
-        st->k = k + 1u;                             /* saturates at rate_warmup */
         *flags |= HDRG_FLAG_WARMUP;
         return 0;
     }
-    st->k = k;
     sc = s;                                         /* clamp to +-s_lim = +-(2^SB - 1) */
     if (s > t->s_lim) {
         sc = t->s_lim;

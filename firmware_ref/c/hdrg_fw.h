@@ -71,9 +71,10 @@
 #error "HDRG_FIX_ORDER must be 0 or 1"
 #endif
 
-/* ---- table layout (version 2; version 1 is read as order 0 with one bank) --------------- */
+/* ---- table layout (version 3; versions 2 and 1 (order 0, one bank) are read unless iir) -- */
 #define HDRG_MAGIC 0x47524448u          /* 'HDRG' as little-endian bytes */
-#define HDRG_LAYOUT_VERSION 2u
+#define HDRG_LAYOUT_VERSION 3u
+#define HDRG_IIR_GEAR_VERSION 3u        /* the iir starts with the gear from this version on */
 #define HDRG_N_FIXED 72u                /* words 0..71: header, config, bank 1, aux header, order,
                                            n_banks, bank 2 */
 #define HDRG_N_FIXED_V1 47u             /* words 0..46 of a version-1 table */
@@ -174,7 +175,7 @@ enum hdrg_error {
     HDRG_OK = 0,
     HDRG_ERR_LENGTH,    /* fewer than 73 (version 1: 48) words, or the length word disagrees with the count */
     HDRG_ERR_MAGIC,     /* word 0 is not 0x47524448 */
-    HDRG_ERR_VERSION,   /* word 1 is not 1 or 2 */
+    HDRG_ERR_VERSION,   /* word 1 is not 1, 2 or 3, or an iir table of version 1 or 2 (blanked start-up) */
     HDRG_ERR_CRC,       /* the last word is not the CRC-32 of the others */
     HDRG_ERR_FIELD,     /* a field outside its legal range (which: *bad_word) */
     HDRG_ERR_HORNER,    /* the mantissas break the Horner interval bound (|acc| <= 2^31 - 1) */
@@ -228,12 +229,13 @@ typedef struct hdrg_table {
     uint32_t n_banks;           /* 1, or 2 with order 1: bank 2 on mode-2 samples */
     uint32_t e_row2[4], e_7_2, e_acc2;          /* bank 2 (0 when n_banks = 1) */
     int32_t mant2[HDRG_N_TERMS];
-    uint32_t n_fixed;           /* fixed words of the table read: 72 (version 2) or 47 (version 1) */
+    uint32_t n_fixed;           /* fixed words of the table read: 72 (versions 2, 3) or 47 (version 1) */
     uint32_t aux_nterms, aux_nch;               /* aux_gen 1 */
     uint32_t aux_frac[HDRG_AUX_MAX_CH];
     hdrg_aux_term_t aux_term[HDRG_AUX_MAX_TERMS];
     uint32_t n_words, crc;
     int64_t s_lim;              /* 2^s_bits - 1: the rate-sum clamp */
+    uint32_t k_sat;             /* where k saturates: max(rate_warmup, 2^rate_shift) for iir, else rate_warmup */
     uint32_t p_ref_ob;          /* p_ref in offset binary: the word (freq), the word with bit 31 flipped (temp) */
     int64_t u_add;              /* u_off + 2^(sh_u - 1) (u_off if sh_u = 0): u = ASR(dP g_u + u_add, sh_u) */
     int64_t v_half;             /* 2^(sh_v - 1) (0 if sh_v = 0): v = ASR(S g_v + v_half, sh_v) */
@@ -292,7 +294,7 @@ typedef struct hdrg_state {
     /* rate estimator */
     uint32_t hist[HDRG_N_HIST_MAX + 1];     /* ring of the last n + 1 proxy words (bit patterns) */
     uint32_t head;                          /* index of the present word */
-    uint32_t k;                             /* samples since restart, saturating at rate_warmup */
+    uint32_t k;                             /* samples since restart, saturating at t.k_sat */
     int64_t iy;                             /* iir state, 2^-24 P LSB */
     /* combiner (index 1, 2: the modes) */
     uint8_t cur, last_window;

@@ -38,8 +38,9 @@ Exact semantics (the fixed-point reference copies them):
   host_tools.golden.regressors; bank by mode for regress_first), deg/h.
 * **Output** (:func:`compensate`): where valid, ``rate_dph = y - B`` (regress_first: the
   combiner's output on the residual r = y - B, :func:`residual`) and ``bias_dph = B``; where
-  not valid, both *hold* their last valid values (0.0 before the first valid sample; the hold
-  is not reset at segment starts), like the combiner's output; ``valid`` = 1.0 / 0.0.
+  not valid, both are NaN (no number: an empty cell in CSV, NaN in NPZ; the firmware's output
+  words hold their last valid values instead, host_tools.fixed.fixed_point); ``valid`` = 1 / 0
+  (int64).  The raw input rate stays in the input file.
 
 The compensated run log keeps every other column and the metadata, and adds the metadata
 ``compensated: yes``, ``compensation_model``, ``compensation_impl``, ``compensation_terms``,
@@ -77,7 +78,7 @@ DEFAULT_RATE = {"estimator": "diff", "n": 8, "shift": 4}   # robust: no long war
 DEFAULT_TERMS = "auto"
 DEFAULT_SIGNIFICANCE = 1.0   # of terms 'auto' in fit_logs: keep the smallest model within this many CV standard errors
 # `hdrg fit` on mode-reversal logs without --rate-estimator/--rate-n/--rate-shift: 'auto'
-# (host_tools.fitting.fit.fit_auto_rate: iir shift 9 unless another candidate's cross-validated rms
+# (host_tools.fitting.fit_rate.fit_auto_rate: iir shift 9 unless another candidate's cross-validated rms
 # is below half of its own) or 'fixed' (DEFAULT_RATE).
 # FTR logs: DEFAULT_RATE_SELECTION_FTR, kept "fixed" (on the measured FTR logs 'auto' picks iir and extrapolates badly).
 DEFAULT_RATE_SELECTION_MR = "auto"
@@ -177,11 +178,12 @@ def residual(pr: Prepared, model: BiasModel):
     return out, bias
 
 
-def _hold(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """values where valid, else the last valid value (0.0 before the first)."""
-    idx = np.where(valid, np.arange(len(values)), -1)
-    np.maximum.accumulate(idx, out=idx)
-    return np.where(idx >= 0, values[np.maximum(idx, 0)], 0.0)
+def blank_invalid(out) -> rl.RunLog:
+    """The compensated log ``out`` with no number where it is not valid: ``rate_dph`` and
+    ``bias_dph`` NaN (an empty cell in CSV) where ``valid`` is 0, ``valid`` int64 0/1."""
+    valid = np.asarray(out["valid"]) != 0
+    return out.with_columns(rate_dph=np.where(valid, out["rate_dph"], np.nan),
+                            bias_dph=np.where(valid, out["bias_dph"], np.nan), valid=valid.astype(np.int64))
 
 
 def check_impl(impl: str) -> None:
@@ -235,7 +237,8 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
     check_impl(impl)
     if impl == "fixed":
         from host_tools.fixed.fixed_point import compensate_log
-        return note_host_checks(add_flags(*compensate_log(log, model, table=table, return_flags=True)), log, model)
+        return note_host_checks(blank_invalid(add_flags(*compensate_log(log, model, table=table, return_flags=True))),
+                                log, model)
     if table is not None:
         raise ValueError("a coefficient table is only used with --impl fixed")
     if str(log.metadata.get("compensated", "")).strip().lower() == "yes" or "bias_dph" in log:
@@ -243,8 +246,7 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
                          f"or a 'bias_dph' column)")
     prep = prepare(log, model)
     value, bias = residual(prep, model)
-    out = log.with_columns(rate_dph=_hold(value, prep.valid), bias_dph=_hold(bias, prep.valid),
-                           valid=prep.valid.astype(np.float64))
+    out = log.with_columns(rate_dph=value, bias_dph=bias, valid=prep.valid.astype(np.float64))
     nvalid = int(np.count_nonzero(prep.valid))
     out.metadata.update({
         "compensated": "yes",
@@ -253,7 +255,7 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
         "compensation_terms": ",".join(f"k{k}" for k in model.terms),
         "compensation_valid": f"{nvalid} of {len(prep)} samples",
     })
-    return note_host_checks(add_flags(out, prep.flags), log, model, prep)
+    return note_host_checks(blank_invalid(add_flags(out, prep.flags)), log, model, prep)
 
 
 def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: str | None = None,
@@ -314,7 +316,7 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
             rev = ReversalConfig(**kw)
     if rate_estimator == "auto":
         raise ValueError("rate estimator 'auto' is chosen by fitting every candidate: use hdrg fit "
-                         "(host_tools.fitting.fit.fit_auto_rate), not a fixed model configuration")
+                         "(host_tools.fitting.fit_rate.fit_auto_rate), not a fixed model configuration")
     rate_estimator = DEFAULT_RATE["estimator"] if rate_estimator is None else rate_estimator
     n = DEFAULT_RATE["n"] if n is None else n
     shift = DEFAULT_RATE["shift"] if shift is None else shift

@@ -16,7 +16,9 @@ Bad input (each case is tested in tests/test_runlog.py):
 
 * errors (:class:`RunLogError`, message ``FILE:LINE: problem``): empty file, no header, no data
   rows, missing required column, duplicated column name, a row with too many or too few cells
-  (except the last line, below), text in a numeric cell, NaN or inf, a blank line inside the data,
+  (except the last line, below), text in a numeric cell, an empty cell, NaN or inf (except in a
+  compensated log's ``rate_dph`` / ``bias_dph`` where ``valid`` is 0: empty in CSV, read as NaN,
+  BLANK_WHERE_INVALID), a blank line inside the data,
   non-increasing or duplicated ``t_s``, a ``mode`` code that is not 0, 1, 2 or 3, a ``freq_hz``
   that is not positive, metadata that contradicts the data (``reversal: on`` without a ``mode``
   column or with every sample in mode 0, ``reversal: off`` with modes 1/2/3, a
@@ -58,7 +60,10 @@ MODES = (0, 1, 2, 3)
 MODE_FTR, MODE_1, MODE_2, MODE_EXCHANGE = MODES
 GAP_FACTOR = 1.5
 PROXY_COLUMNS = {"freq": "freq_hz", "temp": "temp_c"}
-INT_COLUMNS = ("mode", "flags")   # integer columns (flags: compensated logs, docs/RUN_LOG.md)
+INT_COLUMNS = ("mode", "flags", "valid")   # integer columns (flags, valid: compensated logs, docs/RUN_LOG.md)
+# a compensated log (it has the columns 'valid' and 'bias_dph') carries no number in these columns
+# where valid is 0: NaN in memory and NPZ, an empty cell in CSV (docs/RUN_LOG.md)
+BLANK_WHERE_INVALID = ("rate_dph", "bias_dph")
 FS_META_TOLERANCE = 0.02          # metadata sample_rate_hz vs 1 / median t_s step
 FORMAT_COLUMNS = ("t_s", "rate_dph", "rate_dps", "mode", "freq_hz", "temp_c")   # shared/formats/run-log.md
 # columns hdrg itself writes (docs/RUN_LOG.md): a compensated log, and hdrg capture's device outputs
@@ -201,6 +206,12 @@ class RunLog:
 
 # -- validation shared by the readers and the in-memory constructor ------------------------------
 
+def _is_compensated_output(columns) -> bool:
+    """The columns are `hdrg compensate`'s output (``valid`` and ``bias_dph``): BLANK_WHERE_INVALID
+    may be NaN (CSV: empty) where valid is 0."""
+    return "valid" in columns and "bias_dph" in columns
+
+
 def _validate(log: RunLog) -> None:
     src, cols = log.source, log.columns
 
@@ -225,9 +236,17 @@ def _validate(log: RunLog) -> None:
             raise RunLogError(src, None, f"column '{name}' has {len(arr)} values, 't_s' has {n}")
     if n == 0:
         raise RunLogError(src, log.first_data_line, "no data rows")
+    blank_ok = _is_compensated_output(cols)
     for name, arr in cols.items():
         if arr.dtype.kind == "f":
             bad = ~np.isfinite(arr)
+            if blank_ok and name in BLANK_WHERE_INVALID:
+                bad &= ~(np.isnan(arr) & (cols["valid"] == 0))   # no number where not valid
+                if bad.any():
+                    row = int(np.argmax(bad))
+                    what = "empty (NaN)" if np.isnan(arr[row]) else str(arr[row])
+                    raise RunLogError(src, where(row), f"{rowtxt(row)}column '{name}' is {what} at a valid sample "
+                                                       f"(valid 1); only a sample with valid 0 may have no number")
             if bad.any():
                 row = int(np.argmax(bad))
                 raise RunLogError(src, where(row), f"{rowtxt(row)}column '{name}' is {arr[row]} (NaN/inf is not a value)")
@@ -410,6 +429,8 @@ def parse_csv_text(text: str, source: str = "<text>") -> RunLog:
         raise RunLogError(source, first_data_line, "no data rows after the header")
 
     ncol = len(names)
+    # the compensated output's rate_dph / bias_dph: an empty cell (a sample with valid 0) is NaN
+    blank_cols = [k for k, name in enumerate(names) if name in BLANK_WHERE_INVALID] if _is_compensated_output(names) else []
 
     def check_last():
         # a truncated final line: fewer cells, or a cell that does not parse, and no final newline
@@ -418,7 +439,7 @@ def parse_csv_text(text: str, source: str = "<text>") -> RunLog:
         broken = len(cells) < ncol
         if not broken and len(cells) == ncol:
             try:
-                [float(c) for c in cells]
+                [_float_or_blank(c) if k in blank_cols else float(c) for k, c in enumerate(cells)]
             except ValueError:
                 broken = not ends_with_newline
         if broken and (not ends_with_newline or len(cells) < ncol):
@@ -437,11 +458,11 @@ def parse_csv_text(text: str, source: str = "<text>") -> RunLog:
         raise RunLogError(source, first_data_line + blank, "blank line inside the data")
     try:
         table = np.loadtxt(io.StringIO("\n".join(data)), delimiter=",", dtype=np.float64, ndmin=2,
-                           comments=None)
+                           comments=None, converters={k: _float_or_blank for k in blank_cols} or None)
         if table.shape[1] != ncol:
             raise ValueError("column count")
     except ValueError:
-        _locate_bad_row(data, names, source, first_data_line)
+        _locate_bad_row(data, names, source, first_data_line, blank_cols)
         raise  # _locate_bad_row always raises; kept for safety
     columns = {}
     for k, name in enumerate(names):
@@ -468,7 +489,12 @@ def parse_csv_text(text: str, source: str = "<text>") -> RunLog:
     return log
 
 
-def _locate_bad_row(data, names, source, first_data_line):
+def _float_or_blank(cell: str) -> float:
+    """A cell of a BLANK_WHERE_INVALID column of a compensated log: empty -> NaN."""
+    return float(cell) if cell.strip() else math.nan
+
+
+def _locate_bad_row(data, names, source, first_data_line, blank=()):
     ncol = len(names)
     for r, line in enumerate(data):
         lineno = first_data_line + r
@@ -480,6 +506,12 @@ def _locate_bad_row(data, names, source, first_data_line):
         if len(cells) != ncol:
             raise RunLogError(source, lineno, f"{len(cells)} cells, the header has {ncol}: {line!r}")
         for k, cell in enumerate(cells):
+            if not cell.strip():
+                if k in blank:
+                    continue
+                raise RunLogError(source, lineno, f"column '{names[k]}': empty cell (a number is required; only "
+                                                  f"a compensated log's rate_dph / bias_dph may be empty, where "
+                                                  f"valid is 0)")
             try:
                 float(cell)
             except ValueError:
@@ -490,7 +522,8 @@ def _locate_bad_row(data, names, source, first_data_line):
 def _fmt_column(name: str, arr: np.ndarray) -> list:
     if arr.dtype.kind in "iu":
         return [str(int(x)) for x in arr.tolist()]
-    return [repr(x) for x in arr.tolist()]  # shortest repr that round-trips exactly
+    # shortest repr that round-trips exactly; NaN (only where a compensated log is not valid) is empty
+    return [repr(x) if x == x else "" for x in arr.tolist()]
 
 
 def write_csv(log: RunLog, path, extra_metadata: dict | None = None) -> None:

@@ -147,6 +147,14 @@ def sequencer_set(rng) -> VectorSet:
         timed = k == 1
         cs.add(f"random_{k}", f"host_tools.vectors.builders.random_model ({est}) and random_stream"
                f"{', self-timed' if timed else ''}", t, random_stream(rng, t, 500, reversal=reversal), timed)
+    # the iir's start-up gear (shift min(10, floor(log2 k))) through every step, k saturating at 2^10,
+    # a restart after the saturation and a second segment whose gear reaches 10
+    t = _qtable("iir", "pair", shift=10, settle_s=1.0, max_stale_s=40.0)
+    s = random_stream(rng, t, 3200)
+    s["restart"][:] = 0
+    s["restart"][[0, 2000]] = 1
+    cs.add("iir_gear_log", "log-driven, iir shift 10: the start-up gear 0..10 (k = 1, 2, 4, .., 1024), k saturating "
+           "at 2^10, a restart at 2000 and a second 1200-sample segment", t, s)
     vs = VectorSet("sequencer", "the whole pipeline (sequencer, combiner, proxy, rate, evaluator, outputs): inputs "
                    "F T R MODE RESTART Z (MODE -1: self-timed), outputs the 16 fields of the protocol's O line",
                    cs.columns(), SEQ_INPUTS, SEQ_FIELDS, cs.cases, cs.tables)

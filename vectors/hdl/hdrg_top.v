@@ -22,7 +22,8 @@
 //   1      latch; 3 timer (S_TM: its 3 state passes, one per cycle); 1 ring write + read of the
 //          word n back, combiner restart / age / window switch; the divider starts the closing
 //          window's mean
-//   ALU    [lsq: n x_out, (n - 1) A'] or [iir: RHU((d << 24) - y, shift)], then [v: RHU(S G_V, SH_V)]
+//   ALU    [lsq: n x_out, (n - 1) A'] or [iir: RHU((d << 24) - y, e), the gear e = min(shift,
+//          floor(log2 k))], then [v: RHU(S G_V, SH_V)]
 //          unless warm-up, then [u: RHU(dP G_U + U_OFF, SH_U)]: 1..4 operations x 6 cycles
 //   126    evaluator (hdrg_eval_tm: 25 operations x 5 cycles) on u, v, z, bank
 //          in parallel: mean division (47), slope division (47), commit, then the trend term
@@ -124,6 +125,8 @@ module hdrg_top #(
                 default: ;
             endcase
     wire [12:0] n = (est == 2'd1 || est == 2'd2) ? n_tab : 13'd1;
+    // k saturates at max(warmup, 2^shift) for iir (the gear reads k up to 2^shift), else at warmup
+    wire [31:0] ksat = (est == 2'd3 && (32'd1 << ishift) > warmup) ? (32'd1 << ishift) : warmup;
     wire ftr = (combiner == 2'd0);
 
     function signed [63:0] pval;           // proxy word -> value (freq: uint32, temp: int32)
@@ -154,6 +157,17 @@ module hdrg_top #(
         below31 = x[63] && (!(&x[62:31]) || !(|x[30:0]));
     endfunction
     /* verilator lint_on UNUSEDSIGNAL */
+    function [4:0] gear;                   // the iir's shift min(sh, floor(log2 kk)), kk >= 1
+        input [31:0] kk;
+        input [4:0] sh;
+        integer j;
+        begin
+            gear = 5'd0;
+            for (j = 1; j < 25; j = j + 1)
+                if (|(kk >> j)) gear = j[4:0];
+            if (gear > sh) gear = sh;
+        end
+    endfunction
     function signed [31:0] symsat32;       // clamp to +-(2^31 - 1)
         input signed [63:0] x;
         symsat32 = above31(x) ? 32'sh7fffffff : (below31(x) ? -32'sh7fffffff : x[31:0]);
@@ -467,7 +481,7 @@ module hdrg_top #(
                     fill <= restart_q ? ((n == 13'd0) ? 13'd0 : 13'd1) : ((fill >= n) ? n : fill + 13'd1);
                     k_p <= restart_q ? 32'd0 : k;
                     warm_q <= (restart_q ? 32'd0 : k) < warmup;
-                    k <= ((restart_q ? 32'd0 : k) < warmup) ? (restart_q ? 32'd0 : k) + 32'd1 : (restart_q ? 32'd0 : k);
+                    k <= ((restart_q ? 32'd0 : k) < ksat) ? (restart_q ? 32'd0 : k) + 32'd1 : (restart_q ? 32'd0 : k);
                     if (restart_q) begin iy <= 64'sd0; la <= 64'sd0; lq <= 64'sd0; end
                     // combiner: restart, ages, window switch (the closing window's commit starts here)
                     sat_c <= 1'b0;
@@ -524,7 +538,7 @@ module hdrg_top #(
                                     alu_go <= 1'b1; end
                         O_I: begin
                             if (k_p >= 32'd2) begin
-                                alu_a <= dd24 - iy; alu_w <= 32'sd1; alu_c <= 64'sd0; alu_sh <= {1'b0, ishift};
+                                alu_a <= dd24 - iy; alu_w <= 32'sd1; alu_c <= 64'sd0; alu_sh <= {1'b0, gear(k_p, ishift)};
                                 alu_go <= 1'b1;
                             end else begin
                                 if (k_p == 32'd1) begin iy <= dd24; s_w <= dd24; end else s_w <= iy;
