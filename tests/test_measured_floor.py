@@ -64,14 +64,16 @@ def test_one_sign_of_dT_dt_does_not_identify_the_rate_terms_and_says_what_would(
     assert ident["rate_terms_identified"] is False
     rate = ident["groups"]["rate"]
     assert not rate["identified"] and "heating" in rate["record"]
-    # a full cycle has one heating leg: still not enough to hold one out
+    # a full cycle has one heating leg: identified, but the cross-validation can only score the rate
+    # terms on a sign they were not fitted on (the fit asks more of them), and it says what would help
     ident = identifiability([log])
     assert ident["legs_per_sign"] == {"rising": 1, "falling": 2, "hold": 0}
-    assert not ident["rate_terms_identified"] and "heating" in ident["groups"]["rate"]["record"]
-    # two full cycles identify them
-    two = _cycle(2)
-    ident = identifiability([two])
-    assert ident["rate_terms_identified"] and ident["groups"]["rate"]["record"] == ""
+    assert ident["rate_terms_identified"] and ident["rate_cv_extrapolated"]
+    assert "another full chamber cycle" in ident["groups"]["rate"]["record"]
+    # two full cycles: nothing to add
+    ident = identifiability([_cycle(2)])
+    assert ident["rate_terms_identified"] and not ident["rate_cv_extrapolated"]
+    assert ident["groups"]["rate"]["record"] == ""
 
 
 def test_unidentified_rate_terms_give_the_cubic_clamped_to_the_calibrated_range():
@@ -91,6 +93,19 @@ def test_unidentified_rate_terms_give_the_cubic_clamped_to_the_calibrated_range(
     # explicit terms are the user's: kept
     model, _ = fit_default([cooling], [0, 1, 4])
     assert tuple(model.terms) == (0, 1, 4)
+
+
+def test_one_leg_of_a_sign_asks_the_rate_terms_to_halve_the_cubics_error():
+    """One full measured cycle (one heating leg): the rate terms and the lag block are offered, the
+    guard's margin is GUARD_MARGIN_EXTRAPOLATED, and its choice follows its own figures."""
+    from host_tools.fitting.fit_pipeline import GUARD_MARGIN_EXTRAPOLATED, fit_default
+    for ax in "xy":
+        model, _ = fit_default([_read(TOFU / f"tofupilot-imu-{ax}.csv")])
+        g = model.fit["guard"]
+        assert g["margin"] == GUARD_MARGIN_EXTRAPOLATED and g["folds"] == 3
+        best_cubic = min(v for k, v in g["cv_rms"].items() if k != "17-term model")
+        kept = g["cv_rms"]["17-term model"] < (1 - GUARD_MARGIN_EXTRAPOLATED) * best_cubic
+        assert (g["chosen"] == "17-term model") == kept
 
 
 def test_the_guard_keeps_the_rate_terms_when_they_generalize_and_drops_them_when_not():

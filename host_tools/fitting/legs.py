@@ -17,9 +17,11 @@ leg; a leg's sign is that of its proxy change from its first to its last sample.
 
 Term groups (:func:`identifiability`): ``proxy`` (k1..k3: the proxy range the training runs
 cover against the range the model will meet), ``rate`` (k4..k6, k8..k16 and the lag block:
-both signs of dT/dt, each on at least ``MIN_SIGN_SHARE`` of the samples and in at least
-``MIN_LEGS_PER_SIGN`` legs, so that a leg held out by the cross-validation leaves a leg of its
-sign to train on: a rate term fitted on one sign only is an extrapolation on the other),
+both signs of dT/dt, each on at least ``MIN_SIGN_SHARE`` of the samples; with fewer than
+``CV_LEGS_PER_SIGN`` legs of a sign, a leg held out by the cross-validation leaves no leg of its
+sign to train on, so the rate terms are fitted on one sign and scored on the other in every
+fold: ``rate_cv_extrapolated`` is then True and the fit asks more of them, see
+host_tools.fitting.fit_pipeline.fit_default),
 ``rate_curvature``
 (the powers v^2, v^3: more than one chamber rate, the 75th/25th percentile of |slope| on the
 moving samples >= ``MIN_RATE_RATIO``; reported only).  Each group not identified comes with
@@ -35,7 +37,8 @@ LEG_WINDOW_S = 600.0     # centred window of the slope that decides a leg's sign
 HOLD_FRACTION = 0.1      # |slope| below this x the run's 95th percentile of |slope|: a hold
 MIN_LEG_S = 300.0        # shorter stretches of one sign join the leg before them [s]
 MIN_SIGN_SHARE = 0.15    # each sign of dT/dt on at least this share of the samples identifies the rate terms
-MIN_LEGS_PER_SIGN = 2    # and at least this many legs of each sign (a leg held out leaves one of its sign)
+MIN_LEGS_PER_SIGN = 1    # and at least this many legs of each sign
+CV_LEGS_PER_SIGN = 2     # fewer legs of a sign: a leg held out leaves none of its sign (see "extrapolated")
 MIN_RATE_RATIO = 1.5     # p75 / p25 of |dT/dt| on the moving samples: more than one chamber rate
 MIN_PROXY_SHARE = 0.5    # training proxy range below this share of the model's range: warned
 
@@ -177,7 +180,12 @@ def identifiability(logs, config=None) -> dict:
         proxy["why"] += f", {100 * share:.0f} % of the model's range"
         if share < MIN_PROXY_SHARE:
             proxy.update(identified=False, record="a run over the whole temperature range the gyro will meet")
-    return {"legs": legs, "legs_per_sign": {"rising": n_legs[1], "falling": n_legs[-1], "hold": n_legs[0]},
+    extrapolated = rate_ok and min(n_legs[1], n_legs[-1]) < CV_LEGS_PER_SIGN
+    if extrapolated:
+        rate["why"] += (f"; with fewer than {CV_LEGS_PER_SIGN} legs of a sign the cross-validation scores them on a sign "
+                        f"they were not fitted on")
+        rate["record"] = "another full chamber cycle (two legs of each sign let the cross-validation check the rate terms)"
+    return {"legs": legs, "rate_cv_extrapolated": extrapolated, "legs_per_sign": {"rising": n_legs[1], "falling": n_legs[-1], "hold": n_legs[0]},
             "groups": {"proxy": proxy, "rate": rate, "rate_curvature": curvature},
             "rate_terms_identified": rate_ok}
 
