@@ -1,5 +1,6 @@
 """`hdrg simulate`: a run log from host_tools.simulation.sim (the hdrg family) or host_tools.simulation.sim_foreign
-(``--family random``)."""
+(``--family random``); ``--lot N -o DIR``: a lot of N foreign devices for `hdrg lot`
+(host_tools.lot.simulated.write_lot)."""
 from __future__ import annotations
 
 import argparse
@@ -9,7 +10,7 @@ from host_tools.cli.options import add_random_family_options
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", default=None, help="named scenario (see --list)")
-    parser.add_argument("-o", "--output", help="output run log (.csv or .npz)")
+    parser.add_argument("-o", "--output", "--out", help="output run log (.csv or .npz); with --lot the lot's directory")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--duration", type=float, default=None, metavar="S",
                         help="duration [s] (default: the scenario's)")
@@ -27,6 +28,16 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="set a base parameter (e.g. tau_pkg_s=900, device=hdrg-02); repeatable")
     parser.add_argument("--list", action="store_true", help="list scenarios and effects, then exit")
     add_random_family_options(parser)
+    parser.add_argument("--lot", type=int, default=None, metavar="N",
+                        help="a lot of N devices of the random (foreign) family, seeds --seed .. --seed+N-1: in DIR "
+                             "(-o) one folder per device (id foreign-SEED) with train.csv (--chamber-rate, --power-on, "
+                             "--noise-seed) and holdout.csv (--holdout-rate, the next power-on and noise seed), and "
+                             "manifest.csv for hdrg lot")
+    parser.add_argument("--holdout-rate", type=float, default=2.0, metavar="CPM",
+                        help="--lot: chamber rate of the held-out runs [degC/min] (default 2)")
+    parser.add_argument("--no-holdout", action="store_true", help="--lot: training runs only")
+    parser.epilog = ("examples:\n  hdrg simulate --scenario paper-mr-cycle-4dpm --seed 1 -o run.csv\n"
+                     "  hdrg simulate --list")
 
 
 def _set_overrides(items) -> dict:
@@ -56,6 +67,11 @@ def _set_overrides(items) -> dict:
 def run(args) -> int:
     from host_tools.golden import runlog
 
+    if args.lot is not None:
+        return _run_lot(args)
+    for opt, given in (("--holdout-rate", args.holdout_rate != 2.0), ("--no-holdout", args.no_holdout)):
+        if given:
+            raise ValueError(f"{opt} belongs to --lot")
     if args.family == "random":
         return _run_random(args)
     from host_tools.simulation.sim import format_list, simulate
@@ -102,8 +118,8 @@ def _run_random(args) -> int:
             raise ValueError(f"{opt} belongs to the hdrg family; the random family takes --seed, --chamber-rate, "
                              f"--reversal, --power-on, --noise-seed, --effect, --strength, --no-thermal, --duration")
     if args.rate != 1.0:
-        raise ValueError(f"--rate is the sample rate [Hz]; the random family samples at 1 Hz only "
-                         f"(the chamber ramp rate is --chamber-rate)")
+        raise ValueError("--rate is the sample rate [Hz]; the random family samples at 1 Hz only "
+                         "(the chamber ramp rate is --chamber-rate)")
     dev = foreign_device(args.seed)
     if args.describe:
         print(dev.to_json())
@@ -115,4 +131,30 @@ def _run_random(args) -> int:
                            args.duration, not args.no_thermal, args.effect or None, args.strength)
     runlog.write(log, args.output)
     print(f"hdrg simulate: {len(log)} samples (random family, {dev.describe()}) -> {args.output}")
+    return 0
+
+
+def _run_lot(args) -> int:
+    """`hdrg simulate --lot N -o DIR`."""
+    import os
+
+    for opt, bad in (("--scenario", args.scenario), ("--profile", args.profile), ("--exchange-s", args.exchange_s),
+                     ("--dwell-s", args.dwell_s), ("--inject", args.inject), ("--undeclared", args.undeclared),
+                     ("--off", args.off), ("--set", args.set), ("--list", args.list), ("--describe", args.describe)):
+        if bad:
+            raise ValueError(f"{opt} does not apply to --lot (a lot of the random family: --seed, --chamber-rate, "
+                             f"--holdout-rate, --no-holdout, --reversal, --power-on, --noise-seed, --effect, "
+                             f"--strength, --no-thermal, --duration)")
+    if args.rate != 1.0:
+        raise ValueError("--rate: the random family samples at 1 Hz only (the chamber ramp rate is --chamber-rate)")
+    if not args.output:
+        raise ValueError("-o/--output is required (the lot's directory)")
+    if os.path.exists(args.output) and not os.path.isdir(args.output):
+        raise ValueError(f"{args.output}: exists and is not a directory (--lot writes a directory)")
+    from host_tools.lot.simulated import write_lot
+
+    ids = write_lot(args.output, args.lot, args.seed, 4.0 if args.chamber_rate is None else args.chamber_rate,
+                    None if args.no_holdout else args.holdout_rate, (args.reversal or "on") == "on", args.power_on,
+                    args.noise_seed, args.duration, args.effect or None, args.strength, not args.no_thermal)
+    print(f"hdrg simulate: {len(ids)} devices ({ids[0]} .. {ids[-1]}) -> {os.path.join(args.output, 'manifest.csv')}")
     return 0
