@@ -414,25 +414,21 @@ def test_readme_cites_the_projects_format_document():
     assert "capture: in progress" in doc
 
 
-def test_report_allan_bridges_mode_reversal(runs, tmp_path, monkeypatch):
-    """The report's Allan figure of a mode-reversal run reaches 100 s (diagnose's bridging)."""
-    from host_tools.fitting import diagnose, report
+def test_report_allan_reaches_long_taus_on_mode_reversal(runs, tmp_path):
+    """The report's Allan figure of a mode-reversal run reaches 100 s: beyond the longest gap-free
+    stretch (one dwell) the exchanges are bridged, and the curve says which taus are bridged."""
+    from host_tools.fitting import report
     from host_tools.golden.compensate import fit_config_from_logs
     from host_tools.fitting.fit import fit_logs
 
     log = runlog.read(runs["mr"])
     model, _ = fit_logs([log], fit_config_from_logs([log], reversal={"combiner": "trend"}), "k0,k1")
-    seen = []
-    real = diagnose._allan_bridged
-
-    def spy(*a, **k):
-        res = real(*a, **k)
-        seen.append(max(res["tau_s"]))
-        return res
-
-    monkeypatch.setattr(diagnose, "_allan_bridged", spy)
-    report.report([log], model, tmp_path / "rep")
-    assert seen and min(seen) >= 100.0
+    doc = report.report([log], model, tmp_path / "rep")
+    curves = doc["allan"][os.path.basename(log.source)]
+    for curve in curves.values():
+        taus = curve["gapfree"]["tau_s"] + (curve["bridged"] or {"tau_s": []})["tau_s"]
+        assert max(taus) >= 100.0
+        assert max(curve["gapfree"]["tau_s"]) <= curve["longest_stretch_s"] / 2
     assert (tmp_path / "rep" / "allan.png").stat().st_size > 0
 
 

@@ -5,13 +5,13 @@ import argparse
 import os
 
 from host_tools.cli.options import regular_input
-from host_tools.fitting.report import REPORT_FILES, _table, report
+from host_tools.fitting.report import REPORT_FILES, _table, report, summary_lines
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs", metavar="RUN", nargs="+", help="run logs to evaluate (CSV or .npz)")
     parser.add_argument("--model", required=True, help="bias model JSON (hdrg fit)")
-    parser.add_argument("--out", required=True, help="output directory (report.md, report.json, PNG figures)")
+    parser.add_argument("-o", "--out", required=True, help="output directory (report.md, report.json, PNG figures)")
     parser.add_argument("--train", nargs="*", default=None,
                         help="training runs for the flight-stack baseline (default: the model's recorded training runs, when they exist)")
     parser.add_argument("--no-plots", action="store_true", help="tables only")
@@ -43,8 +43,11 @@ def run(args) -> int:
         regular_input(path, "training run log")
     logs = [runlog.read(p) for p in args.runs]
     train_logs = [runlog.read(p) for p in train] if train else None
-    doc = report(logs, model, args.out, train_logs, plots=not args.no_plots, notes=notes)
+    doc = report(logs, model, args.out, train_logs, plots=not args.no_plots, notes=notes,
+                 model_name=os.path.basename(args.model))
     print(_table(doc["rows"]))
+    for line in summary_lines(doc):
+        print(line)
     for note in doc["notes"]:
         print(f"note: {note}")
     print(f"written: {os.path.join(args.out, 'report.md')}")

@@ -218,6 +218,17 @@ def cubic_floor(train, hold, model) -> dict:
     return {"cubic_dph": c, "model_dph": m, "limit": FLOOR_RATIO, "replaced": replaced, "_model": cubic if replaced else None}
 
 
+def _metric_text(entry) -> str:
+    """The step's outcome with its metric named, for the progress lines: the held-out error
+    (diagnose_confirm.HELDOUT_METRIC) before -> after, or without held-out runs the training one."""
+    h = entry.get("heldout_error") or {}
+    if entry.get("confirmed") is not None and h.get("before") is not None:
+        tau = "1-s" if (entry.get("before") or {}).get("std100_dph") is None else "100-s"
+        return f"held-out error, std of {tau} averages: {fmt_value(h['before'])} -> {fmt_value(h['after'])} deg/h"
+    b, a = (entry.get("train_before") or {}).get("std100_dph"), (entry.get("train_after") or {}).get("std100_dph")
+    return f"training error, std of 100-s averages: {fmt_value(b)} -> {fmt_value(a)} deg/h"
+
+
 def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, rate_n=None, rate_shift=None,
              terms=None, combiner=None, order=None, settle_s=None, proxy_range=None, rate_range=None,
              max_iter=MAX_ITER, n_surrogates=N_SURROGATES, g_min=G_MIN, cv_blocks=CV_BLOCKS,
@@ -287,7 +298,8 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
         while kept < max_iter and tries < max_tries:
             tries += 1
             it += 1
-            say(f"iteration {it} ({phase}): scoring the {phase} candidates (CV, {n_surrogates} noise-model surrogates)")
+            number = len(iterations) + 1     # the number diagnose.md gives this step
+            say(f"iteration {number} ({phase}): scoring the {phase} candidates (CV, {n_surrogates} noise-model surrogates)")
             # (tried: the structure phase also scoring the effect candidates and yielding to a better one;
             # on 76 bench runs it found 2 more aging/turn-on effects but raised "effect found" on clean
             # runs from 3/26 to 8/26: the clean devices' own dynamics then win as effects.  Not kept.)
@@ -311,9 +323,11 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
             if not scan["accept"]:
                 stopped = {k: scan[k] for k in ("best", "threshold", "ranking", "reason", "null_max", "not_offered")}
                 stopped["phase"] = phase
+                say(f"iteration {number} ({phase}): no {phase} candidate passes ({scan['reason']}); the {phase} "
+                    f"phase stops")
                 break
             best = scan["winner"]
-            say(f"iteration {it}: {best['label']} passes (CV gain {best['gain']:.3f} >= {scan['threshold']:.3f}); "
+            say(f"iteration {number}: {best['label']} passes (CV gain {best['gain']:.3f} >= {scan['threshold']:.3f}); "
                 f"refitting and checking it on the {'held-out' if hold else 'training'} runs")
             before_model, before_cfg, before_gen, before_rate = model, cfg, gen_terms, rate_choice
             before = error_stats(evals, model)
@@ -344,8 +358,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
             entry["_plot"] = (before_model, model, best)
             iterations.append(entry)
             if confirmed is False:
-                say(f"iteration {it}: {acc.family} NOT confirmed on the held-out runs "
-                    f"({fmt_value(_score(before)[0])} -> {fmt_value(_score(after)[0])} deg/h): reverted")
+                say(f"iteration {number}: {acc.family} NOT confirmed on the held-out runs ({_metric_text(entry)}): reverted")
                 entry["status"] = "not confirmed on held-out: reverted (the model stays the last confirmed one)"
                 model, cfg, gen_terms, rate_choice = before_model, before_cfg, before_gen, before_rate
                 excluded.add(_step_key(acc.family, acc.params))
@@ -358,6 +371,8 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                 entry["status"] += "".join(f" ({n})" for n in kept_step_notes(entry))
                 accepted.append(acc)
                 kept += 1
+                say(f"iteration {number}: {acc.family} {'confirmed on the held-out runs' if confirmed else 'accepted (no held-out runs)'} "
+                    f"({_metric_text(entry)}): kept")
         else:
             if max_iter > 0:
                 stopped = {"reason": f"max_iter ({max_iter}) reached" if kept >= max_iter else
@@ -378,7 +393,8 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                         cfg = replace(cfg, reversal=alt_model.config.reversal)
                         opts = {**opts, "reversal": {**opts["reversal"], **entry["params"]}}
                         accepted.append(_Accepted(entry["effect"], entry["params"]))
-                    say(f"structural: {entry['effect']} {entry['params']}: {entry['status']}")
+                    say(f"iteration {len(iterations)}: structural {entry['effect']} {entry['params']}: {entry['status']}"
+                        f" ({_metric_text(entry)})")
         stops[phase] = stopped
     stopped = stops.get("effect") or stops.get("structure")
     floor = cubic_floor(train, hold, model) if hold else None

@@ -151,6 +151,26 @@ def _stats_line(s):
     return " | ".join(fmt_value(s.get(k)) for k in STAT_KEYS)
 
 
+STAT_HEADERS = {"std_dph": "std 1 s", "pp_dph": "p-p 1 s", "std100_dph": "std 100 s", "pp100_dph": "p-p 100 s",
+                "rms_dph": "rms"}
+TABLE_HEADER = ("iteration", "effect", "params", *(STAT_HEADERS[k] for k in STAT_KEYS), "CV gain", "threshold",
+                "held-out")
+
+
+def _cell(text) -> str:
+    """A table cell: one line, Markdown and HTML escaped (host_tools.fitting.report.md_text: a
+    parameter or status text cannot split the row)."""
+    from host_tools.fitting.report import md_text
+    return md_text(" ".join(str(text).split()))
+
+
+def _row(k, effect, params, stats, gain, threshold, status) -> str:
+    """One row of diagnose.md's main table: as many cells as :data:`TABLE_HEADER`."""
+    cells = [str(k), _cell(effect), _cell(params), *(fmt_value(stats.get(key)) for key in STAT_KEYS),
+             "" if gain is None else fmt_value(gain), "" if threshold is None else fmt_value(threshold), _cell(status)]
+    return "| " + " | ".join(cells) + " |"
+
+
 def write_report(report, model, out_dir, train, hold, plots=True) -> None:
     """DIR/diagnose.json, DIR/diagnose.md, DIR/model.json and (plots) DIR/iter<k>_*.png."""
     os.makedirs(out_dir, exist_ok=True)
@@ -174,20 +194,19 @@ def markdown(doc, model) -> str:
     """The human report (diagnose.md) of a report dict."""
     on = doc["evaluated_on"]
     lines = ["# hdrg diagnose", "",
-             f"Training runs: {', '.join(os.path.basename(s) for s in doc['train'])}  ",
-             "Held-out runs: " + (", ".join(os.path.basename(s) for s in doc["holdout"])
+             f"Training runs: {', '.join(_cell(os.path.basename(s)) for s in doc['train'])}  ",
+             "Held-out runs: " + (", ".join(_cell(os.path.basename(s)) for s in doc["holdout"])
                                   or "(none: figures on the training runs)"),
              "", f"**Verdict: {doc['verdict']}**", "",
              "Errors in deg/h on the " + ("held-out" if on == "holdout" else "training") + " runs: stability "
              "(1 sigma) and variation (p-p) of 1-s and 100-s averages of the compensated output.", "",
-             "| step | effect | params | std 1 s | p-p 1 s | std 100 s | p-p 100 s | CV gain | threshold | held-out |",
-             "|---|---|---|---:|---:|---:|---:|---:|---:|---|"]
+             "| " + " | ".join(TABLE_HEADER) + " |",
+             "|---|---|---|" + "---:|" * (len(STAT_KEYS) + 2) + "---|"]
     first = doc["baseline"][on]
-    lines.append(f"| 0 | (base model) | terms {doc['settings']['terms']} | {_stats_line(first)} | | | |")
+    lines.append(_row(0, "(base model)", f"terms {doc['settings']['terms']}", first, None, None, ""))
     for k, it in enumerate(doc["iterations"], 1):
         params = ", ".join(f"{a}={fmt_value(b) if isinstance(b, float) else b}" for a, b in it["params"].items())
-        lines.append(f"| {k} | {it['effect']} | {params} | {_stats_line(it['after'])} | "
-                     f"{fmt_value(it['cv_gain'])} | {fmt_value(it['threshold'])} | {it['status']} |")
+        lines.append(_row(k, it["effect"], params, it["after"], it.get("cv_gain"), it.get("threshold"), it["status"]))
     lines += ["", f"{doc['verdict_detail']}.  Confirmation: {doc['confirm_rule']}."]
     fl = doc.get("cubic_floor") or {}
     if fl.get("cubic_dph") is not None and fl.get("model_dph") is not None:
