@@ -58,14 +58,15 @@ def test_the_mode_reversal_control_is_not_called_aging():
     """Loop bench seed 0 run 33 (clean, mode reversal): its own slow thermal dynamics are fitted by a
     decay of 15360 s a little better (CV gain 0.106 against 0.087) than by any structural candidate;
     without the margin the loop said "effect found" (aging), held-out 0.102 -> 0.060 deg/h.  With it
-    the structure takes it (a lag of the proxy) and nothing is named."""
+    nothing is named; from today's start (0.064 deg/h) no step is confirmed."""
     tr, ho = _runs(33, True)
     rep, _ = diagnose([tr], [ho], plots=False)
     assert rep["verdict"] != "effect found"
     assert not any(it["effect"] == "aging" and it["confirmed"] for it in rep["iterations"])
     assert rep["iterations"][0]["kind"] == "structure"
-    assert any(it["kind"] == "structure" and it["confirmed"] for it in rep["iterations"])
-    assert rep["final"]["std100_dph"] < rep["baseline"]["holdout"]["std100_dph"]
+    # the start (rate estimator from power-on) is already where the structure step used to bring it
+    # (0.060 deg/h): a structure step is confirmed only if it still lowers the held-out error
+    assert rep["final"]["std100_dph"] <= rep["baseline"]["holdout"]["std100_dph"] < 0.07
 
 
 def test_without_the_margin_the_control_is_called_aging(monkeypatch):

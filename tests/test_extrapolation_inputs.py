@@ -76,10 +76,15 @@ def test_diagnose_reports_a_held_out_run_outside_the_models_range(vdd):
     assert len(msgs) == 1 and msgs[0].startswith(f"{vdd['high'].source}: extrapolation")
     assert extrapolation(error_stats([vdd["log"]], vdd["model"])) == []
     from host_tools.fitting.diagnose import diagnose
+    from host_tools.golden.runlog import RunLog
     log = vdd["log"]
+    # without temp_c: no flight-stack cubic to fall back on (diagnose's floor), so the final model is
+    # the loop's own, whose proxy the held-out run leaves
+    log = RunLog.from_arrays(log.metadata, log.source, **{k: v for k, v in log.columns.items() if k != "temp_c"})
     f = np.asarray(log["freq_hz"], np.float64)
     hot = log.with_columns(freq_hz=f + 0.5 * (f.max() - f.min()))       # half the range beyond it
     rep, _ = diagnose([log], [hot], plots=False, max_iter=0)            # the loop's own model: no aux term
+    assert "error" in rep["cubic_floor"]
     assert len(rep["extrapolation"]) == 1 and "proxy_clamped" in rep["extrapolation"][0]
     assert rep["extrapolation"][0] == f"{hot.source}: {rep['final_runs'][0]['problems'][0]}"
     assert diagnose([log], [log.with_columns(freq_hz=f + 0.0)], plots=False, max_iter=0)[0]["extrapolation"] == []
@@ -95,8 +100,8 @@ def test_fit_names_a_training_run_that_covers_a_sliver_of_the_range(tmp_path, ca
     runlog.write(hold, tmp_path / "hold.csv")
     assert cli.main(["fit", str(tmp_path / "wide.csv"), str(tmp_path / "hold.csv"), "-o", str(tmp_path / "m.json"),
                      "--rate-estimator", "diff"]) == 0
-    out = capsys.readouterr().out
-    assert "hold.csv covers" in out and "of the training runs' joint proxy range" in out
+    err = capsys.readouterr().err
+    assert "hold.csv covers" in err and "of the training runs' joint proxy range" in err
 
 
 def test_fit_says_when_term_selection_keeps_only_the_offset(tmp_path, capsys):
@@ -106,8 +111,9 @@ def test_fit_says_when_term_selection_keeps_only_the_offset(tmp_path, capsys):
     runlog.write(sim.simulate("paper-mr-cycle-4dpm", seed=2, duration_s=3600), tmp_path / "hour.csv")
     assert cli.main(["fit", str(tmp_path / "cycle.csv"), str(tmp_path / "hour.csv"), "-o", str(tmp_path / "m.json"),
                      "--rate-estimator", "diff"]) == 0
-    out = capsys.readouterr().out
-    assert "1 terms ['k0']" in out and "term selection kept only the offset k0" in out and "hour.csv covers" in out
+    out, err = capsys.readouterr()
+    assert "1 terms ['k0']" in out and "hdrg fit: warning: term selection kept only the offset k0" in err
+    assert "hour.csv covers" in err
 
 
 def test_a_run_given_twice_is_refused_and_a_held_out_training_run_is_named(tmp_path, capsys):
@@ -138,11 +144,11 @@ def test_fit_says_when_its_own_ranges_clamp_the_training_run(tmp_path, capsys):
     lo, hi = np.percentile(f, 40), np.percentile(f, 60)
     assert cli.main(["fit", str(tmp_path / "a.csv"), "-o", str(tmp_path / "m.json"), "--proxy-range", f"{lo},{hi}",
                      "--rate-estimator", "diff", "--terms", "k0,k1"]) == 0
-    out = capsys.readouterr().out
-    assert "warning: training run" in out and "proxy_clamped" in out
+    err = capsys.readouterr().err
+    assert "hdrg fit: warning: training run" in err and "proxy_clamped" in err
     assert cli.main(["fit", str(tmp_path / "a.csv"), "-o", str(tmp_path / "m2.json"), "--rate-estimator", "diff",
                      "--terms", "k0,k1"]) == 0
-    assert "warning: training run" not in capsys.readouterr().out
+    assert "warning: training run" not in capsys.readouterr().err
 
 
 def test_diagnose_names_a_column_some_runs_lack(vdd):

@@ -199,3 +199,23 @@ def test_cv_blocks_outside_its_range_is_refused_at_once(blocks):
         fit_default([log], cv_blocks=blocks)
     with pytest.raises(ValueError, match=r"2\.\.64"):
         diagnose([log], cv_blocks=blocks, plots=False)
+
+
+def test_the_loop_ends_no_worse_than_the_flight_stack_cubic_held_out():
+    """hdrg diagnose's floor: a held-out run whose drive frequency left the model's range (the
+    frequency proxy clamps) while its temp_c did not: the flight stack's cubic holds out better and
+    is the final model, said in the report; on its own training run the model is kept."""
+    from host_tools.fitting.diagnose import FLOOR_RATIO, diagnose
+    from host_tools.simulation import sim
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        log = sim.simulate("paper-ftr-cycle-4dpm", seed=1, duration_s=7200.0)
+    f = np.asarray(log["freq_hz"], np.float64)
+    hot = log.with_columns(freq_hz=f + 0.5 * (f.max() - f.min()))
+    rep, model = diagnose([log], [hot], plots=False, max_iter=0)
+    fl = rep["cubic_floor"]
+    assert fl["replaced"] and fl["model_dph"] > FLOOR_RATIO * fl["cubic_dph"]
+    assert model.config.proxy.kind == "temp" and tuple(model.terms) == (0, 1, 2, 3)
+    assert model.fit["diagnose"]["effects"] == []
+    rep, model = diagnose([log], [log], plots=False, max_iter=0)
+    assert not rep["cubic_floor"]["replaced"]

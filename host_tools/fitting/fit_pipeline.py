@@ -1,23 +1,123 @@
 """The default fitting pipeline: what `hdrg fit RUN` does without rate options (and what the
 `*/default` rows of `hdrg bench accuracy` measure).  It composes the fitter (host_tools.fitting.fit) and
 the lag-state block (host_tools.fitting.fit_lag); neither of those imports this module.  The defaults
-(host_tools.golden.compensate.DEFAULT_*) are read at call time.  Several training runs: each run's
-offset per coefficient bank is removed before the fit (:func:`fit_without_run_offsets`)."""
+(host_tools.golden.compensate.DEFAULT_*) are read at call time; :func:`fit_policy` gathers every
+default of the fit in one :class:`FitPolicy` (what `hdrg fit`, `hdrg diagnose` and their `--help`
+read).  Several training runs: each run's offset per coefficient bank is removed before the fit
+(:func:`fit_without_run_offsets`).  The refusals of a fitted result (:func:`check_fit_result`: no
+degrees of freedom, too few samples per coefficient) are here too, so that the Python API
+(host_tools.api.fit) and `hdrg fit` refuse alike."""
 from __future__ import annotations
 
 import numpy as np
 
 from host_tools.golden import compensate
 from host_tools.golden.regressors import regressor_matrix
+from dataclasses import dataclass
+
+from host_tools.errors import UserError
+from host_tools.golden import reversal as _reversal
+from host_tools.fitting import fit as _fit
+from host_tools.fitting import fit_lag as _fit_lag
+from host_tools.fitting import fit_rate as _fit_rate
 from host_tools.fitting.fit import check_cv_blocks, fit_logs
 from host_tools.fitting.fit_rate import fit_auto_rate
 from host_tools.fitting.fit_lag import add_lag_block
 
 RUN_OFFSET_PASSES = 2   # backfitting passes of the per-run offsets (docs/ACCURACY.md "Several training runs")
+DEFAULT_CV_BLOCKS = 8   # time blocks of the cross-validation on a single run
 
 
-def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, cv_blocks=8, rate_prefer="default",
-                run_offsets="auto", guard="auto", **config_kw):
+@dataclass(frozen=True)
+class FitPolicy:
+    """Every default of the fit of `hdrg fit` (and of the starting model of `hdrg diagnose`), in one
+    place; :func:`fit_policy` reads it from the modules that define each value.
+
+    * ``rate_default``: the proxy-rate estimator (estimator, n, shift) of a fixed-rate fit;
+      ``rate_selection_mr`` / ``rate_selection_ftr``: 'auto' (cross-validated choice among
+      ``rate_candidates``, ``rate_preferred`` kept unless another's rms is below
+      ``rate_prefer_margin`` x its own) or 'fixed' (``rate_default``), for mode-reversal / FTR logs;
+    * ``terms``: the term selection ('auto': cross-validated, within ``significance`` standard errors);
+    * ``lag_block``: 'auto' (the lag-state block as k7 when cross-validation lowers the rms by
+      ``lag_margin`` of the kind, 'ftr' or 'mr') or 'off';
+    * ``guard_margin`` / ``guard_margin_extrapolated``: the 17-term model must beat the best cubic's
+      leave-one-leg-out rms by this fraction (the second when a sign of dT/dt has one leg);
+    * ``cv_blocks``: time blocks of the cross-validation on one run;
+    * ``order``, ``combiner``, ``settle_s`` [s], ``max_stale_s`` [s]: the mode-reversal settings;
+    * ``run_offset_passes``, ``min_offset_overlap``: the per-run offsets of several runs;
+    * ``min_samples_per_term``: fewer valid samples per coefficient are refused unless forced."""
+    rate_default: tuple
+    rate_selection_mr: str
+    rate_selection_ftr: str
+    rate_candidates: tuple
+    rate_preferred: tuple
+    rate_prefer_margin: float
+    terms: str
+    significance: float
+    lag_block: str
+    lag_margin: tuple
+    guard_margin: float
+    guard_margin_extrapolated: float
+    cv_blocks: int
+    order: str
+    combiner: str
+    settle_s: float
+    max_stale_s: float
+    run_offset_passes: int
+    min_offset_overlap: float
+    min_samples_per_term: int
+
+    def to_dict(self) -> dict:
+        from dataclasses import asdict
+        return asdict(self)
+
+
+def fit_policy() -> FitPolicy:
+    """The defaults of the fit as they stand (read at call time from the modules that define them)."""
+    rate = compensate.DEFAULT_RATE
+    return FitPolicy(
+        rate_default=(rate["estimator"], rate["n"], rate["shift"]),
+        rate_selection_mr=compensate.DEFAULT_RATE_SELECTION_MR, rate_selection_ftr=compensate.DEFAULT_RATE_SELECTION_FTR,
+        rate_candidates=tuple(_fit_rate.RATE_CANDIDATES), rate_preferred=tuple(_fit_rate.RATE_PREFERRED),
+        rate_prefer_margin=_fit_rate.RATE_PREFER_MARGIN, terms=compensate.DEFAULT_TERMS,
+        significance=compensate.DEFAULT_SIGNIFICANCE, lag_block=compensate.DEFAULT_LAG_BLOCK,
+        lag_margin=tuple(sorted(_fit_lag.LAG_MARGIN.items())), guard_margin=GUARD_MARGIN,
+        guard_margin_extrapolated=GUARD_MARGIN_EXTRAPOLATED, cv_blocks=DEFAULT_CV_BLOCKS,
+        order=_reversal.DEFAULT_ORDER, combiner=_reversal.DEFAULT_COMBINER, settle_s=_reversal.DEFAULT_SETTLE_S,
+        max_stale_s=_reversal.DEFAULT_MAX_STALE_S, run_offset_passes=RUN_OFFSET_PASSES,
+        min_offset_overlap=MIN_OFFSET_OVERLAP, min_samples_per_term=_fit.MIN_SAMPLES_PER_TERM)
+
+
+# What a fit of several runs records (model.fit["several_runs"]) and `hdrg fit` warns.
+SEVERAL_RUNS_NOTE = (
+    "one coefficient set is fitted to all of them. The offset of each run (per coefficient bank: what a "
+    "power-on changes in the turn-on and damping offsets) is removed first (model.json fit.run_offsets); "
+    "its change of the damping SCALE is not modelled, and the cross-validation leaves one run out. Measured "
+    "on foreign devices (docs/ACCURACY.md, 'Several training runs'): a second run at ANOTHER chamber rate "
+    "made the held-out error smaller (MR x0.89 .. x0.93, FTR x0.75 .. x0.86), one at the SAME rate larger for mode "
+    "reversal (x1.14 .. x1.43). Record the runs at different chamber rates, and check the model on a "
+    "held-out run (hdrg report)")
+
+
+class FitRefused(UserError):
+    """A fit whose coefficients the data cannot support (the message says why and what to do)."""
+
+
+def check_fit_result(res, force: bool = False) -> None:
+    """The refusals of a fitted result (FitRefused): no degrees of freedom left (the error bars are
+    undefined), or, unless ``force``, fewer than MIN_SAMPLES_PER_TERM valid samples per coefficient
+    (the fit would follow the noise)."""
+    if res.dof <= 0 or not np.all(np.isfinite(res.stderr)):
+        raise FitRefused(f"{res.n} valid samples for {len(res.terms)} coefficients: no degrees of freedom left, "
+                         f"the error bars are undefined; record more data or fit fewer terms (--terms)")
+    if res.n < _fit.MIN_SAMPLES_PER_TERM * len(res.terms) and not force:
+        raise FitRefused(f"{res.n} valid samples for {len(res.terms)} coefficients (fewer than "
+                         f"{_fit.MIN_SAMPLES_PER_TERM} per coefficient): the fit would follow the noise; record more "
+                         f"data, fit fewer terms (--terms), or force the fit (--force)")
+
+
+def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, cv_blocks=DEFAULT_CV_BLOCKS,
+                rate_prefer="default", run_offsets="auto", guard="auto", **config_kw):
     """What `hdrg fit RUN` does without rate flags: :func:`fit_model` (the 17-term pipeline) on
     what the training runs identify, then the guard against the flight stack's cubic.
 
@@ -33,9 +133,9 @@ def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, c
        :data:`GUARD_CANDIDATES`: the flight stack's cubic in the temperature sensor
        (host_tools.fitting.baseline) and the cubic in the model's proxy.  The 17-term model is
        kept when its cross-validated rms is below (1 - GUARD_MARGIN) x the best cubic's, else
-       that cubic is the model; (1 - GUARD_MARGIN_EXTRAPOLATED) x when a sign of dT/dt has a
-       single leg (every fold then scores the rate terms on a sign they were not fitted on; on
-       the measured consumer-IMU cycle such wins did not hold out: 1.74x and 1.28x the cubic).  'off': step 3 skipped.
+       that cubic is the model; (1 - GUARD_MARGIN_EXTRAPOLATED) x when the runs hold one leg of
+       each sign (every fold then scores the rate terms on a sign they were not fitted on; on
+       the measured consumer-IMU legs such wins did not hold out: 1.74x and 1.28x the cubic).  'off': step 3 skipped.
        model.fit["guard"]: the candidates' cross-validated rms and the choice.
     Returns (model, FitResult of the model kept)."""
     from host_tools.fitting.legs import PROXY_TERMS, identifiability
@@ -71,7 +171,7 @@ def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, c
 
 
 GUARD_MARGIN = 0.05   # the 17-term model must beat the best cubic's leave-one-leg-out rms by this fraction
-GUARD_MARGIN_EXTRAPOLATED = 0.5   # ... by this one when a sign of dT/dt has one leg (rate terms scored on the other sign)
+GUARD_MARGIN_EXTRAPOLATED = 0.5   # ... by this one with one leg of each sign (rate terms scored on the other sign)
 GUARD_CANDIDATES = ("cubic in the temperature sensor (flight stack)", "cubic in the proxy")
 
 
@@ -133,8 +233,8 @@ def _cubic(logs, probe, config_kw):
     return fit_logs(logs, _cubic_config(logs, probe, config_kw), list(BASELINE_TERMS))
 
 
-def fit_model(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, cv_blocks=8, rate_prefer="default",
-              run_offsets="auto", candidates=None, **config_kw):
+def fit_model(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, cv_blocks=DEFAULT_CV_BLOCKS,
+              rate_prefer="default", run_offsets="auto", candidates=None, **config_kw):
     """What `hdrg fit` does without rate flags: mode-reversal logs with
     host_tools.golden.compensate.DEFAULT_RATE_SELECTION_MR 'auto' -> :func:`fit_auto_rate`, else
     :func:`fit_logs` with the default configuration (host_tools.golden.compensate.fit_config_from_logs
