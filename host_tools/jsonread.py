@@ -21,12 +21,13 @@ from __future__ import annotations
 import json
 import os
 import stat
+from host_tools.errors import HdrgError
 
 DEFAULT_MAX_BYTES = 16 << 20          # 16 MiB: a model is ~5 kB, a table.json ~20 kB
 DEFAULT_MAX_DEPTH = 64                # every hdrg document nests less than 12 deep
 
 
-class InputFileError(ValueError):
+class InputFileError(HdrgError, ValueError):
     """An input file that cannot be read (special file, too large, not UTF-8 or JSON, repeated key, too
     deep): the message names the file and the problem."""
 

@@ -99,20 +99,20 @@ def test_fit_compensate_metrics_cli(tmp_path, runs, capsys):
 def test_fit_of_several_runs_says_what_it_does_not_model(tmp_path, runs, capsys):
     """Several training runs: one coefficient set for all of them, the power-on change not modelled
     (docs/ACCURACY.md, 'Several training runs'): said on the console and in model.json; one run: not."""
-    from host_tools.cli.fit import SEVERAL_RUNS_NOTE
+    from host_tools.api import SEVERAL_RUNS_NOTE
     a, b = tmp_path / "a.csv", tmp_path / "b.csv"
     runlog.write(runs["ftr4"], a)
     runlog.write(runs["ftr4b"], b)
     fixed = ["--rate-estimator", "diff", "--terms", "k0,k1,k2"]
     assert main(["fit", str(a), str(b), "-o", str(tmp_path / "m2.json")] + fixed) == 0
-    out = capsys.readouterr().out
-    assert "warning: 2 training runs: " + SEVERAL_RUNS_NOTE in out and "power-on" in SEVERAL_RUNS_NOTE
+    out, err = capsys.readouterr()
+    assert "hdrg fit: warning: 2 training runs: " + SEVERAL_RUNS_NOTE in err and "power-on" in SEVERAL_RUNS_NOTE
     assert BiasModel.from_json(tmp_path / "m2.json").fit["several_runs"] == SEVERAL_RUNS_NOTE
     offs = BiasModel.from_json(tmp_path / "m2.json").fit["run_offsets"]["offsets_dph"]
     assert f"per-run offsets removed before the fit [deg/h]: {a} {offs[0][0]:+.4g}; {b} {offs[1][0]:+.4g}" in out
     assert main(["fit", str(a), "-o", str(tmp_path / "m1.json")] + fixed) == 0
-    out = capsys.readouterr().out
-    assert "training runs" not in out and "per-run offsets" not in out
+    out, err = capsys.readouterr()
+    assert "training runs" not in out + err and "per-run offsets" not in out
     assert "several_runs" not in BiasModel.from_json(tmp_path / "m1.json").fit
 
 def test_rank_deficient_design_is_refused_then_dropped(tmp_path, capsys):
@@ -138,8 +138,8 @@ def test_rank_deficient_design_is_refused_then_dropped(tmp_path, capsys):
 
 def test_measured_data_is_honest_about_what_it_cannot_identify(tmp_path, measured_x, capsys):
     assert main(["fit", str(measured_x), "-o", str(tmp_path / "all.json"), "--terms", "all"]) == 0
-    out = capsys.readouterr().out
-    assert "do not identify" in out and "k4" in out
+    err = capsys.readouterr().err
+    assert "hdrg fit: warning: the data do not identify" in err and "k4" in err
     model = BiasModel.from_json(tmp_path / "all.json")
     assert model.config.proxy.kind == "temp"
     assert set(model.fit["insignificant"]) >= {4, 5, 6}

@@ -31,6 +31,8 @@ def available() -> dict:
 def configure(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK")
     sub.required = True
+    parser.epilog = ("examples:\n  hdrg bench accuracy --devices 10 -o accuracy.json\n"
+                     "  hdrg bench measured --only tofupilot -o measured.json\n  hdrg bench loop --runs 12 -o loop.json")
     for name, (command, stage) in available().items():
         doc = (importlib.import_module(stage).__doc__ or name).strip().split("\n\n")[0]
         p = sub.add_parser(name, help=doc.split("\n")[0], description=doc)

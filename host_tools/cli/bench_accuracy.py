@@ -16,7 +16,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--merge", nargs="+", metavar="JSON", default=None,
                         help="instead: merge --json files of split runs (same options, disjoint devices) and "
                              "print their tables (with --json: write the merged result)")
-    parser.add_argument("--json", metavar="F", help="write config, per-device records and summary as JSON")
+    parser.add_argument("--json", "-o", "--out", "--output", metavar="F",
+                        help="write config, per-device records and summary as JSON")
     parser.add_argument("--pipelines", nargs="+", metavar="PATTERN",
                         help="options to run (fnmatch patterns, e.g. 'ftr/*' 'mr-trend/iir9'; default all)")
     parser.add_argument("--train-rate", type=float, default=4.0, metavar="CPM", help="training chamber rate (4)")

@@ -7,6 +7,7 @@ import os
 import sys
 
 from host_tools.atomic import atomic_open
+from host_tools.errors import UserError
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -16,7 +17,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--merge", nargs="+", default=None, metavar="JSON",
                         help="instead: summarize the records of these --json files together")
     parser.add_argument("--duration", type=float, default=None, help="cut every run to this many seconds")
-    parser.add_argument("--json", default=None, metavar="FILE", help="write records and summary to FILE")
+    parser.add_argument("--json", "-o", "--out", "--output", default=None, metavar="FILE",
+                        help="write records and summary to FILE")
     parser.add_argument("--second-train", type=float, default=None, metavar="CPM",
                         help="train on a second run too, at this chamber rate [degC/min] from the same power-on "
                              "(the loop then cross-validates over the two runs); default: one training run")
@@ -73,12 +75,12 @@ def run(args) -> int:
         res = {"summary": summarize(sorted(records, key=lambda r: r["i"])), "records": records}
     else:
         if args.runs < 1:
-            raise ValueError("--runs must be >= 1")
+            raise UserError("--runs must be >= 1")
         k, m = (int(x) for x in args.shard.split("/"))
         if not 0 <= k < m:
-            raise ValueError(f"--shard K/M needs 0 <= K < M, not {args.shard}")
+            raise UserError(f"--shard K/M needs 0 <= K < M, not {args.shard}")
         if args.second_train is not None and not args.second_train > 0:
-            raise ValueError(f"--second-train must be a chamber rate > 0 degC/min, not {args.second_train}")
+            raise UserError(f"--second-train must be a chamber rate > 0 degC/min, not {args.second_train}")
         res = run_benchmark(args.runs, args.seed, args.duration, shard=(k, m), json_path=args.json,
                             second_train=args.second_train, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     s = res["summary"]

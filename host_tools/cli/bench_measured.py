@@ -12,7 +12,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help=f"folder of measured sets, one sub-folder each with *.csv run logs (default: the "
                              f"sets shipped in {DEFAULT_DATA.parent.name}/{DEFAULT_DATA.name})")
     parser.add_argument("--only", metavar="TEXT", help="only the logs whose file name contains TEXT")
-    parser.add_argument("--json", metavar="F", help="write every split's figures and the summary as JSON")
+    parser.add_argument("--json", "-o", "--out", "--output", metavar="F",
+                        help="write every split's figures and the summary as JSON")
     parser.epilog = "example: hdrg bench measured --only tofupilot --json measured.json"
 
 

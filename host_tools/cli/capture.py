@@ -6,14 +6,15 @@ import argparse
 import sys
 import time
 
-from host_tools.cli.options import add_port_options, seconds_type, writable_output
+from host_tools.cli.options import add_port_options, example, out_option, seconds_type, writable_output
 from host_tools.link.capture import MAX_DURATION_S, CaptureResult, capture, check_output_path
 from host_tools.link.host import open_port
+from host_tools.errors import UserError
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     add_port_options(parser)
-    parser.add_argument("-o", "--output", required=True, help="run log (CSV) to write")
+    out_option(parser, "run log (CSV) to write", required=True)
     parser.add_argument("--duration", type=seconds_type("--duration", MAX_DURATION_S), default=None, metavar="S",
                         help="stop after S seconds of device time, S > 0 (default: until the device stops or Ctrl-C)")
     parser.add_argument("--idle-timeout", type=seconds_type("--idle-timeout", MAX_DURATION_S, zero="never"),
@@ -22,6 +23,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "wait until --duration, the device's end of run or Ctrl-C)")
     parser.add_argument("--flush-every", type=int, default=256, metavar="N", help="flush every N rows (and every second)")
     parser.add_argument("--quiet", action="store_true", help="no live progress line")
+    example(parser, "hdrg capture --port /dev/ttyUSB0 --duration 21600 -o run.csv")
 
 
 class _Progress:
@@ -46,7 +48,7 @@ def run(args) -> int:
     check_output_path(args.output)
     writable_output(args.output)
     if args.flush_every < 1:
-        raise ValueError(f"--flush-every {args.flush_every}: must be at least 1 row")
+        raise UserError(f"--flush-every {args.flush_every}: must be at least 1 row")
     try:
         port = open_port(args.port, args.baud)
     except serial.SerialException as exc:

@@ -11,7 +11,9 @@ from host_tools.bench.cost import TARGETS
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--target", required=True, choices=TARGETS)
-    parser.add_argument("--json", default=None, help="write the figures as JSON to this file")
+    parser.add_argument("--json", "-o", "--out", "--output", default=None, metavar="FILE",
+                        help="write the figures as JSON to this file")
+    parser.epilog = "examples:\n  hdrg cost --target host\n  hdrg cost --target cortex-m4 -o cost.json"
     parser.add_argument("--keep", default=None, help="build directory to keep (default: a temporary one)")
 
 

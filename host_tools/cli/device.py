@@ -22,6 +22,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
                                                         "default: the run's identity table (coefficients 0)")
     parser.add_argument("--name", default=None, help="device name reported in INFO")
     parser.add_argument("--exit-at-end", action="store_true", help="exit when the simulated run has been sent")
+    parser.epilog = ("examples:\n  hdrg device --pty --speed 0 --exit-at-end\n"
+                     "  hdrg device --port loop:// --table table.json")
 
 
 def run(args) -> int:

@@ -1,20 +1,24 @@
-"""`hdrg diagnose`: trace a model's residual to a missing effect and add it (host_tools.fitting.diagnose)."""
+"""`hdrg diagnose`: trace a model's residual to a missing effect and add it (host_tools.api.diagnose over
+host_tools.fitting.diagnose)."""
 from __future__ import annotations
 
 import argparse
 import os
 import sys
 
-from host_tools.cli.options import add_model_options
-from host_tools.fitting.diagnose import CV_BLOCKS, CV_FOLDS, G_MIN, MAX_ITER, N_SURROGATES, fmt_value, diagnose
+from host_tools import api
+from host_tools.cli.options import OUT_OPTIONS, add_model_options, example
+from host_tools.fitting.diagnose import CV_BLOCKS, CV_FOLDS, G_MIN, MAX_ITER, N_SURROGATES, fmt_value
 from host_tools.fitting.diagnose_scan import TRIES_PER_STEP
+from host_tools.errors import UserError
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs", metavar="RUN", nargs="+", help="training run logs (CSV or .npz)")
     parser.add_argument("--holdout", nargs="+", default=[], metavar="RUN",
                         help="held-out run logs: the errors before/after are reported on them")
-    parser.add_argument("--out", required=True, help="output directory (diagnose.md, diagnose.json, model.json, PNG)")
+    parser.add_argument(*OUT_OPTIONS, dest="out", required=True, metavar="DIR",
+                        help="output directory (diagnose.md, diagnose.json, model.json, PNG)")
     parser.add_argument("--json", default=None, metavar="FILE", help="also write the JSON report to FILE")
     add_model_options(parser, "the starting model")
     parser.add_argument("--max-iter", type=int, default=MAX_ITER,
@@ -29,6 +33,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cv-folds", type=int, default=CV_FOLDS, help="single run: folds the blocks are dealt into")
     parser.add_argument("--seed", type=int, default=0, help="random seed of the surrogates")
     parser.add_argument("--no-plots", action="store_true", help="no PNG figures")
+    example(parser, "hdrg diagnose run.csv --holdout held_out.csv -o diagnose/")
 
 
 def run(args) -> int:
@@ -37,7 +42,7 @@ def run(args) -> int:
     from host_tools.golden.checks import check_fit_inputs
 
     if args.max_iter < 0 or args.surrogates < 0 or (args.max_tries is not None and args.max_tries < 0):
-        raise ValueError("--max-iter, --max-tries and --surrogates must be >= 0")
+        raise UserError("--max-iter, --max-tries and --surrogates must be >= 0")
     refuse_overwrite([args.json] + [os.path.join(args.out, f) for f in ("model.json", "diagnose.json", "diagnose.md")],
                      list(args.runs) + list(args.holdout))
     train = [rl.read(p) for p in args.runs]
@@ -46,13 +51,13 @@ def run(args) -> int:
     print(f"hdrg diagnose: {len(train)} training run(s), {len(hold)} held-out; fitting and tracing the residual "
           f"(up to {args.max_iter} iteration(s), {args.surrogates} surrogates each; this takes a while) ...",
           file=sys.stderr, flush=True)
-    report, model = diagnose(train, hold, proxy=args.proxy, rate_estimator=args.rate_estimator,
-                             rate_n=args.rate_n, rate_shift=args.rate_shift, terms=args.terms,
-                             combiner=args.combiner, order=args.order, settle_s=args.settle, proxy_range=args.proxy_range,
-                             rate_range=args.rate_range, max_iter=args.max_iter, max_tries=args.max_tries, n_surrogates=args.surrogates,
-                             g_min=args.g_min, cv_blocks=args.cv_blocks, cv_folds=args.cv_folds,
-                             seed=args.seed, out_dir=args.out, plots=not args.no_plots,
-                             progress=lambda msg: print(f"hdrg diagnose: {msg}", file=sys.stderr, flush=True))
+    report, model = api.diagnose(train, hold, proxy=args.proxy, rate_estimator=args.rate_estimator,
+                                 rate_n=args.rate_n, rate_shift=args.rate_shift, terms=args.terms,
+                                 combiner=args.combiner, order=args.order, settle_s=args.settle, proxy_range=args.proxy_range,
+                                 rate_range=args.rate_range, max_iter=args.max_iter, max_tries=args.max_tries, n_surrogates=args.surrogates,
+                                 g_min=args.g_min, cv_blocks=args.cv_blocks, cv_folds=args.cv_folds,
+                                 seed=args.seed, out_dir=args.out, plots=not args.no_plots,
+                                 progress=lambda msg: print(f"hdrg diagnose: {msg}", file=sys.stderr, flush=True))
     if args.json:
         with open(os.path.join(args.out, "diagnose.json"), encoding="utf-8") as src, \
                 atomic_open(args.json, "w", encoding="utf-8") as dst:

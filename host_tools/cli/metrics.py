@@ -7,6 +7,7 @@ import sys
 
 from host_tools.golden import reversal
 from host_tools.fitting.metrics import DEFAULT_TAUS, format_table, load, repeatability, run_metrics, to_json
+from host_tools.errors import UserError
 
 
 def _parse_taus(text: str) -> tuple:
@@ -26,9 +27,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--combiner", choices=reversal.COMBINERS, default=None,
                         help=f"mode-reversal combiner for raw mode-reversal logs (default {reversal.DEFAULT_COMBINER}, "
                              f"as hdrg fit)")
-    parser.add_argument("--json", nargs="?", const="-", default=None, metavar="FILE",
+    parser.add_argument("--json", "-o", "--out", "--output", nargs="?", const="-", default=None, metavar="FILE",
                         help="JSON output: '--json' or '--json -' prints it instead of the table; "
-                             "'--json FILE' writes FILE and prints the table")
+                             "'--json FILE' (or -o/--out/--output FILE) writes FILE and prints the table")
+    parser.epilog = ("examples:\n  hdrg metrics run.csv compensated.csv\n"
+                     "  hdrg metrics compensated.csv --tau 1,10,100,1000 -o metrics.json")
 
 
 def run(args) -> int:
@@ -37,7 +40,7 @@ def run(args) -> int:
     if args.json not in (None, "-"):
         refuse_overwrite(args.json, args.runs)
     if args.json not in (None, "-") and args.json.lower().endswith((".csv", ".npz")):
-        raise ValueError(f"--json {args.json}: refusing to write JSON over a run-log name (.csv/.npz); "
+        raise UserError(f"--json {args.json}: refusing to write JSON over a run-log name (.csv/.npz); "
                          f"put --json after the RUN paths or use --json -")
     runs = [run_metrics(load(p), taus=args.tau, combiner=args.combiner) for p in args.runs]
     rep = repeatability(runs) if len(runs) >= 2 else None

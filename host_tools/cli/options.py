@@ -1,4 +1,7 @@
-"""Option groups shared by several commands: the model options (`hdrg fit`, `hdrg diagnose`),
+"""Option groups shared by several commands: the output option ``-o/--out/--output`` of every
+command that writes (:func:`out_option`), an input given as a positional or as an option (the
+model of `hdrg quantize`, the table of `hdrg export`: :func:`file_argument`), the examples of a
+command's help (:func:`example`), the model options (`hdrg fit`, `hdrg diagnose`),
 the serial port (`hdrg capture`, `hdrg upload`) and the random simulator family (`hdrg simulate`);
 and the checks of values and paths the commands share: durations in seconds (:func:`seconds_type`:
 negative, NaN and inf refused with the allowed range), outputs of one command that are one file
@@ -11,23 +14,66 @@ import argparse
 import atexit
 
 from firmware_ref.vocabulary import ESTIMATORS, PROXY_KINDS
+from host_tools.errors import UserError
+
+
+OUT_OPTIONS = ("-o", "--out", "--output")
+
+
+def out_option(parser, help: str, required: bool = False, dest: str = "output", metavar: str = "FILE", **kw) -> None:
+    """The output of a command that writes: ``-o``, ``--out`` and ``--output`` alike (``args.<dest>``)."""
+    parser.add_argument(*OUT_OPTIONS, dest=dest, required=required, metavar=metavar, help=help, **kw)
+
+
+def example(parser, *commands: str) -> None:
+    """The examples shown at the end of the command's --help (working command lines)."""
+    parser.epilog = ("example:\n" if len(commands) == 1 else "examples:\n") + "\n".join(f"  {c}" for c in commands)
+
+
+def file_argument(parser, dest: str, metavar: str, help: str) -> None:
+    """An input given as the positional ``METAVAR`` or as the option ``--<dest>`` (as every command
+    that takes a model or a table accepts it); :func:`file_value` reads it."""
+    parser.add_argument(dest, metavar=metavar, nargs="?", default=None, help=f"{help} (or --{dest} {metavar})")
+    parser.add_argument(f"--{dest}", dest=f"{dest}_option", metavar=metavar, default=None,
+                        help=f"the same as the positional {metavar}")
+
+
+def file_value(args, dest: str) -> str:
+    """The path given by :func:`file_argument`'s positional or option; UserError if neither or two
+    different ones are given."""
+    pos, opt = getattr(args, dest), getattr(args, f"{dest}_option")
+    if pos is None and opt is None:
+        raise UserError(f"the {dest} is required: give it as {dest.upper()} or --{dest} {dest.upper()}")
+    if pos is not None and opt is not None and pos != opt:
+        raise UserError(f"two {dest}s given ({pos} and --{dest} {opt}): give one")
+    return pos if pos is not None else opt
 
 
 def add_model_options(parser: argparse.ArgumentParser, what: str = "the model") -> None:
     """The options that configure a model (proxy, rate estimator, terms, combiner, ranges), shared by
-    `hdrg fit` and `hdrg diagnose` (its starting model)."""
+    `hdrg fit` and `hdrg diagnose` (its starting model); the defaults shown are the fit's policy
+    (host_tools.fitting.fit_pipeline.fit_policy)."""
     parser.add_argument("--proxy", choices=PROXY_KINDS, default=None,
                         help="temperature proxy: freq (drive frequency, default when present) or temp (temp_c)")
-    from host_tools.golden.compensate import (DEFAULT_COMBINER, DEFAULT_ORDER, DEFAULT_RATE, DEFAULT_RATE_SELECTION_MR,
-                                       DEFAULT_SETTLE_S, DEFAULT_TERMS)
+    from host_tools.fitting.fit_pipeline import fit_policy
     from host_tools.golden.reversal import COMBINERS, ORDERS
+
+    policy = fit_policy()
+    DEFAULT_RATE = dict(zip(("estimator", "n", "shift"), policy.rate_default))
+    DEFAULT_RATE_SELECTION_MR, DEFAULT_TERMS = policy.rate_selection_mr, policy.terms
+    DEFAULT_ORDER, DEFAULT_COMBINER, DEFAULT_SETTLE_S = policy.order, policy.combiner, policy.settle_s
+    def short(e, n, s):     # an estimator as the help names it: diff, diffn 16, lsq 32, iir 9
+        return e if e == "diff" else f"{e} {s if e == 'iir' else n}"
+    preferred = short(*policy.rate_preferred)
 
     parser.add_argument("--rate-estimator", default=None, choices=ESTIMATORS + ("auto",),
                         help=f"proxy-rate estimator of {what} (default: {DEFAULT_RATE['estimator']}"
                              + ("; hdrg fit on mode-reversal logs: auto" if DEFAULT_RATE_SELECTION_MR == "auto" else "")
                              + f"; diff is the "
-                             f"paper's consecutive difference; auto (hdrg fit only): iir 9 unless another of diff, diffn 16, "
-                             f"lsq 32, iir 7 has a cross-validated rms below half of iir 9's, reported in model.json)")
+                             f"paper's consecutive difference; auto (hdrg fit only): {preferred} unless another of "
+                             + ", ".join(short(*c) for c in policy.rate_candidates if c != policy.rate_preferred)
+                             + f" has a cross-validated rms below {policy.rate_prefer_margin:g} x {preferred}'s, "
+                             f"reported in model.json)")
     parser.add_argument("--rate-n", type=int, default=None,
                         help=f"window length n of diffn/lsq [samples] (default: {DEFAULT_RATE['n']})")
     parser.add_argument("--rate-shift", type=int, default=None,
@@ -79,15 +125,15 @@ def add_random_family_options(parser: argparse.ArgumentParser) -> None:
 # -- checked values and paths ------------------------------------------------------------------------
 
 def positive_seconds(text, option: str, upper: float) -> float:
-    """``text`` as a number of seconds in (0, upper]; ValueError naming ``option`` and the allowed
+    """``text`` as a number of seconds in (0, upper]; UserError (a ValueError) naming ``option`` and the allowed
     range for anything else (negative, zero, NaN, inf, not a number)."""
     import math
     try:
         value = float(text)
     except (TypeError, ValueError):
-        raise ValueError(f"{option} {text!r}: not a number of seconds") from None
+        raise UserError(f"{option} {text!r}: not a number of seconds") from None
     if not (math.isfinite(value) and 0 < value <= upper):
-        raise ValueError(f"{option} {text}: must be a number of seconds in (0, {upper:g}]")
+        raise UserError(f"{option} {text}: must be a number of seconds in (0, {upper:g}]")
     return value
 
 
@@ -116,7 +162,7 @@ def distinct_outputs(outputs: dict) -> None:
     for i, (opt_a, a) in enumerate(named):
         for opt_b, b in named[i + 1:]:
             if same_file(a, b):
-                raise ValueError(f"{opt_a} {a} and {opt_b} {b} are the same file: one output would overwrite "
+                raise UserError(f"{opt_a} {a} and {opt_b} {b} are the same file: one output would overwrite "
                                  f"the other (give each its own file)")
 
 
@@ -145,15 +191,15 @@ def writable_output(path, option: str = "-o") -> None:
     except OSError:
         return
     if stat.S_ISDIR(st.st_mode):
-        raise ValueError(f"{option} {path}: is a directory, not a file to write")
+        raise UserError(f"{option} {path}: is a directory, not a file to write")
     if stat.S_ISSOCK(st.st_mode):
-        raise ValueError(f"{option} {path}: is a socket, not a file to write")
+        raise UserError(f"{option} {path}: is a socket, not a file to write")
     if stat.S_ISFIFO(st.st_mode):
         try:
             fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK)
         except OSError as exc:
             if exc.errno == errno.ENXIO:
-                raise ValueError(f"{option} {path}: is a FIFO that no process is reading (writing would wait "
+                raise UserError(f"{option} {path}: is a FIFO that no process is reading (writing would wait "
                                  f"forever); start the reader first or write to a file") from None
             raise
         _HELD_WRITERS.append(fd)    # kept open until exit: closing it now would end the reader's input

@@ -6,7 +6,9 @@ import json
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--json", default=None, help="also write the results as JSON to this file")
+    parser.add_argument("--json", "-o", "--out", "--output", default=None, metavar="FILE",
+                        help="also write the results as JSON to this file")
+    parser.epilog = "example:\n  hdrg paper -o paper.json"
 
 
 def run(args) -> int:

@@ -1,16 +1,19 @@
-"""`hdrg quantize`: a bias model -> the fixed-point coefficient table (host_tools.fixed.quantize)."""
+"""`hdrg quantize`: a bias model -> the fixed-point coefficient table (host_tools.api.quantize over
+host_tools.fixed.quantize)."""
 from __future__ import annotations
 
 import argparse
+import sys
 
 from firmware_ref import formats as F
-from host_tools.cli.options import distinct_outputs, regular_input, writable_output
-from host_tools.fixed.quantize import quantize
+from host_tools import api
+from host_tools.cli.options import (distinct_outputs, example, file_argument, file_value, out_option, regular_input,
+                                    writable_output)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("model", metavar="MODEL", help="bias model JSON (hdrg fit)")
-    parser.add_argument("-o", "--output", required=True, help="table.json to write")
+    file_argument(parser, "model", "MODEL", "bias model JSON (hdrg fit)")
+    out_option(parser, "table.json to write", required=True)
     parser.add_argument("--exchange-s", type=float, default=30.0, help="sequencer exchange time [s] (default 30)")
     parser.add_argument("--dwell-s", type=float, default=120.0, help="sequencer mode-1/2 window [s] (default 120)")
     parser.add_argument("--power-on-s", type=float, default=0.0, help="sequencer power-on time [s] (default 0)")
@@ -19,22 +22,21 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--memh", metavar="FILE", help="also write a $readmemh memory file")
     parser.add_argument("--header", metavar="FILE", help="also write a C99 header")
     parser.add_argument("--bin", metavar="FILE", help="also write the binary table (little-endian words)")
+    example(parser, "hdrg quantize model.json -o table.json", "hdrg quantize --model model.json -o table.json --max-error 0.01")
 
 
 def run(args) -> int:
     from host_tools.atomic import atomic_open, refuse_overwrite
-    from host_tools.golden.model import BiasModel
 
+    args.model = file_value(args, "model")
     outputs = {"-o": args.output, "--memh": args.memh, "--header": args.header, "--bin": args.bin}
     distinct_outputs(outputs)
     refuse_overwrite(list(outputs.values()), args.model)
     regular_input(args.model, "model")
     for opt, path in outputs.items():
         writable_output(path, opt)
-    model = BiasModel.from_json(args.model)
-    q = quantize(model, exchange_s=args.exchange_s, dwell_s=args.dwell_s, power_on_s=args.power_on_s,
-                 max_error_dph=args.max_error)
-    q.to_json(args.output)
+    q = api.quantize(args.model, args.output, exchange_s=args.exchange_s, dwell_s=args.dwell_s,
+                     power_on_s=args.power_on_s, max_error_dph=args.max_error)
     t = q.table
     if args.memh:
         with atomic_open(args.memh, "w", encoding="utf-8") as fh:
@@ -59,6 +61,7 @@ def run(args) -> int:
         words = ", ".join("{word}={column} (AF {frac})".format(**c) for c in a["channels"]) or "none"
         print(f"aux generators: {len(a['terms'])} terms ({gens}), aux words {words}; |z_fixed - z_golden| "
               f"bound {a['z_error']:.3g}, measured {a['measured_z']['z_max']:.3g}")
+    sys.stdout.flush()
     for w in q.report["warnings"]:
-        print(f"warning: {w}")
+        print(f"hdrg quantize: warning: {w}", file=sys.stderr)
     return 0

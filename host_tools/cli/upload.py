@@ -6,16 +6,17 @@ import argparse
 import sys
 
 from firmware_ref import table as T
-from host_tools.cli.options import add_port_options
+from host_tools.cli.options import add_port_options, example, file_argument, file_value
 from host_tools.link.codec import table_problems
 from host_tools.link.host import HostLink, open_port, upload
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     add_port_options(parser)
-    parser.add_argument("table", metavar="TABLE", help="coefficient table: table.json (hdrg quantize), .bin or .memh")
+    file_argument(parser, "table", "TABLE", "coefficient table: table.json (hdrg quantize), .bin or .memh")
     parser.add_argument("--timeout", type=float, default=2.0, metavar="S", help="answer timeout per attempt (default 2)")
     parser.add_argument("--retries", type=int, default=3, help="TABLE attempts without an answer (default 3)")
+    example(parser, "hdrg upload table.json --port /dev/ttyUSB0")
 
 
 def run(args) -> int:
@@ -23,6 +24,7 @@ def run(args) -> int:
 
     from host_tools.fixed.quantize import read_table
 
+    args.table = file_value(args, "table")
     try:
         table = read_table(args.table)
     except T.TableError as exc:

@@ -7,13 +7,16 @@ import argparse
 from host_tools.cli.options import seconds_type
 from host_tools.vectors.runner import DEFAULT_TIMEOUT_S, MAX_TIMEOUT_S
 from host_tools.vectors.spec import FORMAT_VERSION, GENERATOR_VERSION, O_NAMES
+from host_tools.errors import UserError
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", metavar="ACTION")
     sub.required = True
+    parser.epilog = ("examples:\n  hdrg vectors verify vectors/\n  hdrg vectors check-impl --cmd ./hdrg_fw vectors/\n"
+                     "  hdrg vectors generate -o vectors/")
     g = sub.add_parser("generate", help="generate the vectors into a directory")
-    g.add_argument("-o", "--output", default="vectors", help="output directory (default: vectors/)")
+    g.add_argument("-o", "--out", "--output", dest="output", default="vectors", help="output directory (default: vectors/)")
     g.add_argument("--force", action="store_true", help="overwrite changed vectors without a version bump")
     v = sub.add_parser("verify", help="check the SHA-256s and recompute every vector from its inputs")
     v.add_argument("directory", nargs="?", default="vectors", help="vectors directory (default: vectors/)")
@@ -55,7 +58,7 @@ def run(args) -> int:
         print("vectors OK" if not problems else f"{len(problems)} problem(s)")
         return 0 if not problems else 1
     if args.max_output is not None and args.max_output <= 0:
-        raise ValueError(f"--max-output {args.max_output}: must be a positive number of bytes")
+        raise UserError(f"--max-output {args.max_output}: must be a positive number of bytes")
     rep = check_impl(args.cmd, args.directory, _names(args.sets), _names(args.fields), args.timeout,
                      max_output=args.max_output)
     total = sum(s["rows"] for s in rep["sets"].values())

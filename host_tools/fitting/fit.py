@@ -51,6 +51,7 @@ import numpy as np
 from host_tools.fitting.fit_kernel import _A, _name, _predict, Accumulator, accumulate_groups  # noqa: F401
 from host_tools.golden.model import jsonable
 from firmware_ref.terms import K_AUX, N_TERMS, PAPER_TERMS, TERM_NAMES, TERM_POWERS, parse_terms
+from host_tools.errors import HdrgError
 
 __all__ = [
     "Accumulator", "FitResult", "UnidentifiableError", "accumulate_groups", "block_groups",
@@ -61,7 +62,7 @@ RCOND = 1e-6             # default identifiability threshold (relative column re
 _BASIS_TOL = 1e-14       # truncation of the pivoted Cholesky of the scaled internal Gram
 
 
-class UnidentifiableError(ValueError):
+class UnidentifiableError(HdrgError, ValueError):
     """The data cannot identify some requested terms.  ``collinear`` maps each unidentifiable
     term index to the tuple of kept term indices it is (numerically) a combination of."""
 

@@ -14,11 +14,12 @@ from fractions import Fraction
 from firmware_ref import formats as F
 from firmware_ref.table import COEF_GROUPS, horner_bounds
 from firmware_ref.terms import K_AUX, N_TERMS, TERM_POWERS
+from host_tools.errors import HdrgError
 
 GROUPS = COEF_GROUPS
 GROUP_NAMES = ("row u^0", "row u^1", "row u^2", "row u^3", "k7 (aux)")
 
-class QuantizeError(ValueError):
+class QuantizeError(HdrgError, ValueError):
     """A model the fixed-point formats cannot represent (the message gives the reason)."""
 
 

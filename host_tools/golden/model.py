@@ -60,6 +60,7 @@ from host_tools.golden.proxy import ProxyConfig
 from host_tools.golden.rate import RateConfig
 from host_tools.golden.regressors import AuxConfig, bias_horner
 from host_tools.golden.reversal import ReversalConfig
+from host_tools.errors import HdrgError
 
 FORMAT = "hdrg-model"
 VERSION = 2
@@ -68,7 +69,7 @@ MAX_BYTES = 16 << 20        # a model file is a few kB; larger is refused before
 MAX_DEPTH = 32              # a model nests 4 deep (its fit info a few more); deeper is refused
 
 
-class ModelError(ValueError):
+class ModelError(HdrgError, ValueError):
     """A model file or object that cannot be used: names the file, the field and the problem."""
 
     def __init__(self, source: str, field_name: str | None, problem: str):

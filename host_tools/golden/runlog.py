@@ -54,6 +54,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from host_tools.atomic import atomic_open
+from host_tools.errors import HdrgError
 
 FORMAT_VERSION = 1
 MODES = (0, 1, 2, 3)
@@ -71,7 +72,7 @@ HDRG_COLUMNS = ("bias_dph", "valid", "flags", "comp_rate_dph", "comp_bias_dph", 
 CAPTURE_KEY, CAPTURE_OPEN, CAPTURE_DONE = "capture", "in progress", "complete"
 
 
-class RunLogError(ValueError):
+class RunLogError(HdrgError, ValueError):
     """A run log that cannot be read: names the file, the line (1-based, physical) and the problem."""
 
     def __init__(self, source: str, line: int | None, problem: str):
