@@ -64,12 +64,16 @@ def test_one_sign_of_dT_dt_does_not_identify_the_rate_terms_and_says_what_would(
     assert ident["rate_terms_identified"] is False
     rate = ident["groups"]["rate"]
     assert not rate["identified"] and "heating" in rate["record"]
-    # a full cycle has one heating leg: identified, but the cross-validation can only score the rate
-    # terms on a sign they were not fitted on (the fit asks more of them), and it says what would help
+    # a full cycle has one heating leg: identified; the fold that holds it out scores the rate terms
+    # on a sign they were not fitted on, and it says what would help
     ident = identifiability([log])
     assert ident["legs_per_sign"] == {"rising": 1, "falling": 2, "hold": 0}
-    assert ident["rate_terms_identified"] and ident["rate_cv_extrapolated"]
+    assert ident["rate_terms_identified"] and not ident["rate_cv_extrapolated"]
     assert "another full chamber cycle" in ident["groups"]["rate"]["record"]
+    # one leg of each sign: every fold does
+    hi = int(np.argmax(log["temp_c"]))
+    ident = identifiability([log.select(np.arange(lo, hi)), log.select(np.arange(hi, len(log)))])
+    assert ident["legs_per_sign"] == {"rising": 1, "falling": 1, "hold": 0} and ident["rate_cv_extrapolated"]
     # two full cycles: nothing to add
     ident = identifiability([_cycle(2)])
     assert ident["rate_terms_identified"] and not ident["rate_cv_extrapolated"]
@@ -95,16 +99,20 @@ def test_unidentified_rate_terms_give_the_cubic_clamped_to_the_calibrated_range(
     assert tuple(model.terms) == (0, 1, 4)
 
 
-def test_one_leg_of_a_sign_asks_the_rate_terms_to_halve_the_cubics_error():
-    """One full measured cycle (one heating leg): the rate terms and the lag block are offered, the
-    guard's margin is GUARD_MARGIN_EXTRAPOLATED, and its choice follows its own figures."""
-    from host_tools.fitting.fit_pipeline import GUARD_MARGIN_EXTRAPOLATED, fit_default
-    for ax in "xy":
-        model, _ = fit_default([_read(TOFU / f"tofupilot-imu-{ax}.csv")])
+def test_one_leg_of_each_sign_asks_the_rate_terms_to_halve_the_cubics_error():
+    """Legs as runs, one heating and one cooling (the measured consumer IMU): the guard's margin is
+    GUARD_MARGIN_EXTRAPOLATED and its choice follows its own figures; the whole cycle (two cooling
+    legs) gets GUARD_MARGIN."""
+    from host_tools.fitting.fit_pipeline import GUARD_MARGIN, GUARD_MARGIN_EXTRAPOLATED, fit_default
+    log = _read(TOFU / "tofupilot-imu-x.csv")
+    lo, hi = int(np.argmin(log["temp_c"])), int(np.argmax(log["temp_c"]))
+    for runs, margin in (([log.select(np.arange(lo, hi)), log.select(np.arange(hi, len(log)))], GUARD_MARGIN_EXTRAPOLATED),
+                         ([log], GUARD_MARGIN)):
+        model, _ = fit_default(runs)
         g = model.fit["guard"]
-        assert g["margin"] == GUARD_MARGIN_EXTRAPOLATED and g["folds"] == 3
+        assert g["margin"] == margin and g["folds"] == len(runs) + (len(runs) == 1) * 2
         best_cubic = min(v for k, v in g["cv_rms"].items() if k != "17-term model")
-        kept = g["cv_rms"]["17-term model"] < (1 - GUARD_MARGIN_EXTRAPOLATED) * best_cubic
+        kept = g["cv_rms"]["17-term model"] < (1 - margin) * best_cubic
         assert (g["chosen"] == "17-term model") == kept
 
 
