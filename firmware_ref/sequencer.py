@@ -52,7 +52,7 @@ wraps on long runs.  Per sample with mode m, rate word R, restart r::
                 y = (c << 10) + other; valid                        # y: LSB 2^-21 deg/h
         else: pos += 1
 
-Regress, then reverse (order 1, /work/spec-rtr.md; golden host_tools.golden.reversal)
+Regress, then reverse (order 1, docs/REGRESS_THEN_REVERSE.md; golden host_tools.golden.reversal)
 -----------------------------------------------------------------------------
 The combiner takes the **residual word** instead of c: at a sample past settling (``pos >=
 settle_n``) whose rate estimator is warm (``warm`` false)::

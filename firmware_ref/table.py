@@ -1,10 +1,10 @@
 """The coefficient table: one versioned binary layout of 32-bit little-endian words, shared by the
 C header, table.json, ``$readmemh`` memory files and the serial upload.
 
-Layout (version 2; ``LAYOUT`` below, rendered into FORMATS.md)::
+Layout (version 3; ``LAYOUT`` below, rendered into FORMATS.md)::
 
     word 0   magic 0x47524448 ("HDRG" as little-endian bytes)
-    word 1   version (2)
+    word 1   version (3)
     word 2   length: number of words including the CRC
     3..46    config words and bank 1's exponents and 17 coefficient mantissas (as version 1)
     47..71   order (0 combine_first, 1 regress_first), n_banks (1, 2), bank 2's exponents
@@ -13,7 +13,7 @@ Layout (version 2; ``LAYOUT`` below, rendered into FORMATS.md)::
              aux channel, AUX_TERM_WORDS per term, :func:`decode_aux`)
     last     CRC-32 (IEEE, zlib.crc32) of all preceding words as little-endian bytes
 
-Banks (regress, then reverse; /work/spec-rtr.md): a ``regress_first`` table (order 1) has two
+Banks (regress, then reverse; docs/REGRESS_THEN_REVERSE.md): a ``regress_first`` table (order 1) has two
 coefficient banks, each with its own exponents (the quantizer sizes each bank on its own), and
 the evaluator uses bank 2 on mode-2 samples, bank 1 on every other sample.  order 1 needs
 n_banks 2 and a mode-reversal combiner (1 pair, 2 trend, 3 none); combiner 3 (none) needs
@@ -21,7 +21,9 @@ order 1; an FTR or combine_first table has order 0 and one bank.
 
 Version 1 (47 fixed words, no order/bank-2 words) is still **read**, as order 0 (combine_first)
 with one bank: its words mean exactly what they meant (``from_words``; the C twin does the same).
-Every writer writes version 2.
+Version 2 has the same words; an iir rate estimator in it started after a 2^(shift+1)-sample
+warm-up, so a version-2 table with the iir is refused (quantize the model again), any other is
+read as it is.  Version 3: the iir starts at power-on (FORMATS.md).  Every writer writes version 3.
 
 Signed fields are stored as two's complement.  :class:`Table` holds the decoded fields;
 ``to_words/from_words``, ``to_bytes/from_bytes``, ``to_memh``/``from_memh`` (one 8-digit hex word

@@ -161,7 +161,7 @@ def _pair_by_hand(mode, rate):
 
 
 def test_default_combiner_is_the_fit_default():
-    """issue 13 item 9: metrics' default combiner is the one hdrg fit uses (reversal.DEFAULT_COMBINER)."""
+    """metrics' default combiner is the one hdrg fit uses (reversal.DEFAULT_COMBINER)."""
     from host_tools.golden import reversal
     from host_tools.cli import build_parser
 
@@ -447,7 +447,7 @@ def test_cli_bad_tau():
 
 
 def test_compensated_log_flags_reach_the_notes():
-    """issue 13: metrics of a compensated log repeats its flag counts and the extrapolation warning."""
+    """metrics of a compensated log repeats its flag counts and the extrapolation warning."""
     n = 200
     flags = np.zeros(n, np.int64)
     flags[:50] = 1                       # proxy_clamped on 25 % of the samples

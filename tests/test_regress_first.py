@@ -1,4 +1,4 @@
-"""Regress, then reverse (issue #10): two coefficient banks by mode, the combiner on the residual.
+"""Regress, then reverse: two coefficient banks by mode, the combiner on the residual.
 Synthetic logs where the truth is known exactly."""
 import json
 

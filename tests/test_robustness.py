@@ -1,4 +1,4 @@
-"""Issue 13 "No silent wrong answers": one regression test per probe of the issue.
+"""No silent wrong answers: one regression test per probe of a careless or hostile input.
 
 Every case must give a clear error (``hdrg CMD: error: ...``, exit code 2, no traceback), a
 warning with the count, or a correct result.  The CLI runs in-process (host_tools.cli.main) on

@@ -152,7 +152,7 @@ def test_csv_and_npz_round_trip_lossless(tmp_path_factory, data, meta):
         assert {k: v.strip() for k, v in back.metadata.items()} == {k: v.strip() for k, v in meta.items()}
 
 
-# -- issue 13: metadata that contradicts the data, non-physical frequency, flags column ---------------------
+# -- metadata that contradicts the data, non-physical frequency, flags column ---------------------
 
 def _csv(tmp_path, text, name="x.csv"):
     p = tmp_path / name

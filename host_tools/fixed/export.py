@@ -15,10 +15,11 @@ endian bytes last.  Every export holds exactly these words:
   (model, ``coef_dph``) and the quantizer's report.
 * ``mem``  ``NAME.memh``: ``$readmemh`` text, one 8-digit hex word per line, address 0 first.
 
-Layout version 2 (regress, then reverse): the words carry ``order``, ``n_banks`` and bank 2's
+Layout version 3 (version 2's words; the iir starts at power-on): the words carry ``order``, ``n_banks`` and bank 2's
 exponents and mantissas (words 47..71; the C header comments bank 2's coefficients in deg/h, the
 JSON adds ``coef_quantized_mode2_dph``).  A version-1 TABLE (``.memh``/``.bin`` of an older
-export) is read as combine_first with one bank and written as version 2.
+export) is read as combine_first with one bank and written as version 3; a version-1/2 table with
+the iir rate estimator is refused (quantize its model again).
 
 TABLE is a table.json (``hdrg quantize``), a binary ``.bin`` or a ``.memh``/``.hex``/``.mem``
 file; it is checked (magic, version, length, CRC, field ranges, the JSON's field types) before

@@ -36,7 +36,7 @@ firmware_ref/FORMATS.md):
   input word, a time constant, ramp or period out of range, a rate term of another estimator or
   column, a span below one word LSB.  The k7 mantissa and exponent are quantized as before.
 
-* **two banks** (a ``regress_first`` mode-reversal model, /work/spec-rtr.md; table order 1): bank 1
+* **two banks** (a ``regress_first`` mode-reversal model, docs/REGRESS_THEN_REVERSE.md; table order 1): bank 1
   (``coef``, mode 1 and every non-mode-2 sample) and bank 2 (``coef_mode2``) are quantized
   **each with its own exponents** (the rule above, per bank: a bank with small coefficients keeps
   its resolution whatever the other's size; the firmware reads the bank's exponents with its

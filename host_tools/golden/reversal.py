@@ -13,7 +13,7 @@ equals  Omega + B_E + s * B_D:  averaging a mode-1 and a mode-2 value cancels B_
 A log is either FTR (every sample mode 0: output = rate, always valid, s = +1) or mode reversal
 (modes 1, 2, 3 only; a mix with mode 0 is an error).
 
-Orders (``ReversalConfig.order``; the spec of issue #10, /work/spec-rtr.md):
+Orders (``ReversalConfig.order``; docs/REGRESS_THEN_REVERSE.md):
 
 * ``"combine_first"`` (legacy, model files of version 1): the value combined at sample i is
   x[i] = c[i]; the combined output minus one bias bank B(u, v, z) is the compensated output
