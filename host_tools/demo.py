@@ -41,7 +41,7 @@ def run_demo(out_dir: str = "hdrg-demo", duration_s: float = 6 * 3600.0) -> None
     compensation of the held-out run, a report and the closed-loop diagnosis, all written below
     ``out_dir`` (created); progress and tables are printed to stdout.  Returns nothing."""
     from host_tools.fitting.fit_pipeline import fit_default
-    from host_tools.fitting.report import _table, report, summary_lines
+    from host_tools.fitting.report import markdown_table, report, summary_lines
 
     os.makedirs(out_dir, exist_ok=True)
     with warnings.catch_warnings():
@@ -73,7 +73,7 @@ def run_demo(out_dir: str = "hdrg-demo", duration_s: float = 6 * 3600.0) -> None
         print("4. report on the held-out run: mode reversal alone (no model) / flight-stack baseline / the model")
         doc = report([test], model, os.path.join(out_dir, "report"), train_logs=[train], model_name="model.json",
                      notes=[DEFAULTS_NOTE])
-        print(_table(doc["rows"]))
+        print(markdown_table(doc["rows"]))
         for line in summary_lines(doc):
             print(f"   {line}")
         print(f"   figures: {', '.join(doc.get('figures', []))} in {os.path.join(out_dir, 'report')}")

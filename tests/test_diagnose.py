@@ -390,12 +390,12 @@ def test_confirmed_steps_lower_the_held_out_error(results):
 
 
 def test_noise_model_recovers_white_and_flicker_and_ignores_a_slow_effect():
-    from host_tools.fitting.diagnose import _noise_series, noise_model
+    from host_tools.fitting.diagnose import noise_series, noise_model
     rng = np.random.default_rng(5)
     n = 40000
     t = np.arange(n, dtype=float)
     ref = {"_psd": (2 * 0.25, 0.05 ** 2 / (2 * np.log(2)), 0.0), "fs": 1.0}     # white 0.5, flicker 0.05
-    noise = _noise_series(ref, n, 1, rng)[:, 0]
+    noise = noise_series(ref, n, 1, rng)[:, 0]
     nm = noise_model(noise, t, np.ones(n, bool), 1.0)
     assert nm["white_dph"] == pytest.approx(0.5, rel=0.1)
     assert nm["flicker_dph"] == pytest.approx(0.05, rel=0.5)
@@ -405,7 +405,7 @@ def test_noise_model_recovers_white_and_flicker_and_ignores_a_slow_effect():
     assert nm2["white_dph"] == pytest.approx(0.5, rel=0.1)
     assert nm2["flicker_dph"] < 0.1 and nm2["rw_dph_per_sqrt_s"] == 0.0
     # the surrogate of that noise model stays at the noise level at long averaging times
-    sur = _noise_series(nm2, n, 1, rng)[:, 0]
+    sur = noise_series(nm2, n, 1, rng)[:, 0]
     assert np.std(sur.reshape(-1, 1000).mean(axis=1)) < 0.2 < np.std(slow.reshape(-1, 1000).mean(axis=1))
 
 
@@ -420,11 +420,11 @@ def test_combiner_lines_are_the_reversal_cycle_and_its_chamber_sidebands():
 
 
 def test_the_structural_fix_offered_for_a_combiner_line_is_not_the_one_in_use():
-    from host_tools.fitting.diagnose_noise import _artifact_entry
+    from host_tools.fitting.diagnose_noise import artifact_entry
     line = {"period_s": 300.0, "amp_dph": 0.1, "ratio": 9.0}
     cl = {"reversal_period_s": 300.0, "chamber_period_s": 2400.0, "combiner": "pair", "order": "combine_first"}
-    assert "regress-then-reverse (the bias model" in _artifact_entry(line, cl, "x")["structural_fix"]
-    fix = _artifact_entry(line, {**cl, "order": "regress_first"}, "x")["structural_fix"]
+    assert "regress-then-reverse (the bias model" in artifact_entry(line, cl, "x")["structural_fix"]
+    fix = artifact_entry(line, {**cl, "order": "regress_first"}, "x")["structural_fix"]
     assert "already in use (residual combiner pair)" in fix and "(none or trend;" in fix
 
 
@@ -505,7 +505,7 @@ def test_a_step_that_shifts_a_held_out_leg_is_not_confirmed():
     """Confirmation includes the rms WITH the mean offset per held-out run and leg: a step whose
     std drops but which moves one leg by tens of deg/h (tofupilot x heat->cool) is refused; the
     same std drop without the shift is confirmed."""
-    from host_tools.fitting.diagnose import _stats_one, confirmed_on_holdout, leg_rms
+    from host_tools.fitting.diagnose import stats_one, confirmed_on_holdout, leg_rms
     rng = np.random.default_rng(3)
     n = 4000
     t = np.arange(n, dtype=float)
@@ -515,7 +515,7 @@ def test_a_step_that_shifts_a_held_out_leg_is_not_confirmed():
     white = rng.standard_normal(n)
 
     def stats(y):
-        one = _stats_one(y, t, valid)
+        one = stats_one(y, t, valid)
         return {"runs": [{**one, "rms_legs_dph": leg_rms(y, valid, legs)}], **one}
 
     before = stats(slow + white)
@@ -540,7 +540,7 @@ def test_one_held_out_metric_compares_two_models_on_their_common_samples():
     """diagnose.step_errors is the held-out error that confirms a step and that bench_loop scores:
     with a long rate warm-up on one side, both models are judged on the samples valid under both
     (a step used to be confirmed on the common samples and scored by the bench on each model's own)."""
-    from host_tools.fitting.diagnose import _score, _stats_one, base_model, base_options, error_stats, step_errors
+    from host_tools.fitting.diagnose import heldout_score, stats_one, base_model, base_options, error_stats, step_errors
     from host_tools.fitting.fit import fit_logs
     from host_tools.golden.compensate import fit_config_from_logs
     train, hold = world(1), world(2)
@@ -551,9 +551,9 @@ def test_one_held_out_metric_compares_two_models_on_their_common_samples():
     out_d, out_s = compensate(hold, diff), compensate(hold, slow)
     both = (np.asarray(out_d["valid"]) == 1) & (np.asarray(out_s["valid"]) == 1)
     assert both.sum() < (np.asarray(out_d["valid"]) == 1).sum()         # the warm-up hides samples
-    assert b["std100_dph"] == pytest.approx(_stats_one(out_d.rate_dph, hold.t_s, both)["std100_dph"], rel=1e-12)
-    assert a["std100_dph"] == pytest.approx(_stats_one(out_s.rate_dph, hold.t_s, both)["std100_dph"], rel=1e-12)
-    assert _score(b)[0] != _score(error_stats([hold], diff))[0]
+    assert b["std100_dph"] == pytest.approx(stats_one(out_d.rate_dph, hold.t_s, both)["std100_dph"], rel=1e-12)
+    assert a["std100_dph"] == pytest.approx(stats_one(out_s.rate_dph, hold.t_s, both)["std100_dph"], rel=1e-12)
+    assert heldout_score(b)[0] != heldout_score(error_stats([hold], diff))[0]
 
 
 def test_steps_keep_the_rate_estimator_hdrg_fit_chose():

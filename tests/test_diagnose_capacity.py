@@ -17,7 +17,7 @@ import pytest
 from firmware_ref.formats import AUX_MAX_TERMS
 from host_tools.fitting import effects
 from host_tools.fitting.diagnose import diagnose
-from host_tools.fitting.diagnose_scan import _poly_terms, _scan
+from host_tools.fitting.diagnose_scan import poly_terms, scan_candidates
 from host_tools.fitting.fit_pipeline import fit_default
 from host_tools.fixed.quantize import quantize
 from host_tools.simulation.sim_foreign import simulate_foreign
@@ -34,13 +34,13 @@ def ftr_run():
 
 def _taken(n):
     """n accepted one-term generators (turn-on decays of different taus)."""
-    return [effects._term("decay_on", "turn_on", tau_s=100.0 * (k + 1)) for k in range(n)]
+    return [effects.effect_term("decay_on", "turn_on", tau_s=100.0 * (k + 1)) for k in range(n)]
 
 
 @pytest.mark.parametrize("taken", [AUX_MAX_TERMS - 1, AUX_MAX_TERMS])
 def test_a_candidate_that_does_not_fit_the_k7_sum_is_not_offered(ftr_run, taken):
     tr, model = ftr_run
-    scan = _scan([tr], model.config, model, _poly_terms(model), _taken(taken), np.random.default_rng(0), 5,
+    scan = scan_candidates([tr], model.config, model, poly_terms(model), _taken(taken), np.random.default_rng(0), 5,
                  0.02, 16, 4, None, False)
     room = AUX_MAX_TERMS - taken
     offered = effects.library([tr], model.config)
@@ -73,12 +73,12 @@ def test_a_reverted_period_excludes_its_neighbourhood_only(monkeypatch):
     not confirmed; when that excluded the whole family the true line was never tried."""
     import host_tools.fitting.diagnose_scan as ds
     assert ds.PERIOD_EXCLUDE_RATIO == 2 ** 0.5
-    key = ds._step_key("periodic", {"period_s": 4033.5})
+    key = ds.step_key("periodic", {"period_s": 4033.5})
     assert key.startswith("periodic@")
     excluded = frozenset({key})
     assert ds._excluded(effects.periodic(4033.5), excluded)
     assert ds._excluded(effects.periodic(3000.0), excluded)       # within 2^(1/2)
     assert not ds._excluded(effects.periodic(1534.4), excluded)   # another line may still be tried
     monkeypatch.setattr(ds, "PERIOD_EXCLUDE_RATIO", None)
-    assert ds._step_key("periodic", {"period_s": 4033.5}) == "periodic"
+    assert ds.step_key("periodic", {"period_s": 4033.5}) == "periodic"
     assert ds._excluded(effects.periodic(1534.4), frozenset({"periodic"}))

@@ -24,7 +24,7 @@ from firmware_ref.table import FIELD_INDEX, Table, TableError, encode_aux
 from host_tools.vectors.builders import make_model, with_aux
 from host_tools.golden import compensate as hc
 from host_tools.golden import runlog as rl
-from host_tools.fitting.diagnose import STAT_KEYS, _stats_one, diagnose
+from host_tools.fitting.diagnose import STAT_KEYS, stats_one, diagnose
 from host_tools.fitting.fit import fit_logs
 from host_tools.fixed.quantize import QuantizeError, quantize, read_table
 from host_tools.fixed.quantize_parts import aux_channel_fracs
@@ -345,7 +345,7 @@ def test_acceptance_effect_found_exported_quantized_and_run_in_fixed_point(tmp_p
     # diagnose passes the reversal as a dict without "order", which reads as combine_first)
     cfg0 = hc.fit_config_from_logs(train, reversal=ReversalConfig("trend", settle_s=0.0, order="combine_first"))
     base, _ = fit_logs(train, cfg0, "all", drop_unidentifiable=True)
-    before_float = _stats_one(*_run(hc.compensate(hold, base), hold))
+    before_float = stats_one(*_run(hc.compensate(hold, base), hold))
     assert before_float == pytest.approx({k: rep["baseline"]["holdout"][k] for k in STAT_KEYS}, rel=1e-12)
     rows = {}
     for name, model in (("before", base), ("after", final)):
@@ -364,8 +364,8 @@ def test_acceptance_effect_found_exported_quantized_and_run_in_fixed_point(tmp_p
         np.testing.assert_array_equal(fixed.rate_dph, hc.blank_invalid(compensate_log(hold, model)).rate_dph)
         gold = hc.compensate(dequantized_log(hold, model), model)
         flt = hc.compensate(hold, model)
-        rows[name] = {"float": _stats_one(*_run(flt, hold)), "golden_deq": _stats_one(*_run(gold, hold)),
-                      "fixed": _stats_one(*_run(fixed, hold)), "bound": q.report["bound_dph"]["out"],
+        rows[name] = {"float": stats_one(*_run(flt, hold)), "golden_deq": stats_one(*_run(gold, hold)),
+                      "fixed": stats_one(*_run(fixed, hold)), "bound": q.report["bound_dph"]["out"],
                       "fixed_float_max": float(np.nanmax(np.abs(fixed.rate_dph - flt.rate_dph))),    # NaN: not valid
                       "fixed_golden_max": float(np.nanmax(np.abs(fixed.rate_dph - gold.rate_dph)))}
     capsys.readouterr()

@@ -161,7 +161,7 @@ def test_table_json_with_a_wrong_type_in_a_float_original_is_refused(tmp_path, m
 
 def test_markdown_cells_and_notes_are_escaped(tmp_path, model_file, capsys):
     """Case: run names with `|`, HTML or newlines injected rows and markup into report.md."""
-    from host_tools.fitting.report import _table, md_text
+    from host_tools.fitting.report import markdown_table, md_text
     from host_tools.golden import runlog as rl
     from host_tools.golden.model import BiasModel
     from host_tools.fitting.report import report
@@ -170,7 +170,7 @@ def test_markdown_cells_and_notes_are_escaped(tmp_path, model_file, capsys):
     assert "\n" not in md_text(name) and "<" not in md_text(name)
     assert md_text("a|b") == "a\\|b" and md_text("x\\|y") == "x\\\\\\|y" and md_text("model (8 of 17 terms)") == \
         "model (8 of 17 terms)"
-    table = _table([{"run": name, "output": "o|p", "std1_dph": 1.0, "pp1_dph": 2.0, "std100_dph": None,
+    table = markdown_table([{"run": name, "output": "o|p", "std1_dph": 1.0, "pp1_dph": 2.0, "std100_dph": None,
                      "pp100_dph": None}])
     lines = table.splitlines()
     assert len(lines) == 3
@@ -543,7 +543,7 @@ def manifest_text():
 @FUZZ
 @given(data=st.data())
 def test_fuzz_manifest_reader(tmp_path, manifest_text, data):
-    from host_tools.vectors.build import _set_order
+    from host_tools.vectors.build import set_order
     from host_tools.vectors.files import read_manifest
     from host_tools.vectors.spec import VectorsError
     text = data.draw(hostile_texts(manifest_text))
@@ -553,7 +553,7 @@ def test_fuzz_manifest_reader(tmp_path, manifest_text, data):
     except VectorsError as exc:
         assert str(exc).startswith(str(tmp_path / "manifest.json"))
         return
-    for name in _set_order(m):                      # what check-impl and verify read next
+    for name in set_order(m):                      # what check-impl and verify read next
         meta = m["sets"][name]
         for case in meta.get("cases", []):
             if meta.get("tables"):

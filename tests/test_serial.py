@@ -433,7 +433,7 @@ def test_upload_round_trip_applies_from_the_next_sample(run):
 
 
 def _raw_table_request(link, data):
-    fr = link.request(SL.T_TABLE, data, lambda f, s: SL._is_reply_to(f, SL.T_TABLE, s), 3.0)
+    fr = link.request(SL.T_TABLE, data, lambda f, s: SL.is_reply_to(f, SL.T_TABLE, s), 3.0)
     assert fr is not None
     return fr.type, SL.Reply.unpack(fr.payload)
 
@@ -475,7 +475,7 @@ def test_device_refuses_bad_crc_and_out_of_range_tables(run):
         reply = None
         while reply is None and time.monotonic() < deadline:
             for fr in link.poll():
-                if SL._is_reply_to(fr, SL.T_READ_TABLE, seq):
+                if SL.is_reply_to(fr, SL.T_READ_TABLE, seq):
                     reply = SL.Reply.unpack(fr.payload)
         assert reply is not None and reply.code == SL.R_VERSION and "2.0" in reply.text
 

@@ -245,7 +245,7 @@ def test_verify_reports_first_mismatch_with_inputs(tmp_path):
     assert f"F={fields[2]}" in first and f"R={fields[4]}" in first and "bias: file" in first
     # a consistent forgery (manifest hash updated) is still caught by the recomputation
     m = json.loads((d / "manifest.json").read_text())
-    m["files"]["sequencer.csv"]["sha256"] = V.files._sha256((d / "sequencer.csv").read_bytes())
+    m["files"]["sequencer.csv"]["sha256"] = V.files.sha256_of((d / "sequencer.csv").read_bytes())
     m["files"]["sequencer.csv"]["bytes"] = len((d / "sequencer.csv").read_bytes())
     (d / "manifest.json").write_text(json.dumps(m))
     problems = V.verify(d, ["sequencer"], log=quiet)

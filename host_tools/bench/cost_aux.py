@@ -15,7 +15,7 @@ from pathlib import Path
 
 from host_tools import vectors as V
 from host_tools.bench.cost_tools import CostError, run_tool, need
-from host_tools.bench.cost_fpga import HDL, _offsets_file, _tb_result, record_positions, resources, yosys_cells
+from host_tools.bench.cost_fpga import HDL, offsets_file, tb_result, record_positions, resources, yosys_cells
 
 AUX_SOURCES = (HDL / "tb_aux.v", HDL / "hdrg_aux.v")
 SET = "aux"
@@ -26,7 +26,7 @@ def aux_params(work: Path, n_vec: int | None = None) -> tuple:
     meta = V.read_manifest(V.DEFAULT_DIR)["sets"][SET]
     rec, pos = record_positions(meta)
     work.mkdir(parents=True, exist_ok=True)
-    off_file, n_cases, n_words = _offsets_file(meta, work, SET, per_case=True)
+    off_file, n_cases, n_words = offsets_file(meta, work, SET, per_case=True)
     params = {"REC": rec, "P_CASE": pos["case"], "P_F": pos["F"], "P_T": pos["T"], "P_RESTART": pos["RESTART"],
               "P_Z": pos["Z"], "P_K": pos["K"], "P_A0": pos["A0"], "P_A1": pos["A1"], "P_A2": pos["A2"],
               "P_A3": pos["A3"], "P_MODE": pos["mode"], "P_ZOUT": pos["z"], "P_S": pos["s"], "P_FLAGS": pos["flags"]}
@@ -64,7 +64,7 @@ def rtl_aux_check(work: Path, simulator: str = "icarus", defines=(), n_vec: int 
         out = run_tool([obj / "Vtb_aux", *plus], what="verilator run", timeout=1800)
     else:
         raise CostError(f"simulator {simulator!r}: icarus or verilator")
-    return {**_tb_result(out, f"{simulator} aux"), **_cycles(out)}
+    return {**tb_result(out, f"{simulator} aux"), **_cycles(out)}
 
 
 def lint_aux(op_cycles: int = 2) -> str:

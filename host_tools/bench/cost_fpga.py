@@ -44,7 +44,7 @@ def _evaluator_meta():
     return meta, len(meta["tables"])
 
 
-def _tb_result(out: str, what: str) -> dict:
+def tb_result(out: str, what: str) -> dict:
     m = re.search(r"^RESULT vectors=(\d+) mismatches=(\d+) cycles=(-?\d+)$", out, re.M)
     if not m or "ERROR" in out:
         raise CostError(f"{what}: no RESULT line:\n{out[-1500:]}")
@@ -61,7 +61,7 @@ def record_positions(meta: dict) -> tuple:
     return rec, pos
 
 
-def _offsets_file(meta: dict, work: Path, name: str, per_case: bool) -> tuple:
+def offsets_file(meta: dict, work: Path, name: str, per_case: bool) -> tuple:
     """A file of table start words (one per table, or per case: the case's table) and the number of
     table words."""
     n_words = len((V.DEFAULT_DIR / meta["tables_mem"]).read_text().split())
@@ -77,7 +77,7 @@ def _eval_tb_args(work: Path) -> tuple:
     meta = V.read_manifest(V.DEFAULT_DIR)["sets"]["evaluator"]
     rec, pos = record_positions(meta)
     work.mkdir(parents=True, exist_ok=True)
-    off, n_tab, n_words = _offsets_file(meta, work, "evaluator", per_case=False)
+    off, n_tab, n_words = offsets_file(meta, work, "evaluator", per_case=False)
     params = {"REC": rec, "P_CASE": pos["case"], "P_U": pos["u"], "P_V": pos["v"], "P_Z": pos["z"], "P_B": pos["b"],
               "P_ZC": pos["zclamped"], "HAS_BANK": int("bank" in pos), "P_BANK": pos.get("bank", 0)}
     plus = [f"+vectors={V.DEFAULT_DIR / meta['mem']}", f"+tables={V.DEFAULT_DIR / meta['tables_mem']}",
@@ -92,7 +92,7 @@ def rtl_check_icarus(work: Path, defines=()) -> dict:
     run_tool([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines),
           *(f"-Ptb_eval_tm.{k}={v}" for k, v in params.items()), "-o", exe, *TM_SOURCES], what="iverilog")
     out = run_tool([need("vvp"), "-n", exe, *plus], what="vvp", timeout=900)
-    return _tb_result(out, "icarus")
+    return tb_result(out, "icarus")
 
 
 def rtl_check_verilator(work: Path) -> dict:
@@ -102,7 +102,7 @@ def rtl_check_verilator(work: Path) -> dict:
     run_tool([need("verilator"), "--binary", "-j", "0", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_eval_tm",
           *(f"-G{k}={v}" for k, v in params.items()), "-Mdir", obj, *TM_SOURCES], what="verilator", timeout=900)
     out = run_tool([obj / "Vtb_eval_tm", *plus], what="verilator run", timeout=900)
-    return _tb_result(out, "verilator")
+    return tb_result(out, "verilator")
 
 
 def yosys_cells(stat: str) -> dict:

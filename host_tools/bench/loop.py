@@ -64,9 +64,9 @@ import numpy as np
 from pathlib import Path
 
 from host_tools.atomic import atomic_open, atomic_path
-from host_tools.fitting.diagnose_scan import _poly_terms, refit_with
-from host_tools.fitting.effects import _term, training_range
-from host_tools.fitting.diagnose import _score, base_model, base_options, diagnose, error_stats
+from host_tools.fitting.diagnose_scan import poly_terms, refit_with
+from host_tools.fitting.effects import effect_term, training_range
+from host_tools.fitting.diagnose import heldout_score, base_model, base_options, diagnose, error_stats
 from host_tools.fitting.diagnose_report import is_minor
 from host_tools.simulation.sim_foreign import EFFECTS, EFFECT_KINDS, foreign_device, simulate_foreign
 
@@ -121,7 +121,7 @@ def _base_model(train):
 
 
 def _base_error(train, hold) -> float:
-    return _score(error_stats([hold], _base_model(train)))[0]
+    return heldout_score(error_stats([hold], _base_model(train)))[0]
 
 
 def _oracle_fit_error(base, train, hold, ctrain, chold) -> float:
@@ -135,9 +135,9 @@ def _oracle_fit_error(base, train, hold, ctrain, chold) -> float:
     tr = [t.with_columns(aux_truth=t.rate_dph - c.rate_dph) for t, c in zip(_logs(train), _logs(ctrain))]
     ho = hold.with_columns(aux_truth=hold.rate_dph - chold.rate_dph)
     ref, span = training_range(tr, "aux_truth")
-    truth = _term("input", "truth", column="aux_truth", ref=ref, span=span, sign=bool(tr[0].reversal))
-    oracle, _ = refit_with(tr, base.config, _poly_terms(base), [truth])
-    return _score(error_stats([ho], oracle))[0]
+    truth = effect_term("input", "truth", column="aux_truth", ref=ref, span=span, sign=bool(tr[0].reversal))
+    oracle, _ = refit_with(tr, base.config, poly_terms(base), [truth])
+    return heldout_score(error_stats([ho], oracle))[0]
 
 
 def _training_runs(dev, rev, duration_s, second_train, **effect) -> list:
@@ -164,20 +164,20 @@ def run_one(spec: dict, duration_s=None, n_surrogates=None, second_train=None) -
         rep, model = diagnose(train, [hold], plots=False, **kw)
         third = simulate_foreign(dev, 3.0, rev, 2, 2, duration_s=duration_s, effect=eff, strength=st or 1.0)
         base = _base_model(train)
-        base3 = _score(error_stats([third], base))[0]
-        final3 = _score(error_stats([third], model))[0]
+        base3 = heldout_score(error_stats([third], base))[0]
+        final3 = heldout_score(error_stats([third], model))[0]
         ratio = fit_ratio = None
         if eff is not None:
             ctrain = _training_runs(dev, rev, duration_s, second_train)
             chold = simulate_foreign(dev, 2.0, rev, 1, 1, duration_s=duration_s)
-            ratio = _score(rep["baseline"]["holdout"])[0] / _base_error(ctrain, chold)
-            fit_ratio = _score(rep["baseline"]["holdout"])[0] / _oracle_fit_error(base, train, hold, ctrain, chold)
+            ratio = heldout_score(rep["baseline"]["holdout"])[0] / _base_error(ctrain, chold)
+            fit_ratio = heldout_score(rep["baseline"]["holdout"])[0] / _oracle_fit_error(base, train, hold, ctrain, chold)
     steps = [{"effect": it["effect"], "params": it["params"], "kind": it["kind"], "confirmed": it["confirmed"],
               "material": it["material"],
               "before": it["heldout_error"]["before"], "after": it["heldout_error"]["after"]}
              for it in rep["iterations"]]
     return {**spec, "verdict": rep["verdict"], "steps": steps,
-            "base": _score(rep["baseline"]["holdout"])[0], "final": _score(rep["final"])[0],
+            "base": heldout_score(rep["baseline"]["holdout"])[0], "final": heldout_score(rep["final"])[0],
             "third_base": base3, "third_final": final3,
             "effect_ratio": ratio, "oracle_fit_ratio": fit_ratio,
             "named": bool(eff and any(_names_effect(s) and _named(eff, s["effect"]) for s in steps)),

@@ -5,7 +5,7 @@ import argparse
 import os
 
 from host_tools.cli.options import regular_input
-from host_tools.fitting.report import REPORT_FILES, _table, report, summary_lines
+from host_tools.fitting.report import REPORT_FILES, markdown_table, report, summary_lines
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -45,7 +45,7 @@ def run(args) -> int:
     train_logs = [runlog.read(p) for p in train] if train else None
     doc = report(logs, model, args.out, train_logs, plots=not args.no_plots, notes=notes,
                  model_name=os.path.basename(args.model))
-    print(_table(doc["rows"]))
+    print(markdown_table(doc["rows"]))
     for line in summary_lines(doc):
         print(line)
     for note in doc["notes"]:

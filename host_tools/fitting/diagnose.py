@@ -78,7 +78,7 @@ Procedure (:func:`diagnose`)
    STRUCT_TAU_FRACTION of the run; for per-mode banks the exchange settling: a decay after each
    exchange with ONE coefficient for both banks, i.e. a transient that follows the mode sign like
    the rate, tau <= 2 x the settle window), then for mode-reversal logs the order/combiner
-   (:func:`_order_step`: regress_first with each other combiner, whole-model CV), confirmed the
+   (:func:`order_step`: regress_first with each other combiner, whole-model CV), confirmed the
    same way.  Beside the structure phase 1 also scores the drift in time (``COMPETE_FAMILIES``:
    aging, a ramp or a decay longer than any turn-on), which a lag of the proxy of thousands of
    seconds mimics; it is taken there, as an effect step, only when it leaves at most
@@ -127,17 +127,17 @@ from dataclasses import replace
 import numpy as np
 
 from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE, CONFIRM_TOL_1S, CONFIRM_TOL_RMS,  # noqa: F401
-                                         EFFECT_RULE, HELDOUT_METRIC, REPORT_TAUS, STAT_KEYS, _clean, fmt_value, _residuals, _score,
-                                         _stats_one, _step_metric, confirmed_on_holdout, error_stats, leg_rms,
+                                         EFFECT_RULE, HELDOUT_METRIC, REPORT_TAUS, STAT_KEYS, clean_stats, fmt_value, residuals, heldout_score,
+                                         stats_one, step_metric, confirmed_on_holdout, error_stats, leg_rms,
                                          material_on_holdout, noise_floor, offsets_hold, step_errors)
-from host_tools.fitting.diagnose_noise import (_allan_bridged, _noise_series, artifact_of, characterize,  # noqa: F401
+from host_tools.fitting.diagnose_noise import (allan_bridged, noise_series, artifact_of, characterize,  # noqa: F401
                                        combiner_lines, noise_model, spectral_lines, surrogates)
-from host_tools.fitting.diagnose_report import (_verdict_detail, extrapolation, generalization, is_minor, kept_step_notes,
+from host_tools.fitting.diagnose_report import (verdict_detail_text, extrapolation, generalization, is_minor, kept_step_notes,
                                                 line_or_drift, not_scanned, several_runs_caveat, verdict_of, write_report)
 from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, DRIFT_MARGIN, G_MIN, MAX_ITER, N_SURROGATES,  # noqa: F401
-                                      NULL_QUANTILE, PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, TRIES_PER_STEP, _Accepted,
-                                      _config, _poly_terms, _scan, _step_key, kind_of, refit_with, rivals)
-from host_tools.fitting.diagnose_structure import _order_step, _settle_step
+                                      NULL_QUANTILE, PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, TRIES_PER_STEP, Accepted,
+                                      loop_config, poly_terms, scan_candidates, step_key, kind_of, refit_with, rivals)
+from host_tools.fitting.diagnose_structure import order_step, settle_step
 from host_tools.fitting.fit import check_cv_blocks, fit_logs
 from host_tools.fitting.fit_pipeline import fit_default
 from host_tools.golden.checks import check_distinct_runs, same_runs
@@ -191,7 +191,7 @@ def base_model(train, opts, terms=None):
         model = fit_default(train, terms, drop_unidentifiable=True, lag_block="off", rate_prefer=None, run_offsets="off",
                             **kw)[0]
         return model, model.config
-    cfg = _config(train, opts)
+    cfg = loop_config(train, opts)
     return fit_logs(train, cfg, terms, drop_unidentifiable=True)[0], cfg
 
 
@@ -210,8 +210,8 @@ def cubic_floor(train, hold, model) -> dict:
         return {"error": "no temp_c column: no flight-stack cubic to compare with"}
     try:
         cubic = fit_baseline(train, model.config)
-        c = _score(error_stats(hold, cubic, model))[0]
-        m = _score(error_stats(hold, model, cubic))[0]
+        c = heldout_score(error_stats(hold, cubic, model))[0]
+        m = heldout_score(error_stats(hold, model, cubic))[0]
     except ValueError as exc:
         return {"error": str(exc)}
     replaced = bool(c is not None and m is not None and m > FLOOR_RATIO * c)
@@ -259,10 +259,10 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
         # from opts, which must not fall back to DEFAULT_RATE behind the step's back
         r = cfg.rate
         opts = {**opts, "rate_estimator": r.estimator, "n": r.n, "shift": r.shift}
-    poly = _poly_terms(model)
+    poly = poly_terms(model)
     evals = hold if hold else train
     rng = np.random.default_rng(seed)
-    accepted: list[_Accepted] = []
+    accepted: list[Accepted] = []
     gen_terms: list = []
     rate_choice = None
     iterations = []
@@ -305,13 +305,13 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
             # runs from 3/26 to 8/26: the clean devices' own dynamics then win as effects.  Not kept.)
             compete = COMPETE and phase == "structure" and "effect" in phases
             also = frozenset(COMPETE_FAMILIES) if phase == "structure" and "effect" in phases else frozenset()
-            scan = _scan(train, cfg, model, poly, gen_terms, rng, n_surrogates, g_min, cv_blocks, cv_folds,
+            scan = scan_candidates(train, cfg, model, poly, gen_terms, rng, n_surrogates, g_min, cv_blocks, cv_folds,
                          families, rate_alternatives and rate_choice is None, frozenset(excluded),
                          phase=None if compete else phase, also=also)
             if characterization is None:
                 characterization = {"train": scan["characterization"],
                                     "holdout": [characterize(log, r, pr.valid, cfg.rate.fs, pr.v)
-                                                for log, (pr, r) in zip(hold, _residuals(hold, model))],
+                                                for log, (pr, r) in zip(hold, residuals(hold, model))],
                                     "noise_models": [jsonable(nm, skip_private=True) if nm else None
                                                      for nm in scan["noise_models"]]}
                 artifacts = {"lines": scan["artifacts"], "combiner_lines": scan["combiner_lines"]}
@@ -334,20 +334,20 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
             if best["family"] == "rate_estimator":
                 bp = best["params"]
                 rate_choice = {"estimator": bp["estimator"], "n": bp.get("n", cfg.rate.n), "shift": bp.get("shift", cfg.rate.shift)}
-                acc = _Accepted("rate_estimator", dict(best["params"]), [], rate_choice)
+                acc = Accepted("rate_estimator", dict(best["params"]), [], rate_choice)
             else:
-                acc = _Accepted(best["family"], dict(best["params"]), [dict(t) for t in best["terms"]])
+                acc = Accepted(best["family"], dict(best["params"]), [dict(t) for t in best["terms"]])
                 gen_terms = gen_terms + acc.terms
-            model, cfg = refit_with(train, _config(train, opts, rate=rate_choice), poly, gen_terms)
+            model, cfg = refit_with(train, loop_config(train, opts, rate=rate_choice), poly, gen_terms)
             after = error_stats(evals, model)
             cb, ca = step_errors(evals, before_model, model)     # the one metric (HELDOUT_METRIC)
             confirmed = confirmed_on_holdout(cb, ca) if hold else None
             material = (confirmed and material_on_holdout(cb, ca)) if hold else None
             entry = {"effect": acc.family, "params": acc.params, "kind": kind_of(acc.family, acc.params),
-                     "before": _clean(before), "after": _clean(after), "confirmed": confirmed, "material": material,
-                     "heldout_error": _step_metric(cb, ca),
-                     "train_before": _clean(error_stats(train, before_model)) if hold else _clean(before),
-                     "train_after": _clean(error_stats(train, model)) if hold else _clean(after),
+                     "before": clean_stats(before), "after": clean_stats(after), "confirmed": confirmed, "material": material,
+                     "heldout_error": step_metric(cb, ca),
+                     "train_before": clean_stats(error_stats(train, before_model)) if hold else clean_stats(before),
+                     "train_after": clean_stats(error_stats(train, model)) if hold else clean_stats(after),
                      "cv_gain": best["gain"], "threshold": scan["threshold"], "refined_from": best["coarse"],
                      "folds_improved": best["folds_improved"], "folds": best["folds"],
                      "ranking": scan["ranking"], "null_max": scan["null_max"],
@@ -361,7 +361,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                 say(f"iteration {number}: {acc.family} NOT confirmed on the held-out runs ({_metric_text(entry)}): reverted")
                 entry["status"] = "not confirmed on held-out: reverted (the model stays the last confirmed one)"
                 model, cfg, gen_terms, rate_choice = before_model, before_cfg, before_gen, before_rate
-                excluded.add(_step_key(acc.family, acc.params))
+                excluded.add(step_key(acc.family, acc.params))
             else:
                 entry["status"] = "confirmed on held-out" if confirmed else "accepted (no held-out runs)"
                 if is_minor(entry):
@@ -381,7 +381,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
         if phase == "structure" and rev and max_iter > 0:
             say("structural candidates: regress-then-reverse (per-mode banks) with each combiner, and the "
                 "settling window after each exchange, by CV")
-            for step in (_order_step, _settle_step):
+            for step in (order_step, settle_step):
                 entry, alt_model = step(train, hold, evals, cfg, model, cv_blocks, cv_folds)
                 if entry is not None and "skipped" in entry:
                     report.setdefault("structural_skipped", []).append(entry["skipped"])
@@ -392,7 +392,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                         model = alt_model
                         cfg = replace(cfg, reversal=alt_model.config.reversal)
                         opts = {**opts, "reversal": {**opts["reversal"], **entry["params"]}}
-                        accepted.append(_Accepted(entry["effect"], entry["params"]))
+                        accepted.append(Accepted(entry["effect"], entry["params"]))
                     say(f"iteration {len(iterations)}: structural {entry['effect']} {entry['params']}: {entry['status']}"
                         f" ({_metric_text(entry)})")
         stops[phase] = stopped
@@ -407,12 +407,12 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     final = error_stats(evals, model)
     verdict = verdict_of(iterations)
     final_train = error_stats(train, model) if hold else final
-    report.update({"iterations": iterations, "final": _clean(final), "final_runs": final["runs"],
-                   "final_train": _clean(final_train),
-                   "generalization": generalization(_score(final_train)[0], _score(final)[0]) if hold else None,
+    report.update({"iterations": iterations, "final": clean_stats(final), "final_runs": final["runs"],
+                   "final_train": clean_stats(final_train),
+                   "generalization": generalization(heldout_score(final_train)[0], heldout_score(final)[0]) if hold else None,
                    "several_runs": several_runs_caveat(len(train)),
                    "extrapolation": extrapolation(final) if hold else [],
-                   "verdict": verdict, "verdict_detail": _verdict_detail(iterations, hold), "cubic_floor": floor,
+                   "verdict": verdict, "verdict_detail": verdict_detail_text(iterations, hold), "cubic_floor": floor,
                    "artifacts": artifacts, "stopped": stopped, "characterization": characterization})
     model.fit["diagnose"] = {"effects": [] if floor and floor.get("replaced") else
                              [{"effect": a.family, "params": a.params} for a in accepted],

@@ -56,7 +56,7 @@ def leg_rms(y, valid, segments) -> list:
     return out
 
 
-def _stats_one(y, t, valid) -> dict:
+def stats_one(y, t, valid) -> dict:
     """STAT_KEYS of one output: std / pp of 1-s and 100-s averages, rms with the mean [deg/h]."""
     m = metrics.bias_metrics(y, t, valid, taus=REPORT_TAUS)
     r1, r100 = metrics.at_tau(m, 1.0), metrics.at_tau(m, 100.0)
@@ -86,12 +86,12 @@ def error_stats(logs, model: BiasModel, other: BiasModel | None = None) -> dict:
         valid = np.asarray(out["valid"]) == 1
         if other is not None:
             valid &= np.asarray(compensate(log, other)["valid"]) == 1
-        rows.append({"run": log.source, **_stats_one(out.rate_dph, log.t_s, valid),
+        rows.append({"run": log.source, **stats_one(out.rate_dph, log.t_s, valid),
                      "rms_legs_dph": leg_rms(out.rate_dph, valid, log.segments), "problems": problems(out)})
     return {**_mean_stats(rows), "runs": rows}
 
 
-def _residuals(logs, model):
+def residuals(logs, model):
     res = []
     for log in logs:
         pr = prepare(log, model)
@@ -104,7 +104,7 @@ def noise_floor(logs, model) -> dict:
     at 1 s (the 1-s std of white noise) and that / 10 (its 100-s std); None if 1 s is not an
     Allan tau."""
     vals = []
-    for log, (pr, r) in zip(logs, _residuals(logs, model)):
+    for log, (pr, r) in zip(logs, residuals(logs, model)):
         a = metrics.allan(r, log.t_s, pr.valid)
         if a["adev_1s_dph"] is not None:
             vals.append(a["adev_1s_dph"])
@@ -115,7 +115,7 @@ def noise_floor(logs, model) -> dict:
             "method": "white noise: Allan deviation of the residual at 1 s; / sqrt(100) at 100 s"}
 
 
-def _score(stats):
+def heldout_score(stats):
     """(primary, 1-s) error of error_stats: the std of 100-s averages where defined, else of 1-s."""
     return (stats["std100_dph"] if stats["std100_dph"] is not None else stats["std_dph"]), stats["std_dph"]
 
@@ -129,7 +129,7 @@ def step_errors(logs, before: BiasModel, after: BiasModel) -> tuple:
     """THE held-out error of a step (:data:`HELDOUT_METRIC`), used both to confirm a step here and
     by host_tools.bench.loop to score it: ``(stats_before, stats_after)`` of :func:`error_stats` on
     ``logs``, each restricted to the samples valid under BOTH models (a longer rate warm-up or
-    settle window must not win or lose by hiding samples); ``_score(stats)[0]`` is the number."""
+    settle window must not win or lose by hiding samples); ``heldout_score(stats)[0]`` is the number."""
     return error_stats(logs, before, after), error_stats(logs, after, before)
 
 
@@ -138,8 +138,8 @@ def confirmed_on_holdout(before, after) -> bool:
     least CONFIRM_MIN_DROP, the held-out std of 1-s averages does not rise by more than
     CONFIRM_TOL_1S (relative) and no held-out run or leg has its rms, mean offset included, raised
     by more than CONFIRM_TOL_RMS (:func:`offsets_hold`)."""
-    p0, s0 = _score(before)
-    p1, s1 = _score(after)
+    p0, s0 = heldout_score(before)
+    p1, s1 = heldout_score(after)
     if p0 is None or p1 is None:
         return False
     return bool(p1 <= p0 * (1.0 - CONFIRM_MIN_DROP)
@@ -148,8 +148,8 @@ def confirmed_on_holdout(before, after) -> bool:
 
 
 def material_on_holdout(before, after) -> bool:
-    """EFFECT_RULE: the held-out error (``_score(...)[0]``) drops by at least EFFECT_MIN_DROP."""
-    p0, p1 = _score(before)[0], _score(after)[0]
+    """EFFECT_RULE: the held-out error (``heldout_score(...)[0]``) drops by at least EFFECT_MIN_DROP."""
+    p0, p1 = heldout_score(before)[0], heldout_score(after)[0]
     return bool(p0 is not None and p1 is not None and p1 <= p0 * (1.0 - EFFECT_MIN_DROP))
 
 
@@ -174,13 +174,13 @@ def offsets_hold(before, after) -> bool:
     return True
 
 
-def _clean(stats) -> dict:
+def clean_stats(stats) -> dict:
     return {k: stats[k] for k in STAT_KEYS}
 
 
-def _step_metric(cb, ca) -> dict:
+def step_metric(cb, ca) -> dict:
     """The step's held-out error (:data:`HELDOUT_METRIC`, :func:`step_errors`) before / after [deg/h]."""
-    return {"before": _score(cb)[0], "after": _score(ca)[0], "metric": HELDOUT_METRIC}
+    return {"before": heldout_score(cb)[0], "after": heldout_score(ca)[0], "metric": HELDOUT_METRIC}
 
 
 def fmt_value(x, prec=4) -> str:

@@ -24,7 +24,7 @@ MAX_LINES = 3                # periodic candidates: at most this many lines ...
 # spectrum: continuum, lines, surrogates
 # ---------------------------------------------------------------------------------------------
 
-def _filled(resid, valid):
+def filled(resid, valid):
     """The mean-free residual on the valid rows, linearly interpolated (in row index) across the
     invalid ones (mode exchanges, warm-up; held at the ends): a gap-free series for spectra.
     Zero-filling instead would modulate the residual by the exchange pattern (spurious lines)."""
@@ -98,13 +98,13 @@ def local_continuum(power, exact_upto=256) -> np.ndarray:
 
 def spectral_lines(resid, valid, fs, max_lines=MAX_LINES, alpha=LINE_ALPHA) -> list:
     """Significant lines of a residual: periodogram (Hann window) of the mean-free residual
-    (invalid samples interpolated, :func:`_filled`)
+    (invalid samples interpolated, :func:`filled`)
     over its :func:`local_continuum`; a bin is a line when power / continuum > ln(K / alpha) (K
     bins: about alpha false alarms per spectrum) and a local maximum, with a period between 4
     samples and a third of the record.  Returns up to ``max_lines`` dicts {period_s, ratio,
     amp_dph} (strongest first; amp: the sinusoid amplitude estimate)."""
     valid = np.asarray(valid, bool)
-    r = _filled(np.asarray(resid, np.float64), valid)
+    r = filled(np.asarray(resid, np.float64), valid)
     n = len(r)
     if n < 16 or not valid.any():
         return []
@@ -169,7 +169,7 @@ def noise_model(resid, t_s, valid, fs, reversal=False) -> dict:
             "_psd": (2.0 * A, B / (2.0 * math.log(2.0)), 3.0 * C / (2.0 * math.pi ** 2))}
 
 
-def _noise_series(nm, n, count, rng) -> np.ndarray:
+def noise_series(nm, n, count, rng) -> np.ndarray:
     """``count`` Gaussian series (n, count) with the one-sided PSD ``h0 + h1 / f + h2 / f^2`` of
     the noise model ``nm`` (:func:`noise_model`), each a random window of a SURROGATE_OVERSAMPLE x
     longer series (no wrap-around: it drifts and wanders like a real record)."""
@@ -189,7 +189,7 @@ def _noise_series(nm, n, count, rng) -> np.ndarray:
     return out
 
 
-def _combined(cfg) -> bool:
+def combined_noise(cfg) -> bool:
     """The model's target is a combiner output (mode reversal, order combine_first); regress_first
     regresses the per-sample signed output (the noise is raw)."""
     return cfg.reversal is not None and cfg.reversal.order != "regress_first"
@@ -205,8 +205,8 @@ def surrogates(nm, log, cfg, count, rng, project=None):
     if count == 0 or nm is None:
         z = np.zeros((n, count))
         return z, z
-    w = _noise_series(nm, n, count, rng)
-    if _combined(cfg):
+    w = noise_series(nm, n, count, rng)
+    if combined_noise(cfg):
         from host_tools.golden.reversal import combine_values
         mode = np.asarray(log.mode, np.int64)
         ok = np.ones(n, np.bool_)
@@ -266,7 +266,7 @@ def artifact_of(period_s, cl) -> str | None:
     return None
 
 
-def _artifact_entry(line, cl, why) -> dict:
+def artifact_entry(line, cl, why) -> dict:
     if cl.get("order") == "regress_first":    # already regress-then-reverse: only the residual's combiner is left
         others = " or ".join(c for c in ("none", "pair", "trend") if c != cl["combiner"])
         fix = (f"regress-then-reverse is already in use (residual combiner {cl['combiner']}): another residual "
@@ -301,23 +301,23 @@ def _binned(x, r, bins=10):
     return out
 
 
-def _allan_bridged(resid, t_s, valid, fs=None) -> dict:
+def allan_bridged(resid, t_s, valid, fs=None) -> dict:
     """metrics.allan of the residual with its invalid samples (mode exchanges, warm-up) bridged by
-    linear interpolation (:func:`_filled`), so a mode-reversal log reaches long taus (its valid
+    linear interpolation (:func:`filled`), so a mode-reversal log reaches long taus (its valid
     stretches are at most one dwell long); time gaps still break the stretches."""
-    return metrics.allan(_filled(resid, valid), t_s, np.ones(len(resid), bool), fs)
+    return metrics.allan(filled(resid, valid), t_s, np.ones(len(resid), bool), fs)
 
 
 def characterize(log, resid, valid, fs, v=None) -> dict:
     """The residual of one run against its own noise floor (see the module doc): ``allan``
-    (:func:`_allan_bridged`: tau_s, adev_dph, white_dph = the white-noise line through the
+    (:func:`allan_bridged`: tau_s, adev_dph, white_dph = the white-noise line through the
     shortest tau, structure_taus_s = the taus where adev > 2 x white_dph), ``lines`` (:func:`spectral_lines`),
     ``dependence`` {channel: {corr, range_dph, bins}} over time_s, proxy_rate (v), mode and every
     logged channel but t_s/rate_dph, ``rms_dph``."""
     valid = np.asarray(valid, bool)
     out = {"source": log.source, "n_valid": int(valid.sum()),
            "rms_dph": float(np.std(resid[valid])) if valid.any() else None}
-    a = _allan_bridged(resid, log.t_s, valid, fs)
+    a = allan_bridged(resid, log.t_s, valid, fs)
     taus = np.asarray(a["tau_s"], np.float64)
     adev = np.asarray(a["adev_dph"], np.float64)
     white = adev[0] * np.sqrt(taus[0] / taus) if len(taus) else np.zeros(0)

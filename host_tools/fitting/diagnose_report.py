@@ -11,8 +11,8 @@ import numpy as np
 from firmware_ref.terms import K_AUX, TERM_NAMES
 from host_tools.atomic import atomic_open, atomic_path
 from host_tools.golden.compensate import prepare, residual
-from host_tools.fitting.diagnose_confirm import STAT_KEYS, fmt_value, _residuals
-from host_tools.fitting.diagnose_noise import _allan_bridged, _filled
+from host_tools.fitting.diagnose_confirm import STAT_KEYS, fmt_value, residuals
+from host_tools.fitting.diagnose_noise import allan_bridged, filled
 from host_tools.fitting.diagnose_scan import TIE_TOLERANCE
 from host_tools.golden.model import jsonable
 from host_tools.golden.regressors import generator_values
@@ -131,7 +131,7 @@ def kept_step_notes(entry) -> list:
     return notes
 
 
-def _verdict_detail(iterations, hold) -> str:
+def verdict_detail_text(iterations, hold) -> str:
     if not iterations:
         return "no candidate passed the selection rule on the training runs"
     parts = []
@@ -278,7 +278,7 @@ def _plots(k, plot_info, train, evals, out_dir) -> list:
     # residual vs the candidate's fitted contribution (training runs)
     fig, ax = plt.subplots(figsize=(6, 4.5))
     after_aux = after_model.config.aux
-    for log, (pr, r) in zip(train, _residuals(train, before_model)):
+    for log, (pr, r) in zip(train, residuals(train, before_model)):
         if best["terms"]:
             cols = np.column_stack([generator_values(log, t, after_model.config.rate.fs) for t in best["terms"]])
             weights = [t2["weight"] for t2 in after_aux.terms[-len(best["terms"]):]]
@@ -305,12 +305,12 @@ def _plots(k, plot_info, train, evals, out_dir) -> list:
     fig1, ax1 = plt.subplots(figsize=(6, 4.5))
     fig2, ax2 = plt.subplots(figsize=(6, 4.5))
     for name, m, style in (("before", before_model, "--"), ("after", after_model, "-")):
-        for log, (pr, r) in zip(evals, _residuals(evals, m)):
-            a = _allan_bridged(r, log.t_s, pr.valid)
+        for log, (pr, r) in zip(evals, residuals(evals, m)):
+            a = allan_bridged(r, log.t_s, pr.valid)
             label = f"{os.path.basename(log.source)} {name}"
             if a["tau_s"]:
                 ax1.loglog(a["tau_s"], a["adev_dph"], style, label=label)
-            g = _filled(r, pr.valid)
+            g = filled(r, pr.valid)
             nper = min(len(g), max(256, len(g) // 4))
             if nper >= 16:
                 f, p = welch(g, fs=after_model.config.rate.fs, nperseg=nper)

@@ -3,7 +3,7 @@ cross-validation engine (:class:`_Scanner`: leave-one-group-out refits of the ba
 candidate, in Gram form, for the real target and the surrogates at once; folds and held-out SSE
 from host_tools.fitting.cv), the 1-s binning of the score (:class:`_Binner`), the design of the current
 model (polynomial terms + accepted generators, per mode bank for regress_first), the rate
-estimator alternatives, the structure/effect kinds, and :func:`_scan`: every candidate scored, the
+estimator alternatives, the structure/effect kinds, and :func:`scan_candidates`: every candidate scored, the
 max-T threshold from noise-model surrogates, the selection rule and the refinement of the winner.
 Gains are fractions of the held-out residual variance of 1-s means; taus in seconds."""
 from __future__ import annotations
@@ -22,7 +22,7 @@ from host_tools.golden.compensate import fit_config_from_logs, prepare
 from host_tools.fitting.cv import fold_ids, heldout_sse
 from host_tools.fitting.diagnose_confirm import fmt_value
 from host_tools.fitting.fit import fit_logs
-from host_tools.fitting.diagnose_noise import (MAX_LINES, _artifact_entry, _combined, artifact_of, characterize,
+from host_tools.fitting.diagnose_noise import (MAX_LINES, artifact_entry, combined_noise, artifact_of, characterize,
                                        combiner_lines, noise_model, spectral_lines, surrogates)
 from host_tools.golden.regressors import AuxConfig, generator_values, regressor_matrix
 
@@ -195,14 +195,14 @@ def cv_groups(valid_masks, cv_blocks=CV_BLOCKS, cv_folds=CV_FOLDS) -> list:
 # ---------------------------------------------------------------------------------------------
 
 @dataclass
-class _Accepted:
+class Accepted:
     family: str
     params: dict
     terms: list = field(default_factory=list)      # generator terms (weight 1 placeholders)
     rate: dict | None = None                       # rate_estimator winner: {"estimator", "n"}
 
 
-def _poly_terms(model) -> tuple:
+def poly_terms(model) -> tuple:
     return tuple(k for k in model.terms if k != K_AUX)
 
 
@@ -284,7 +284,7 @@ def _rate_alternatives(train, cfg) -> list:
     return keep
 
 
-def _config(train, opts, rate=None, aux=None):
+def loop_config(train, opts, rate=None, aux=None):
     o = dict(opts)
     if rate is not None:
         o["rate_estimator"], o["n"] = rate["estimator"], rate["n"]
@@ -325,7 +325,7 @@ def phase_of(family, params) -> str:
     return "effect" if family in SCANNED_WITH_EFFECTS else kind_of(family, params)
 
 
-def _step_key(family, params) -> str:
+def step_key(family, params) -> str:
     """The name under which a reverted step is not offered again: the family; the lag block apart;
     with PERIOD_EXCLUDE_RATIO a periodic step by its period (:func:`_excluded`)."""
     if family == "periodic" and PERIOD_EXCLUDE_RATIO:
@@ -336,7 +336,7 @@ def _step_key(family, params) -> str:
 def _excluded(c, excluded) -> bool:
     """Candidate ``c`` is not offered again: its step key was reverted, or (PERIOD_EXCLUDE_RATIO) it
     is a period within that ratio of a reverted period: another line may still be tried."""
-    if _step_key(c.family, c.params) in excluded:
+    if step_key(c.family, c.params) in excluded:
         return True
     if c.family != "periodic" or not PERIOD_EXCLUDE_RATIO:
         return False
@@ -345,7 +345,7 @@ def _excluded(c, excluded) -> bool:
                for q in (float(k.split("@", 1)[1]) for k in excluded if k.startswith("periodic@")))
 
 
-def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_folds, families, rate_alt,
+def scan_candidates(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_folds, families, rate_alt,
           excluded=frozenset(), phase=None, also=frozenset()):
     """Score every candidate (module doc, steps 3-4) against the current base; returns a dict with
     the ranking, the null, the decision and the (refined) winner.  ``phase``: offer only that
@@ -371,7 +371,7 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
         for ln in c["lines"]:
             why = artifact_of(ln["period_s"], clines)
             if why:
-                artifacts.append(_artifact_entry(ln, clines, why))
+                artifacts.append(artifact_entry(ln, clines, why))
     periods = _pooled_periods([[ln for ln in c["lines"] if not artifact_of(ln["period_s"], clines)]
                                for c in charac]) if gapfree else []
     Y_logs = []
@@ -386,7 +386,7 @@ def _scan(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_f
             out[v] = Qv @ (Qv.T @ W[v])
             return out
 
-        nm = noise_model(r, log.t_s, v, fs, reversal=_combined(cfg))
+        nm = noise_model(r, log.t_s, v, fs, reversal=combined_noise(cfg))
         noise_models.append(nm)
         sur, sur_resid = surrogates(nm, log, cfg, n_sur, rng, project)
         Y_logs.append(np.column_stack([pr.y, f[:, None] + sur]))

@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 
 from host_tools.fitting.cv import fold_ids
-from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, _clean, _score, _step_metric, confirmed_on_holdout,
+from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, clean_stats, heldout_score, step_metric, confirmed_on_holdout,
                                          error_stats, material_on_holdout, step_errors)
 from host_tools.fitting.fit import fit_logs
 
@@ -29,7 +29,7 @@ def _fold_logs(train, cv_blocks, cv_folds) -> list:
     return [([log.select(fold != k)], [log.select(fold == k)]) for k in range(cv_folds)]
 
 
-def _order_step(train, hold, evals, cfg, model, cv_blocks, cv_folds):
+def order_step(train, hold, evals, cfg, model, cv_blocks, cv_folds):
     """The structural candidate 'regress-then-reverse' (host_tools.golden.reversal order regress_first:
     two coefficient banks by mode, the combiner applied to the residual) with each combiner of
     ORDER_ALTERNATIVES, the current terms and aux generators kept (:func:`_whole_model_step`).
@@ -45,7 +45,7 @@ def _order_step(train, hold, evals, cfg, model, cv_blocks, cv_folds):
 SETTLE_FACTORS = (2.0, 4.0)   # settle-window candidates: the current window x these (2 s, 4 s from none)
 
 
-def _settle_step(train, hold, evals, cfg, model, cv_blocks, cv_folds):
+def settle_step(train, hold, evals, cfg, model, cv_blocks, cv_folds):
     """The structural candidate 'settling window' (ReversalConfig.settle_s: the seconds after each
     mode exchange that the fit and the output skip): the current window x SETTLE_FACTORS.  A
     device whose loop settles for longer than the window leaves a transient after every exchange
@@ -78,8 +78,8 @@ def _whole_model_step(family, alts, train, hold, evals, cfg, model, cv_blocks, c
             for (tr, te), mb in zip(folds, base_fits):
                 ma = fit_logs(tr, alt, terms, drop_unidentifiable=True)[0]
                 sb, sa = step_errors(te, mb, ma)
-                e0.append(_score(sb)[0])
-                e1.append(_score(sa)[0])
+                e0.append(heldout_score(sb)[0])
+                e1.append(heldout_score(sa)[0])
         except ValueError:
             continue
         if any(e is None for e in e0 + e1):
@@ -103,10 +103,10 @@ def _whole_model_step(family, alts, train, hold, evals, cfg, model, cv_blocks, c
     cb, ca = step_errors(evals, model, alt_model)
     confirmed = confirmed_on_holdout(cb, ca) if hold else None
     entry = {"effect": family, "params": dict(best["params"]), "kind": "structure",
-             "before": _clean(before), "after": _clean(after), "confirmed": confirmed,
+             "before": clean_stats(before), "after": clean_stats(after), "confirmed": confirmed,
              "material": (confirmed and material_on_holdout(cb, ca)) if hold else None,
-             "heldout_error": _step_metric(cb, ca),
-             "train_before": _clean(error_stats(train, model)), "train_after": _clean(error_stats(train, alt_model)),
+             "heldout_error": step_metric(cb, ca),
+             "train_before": clean_stats(error_stats(train, model)), "train_after": clean_stats(error_stats(train, alt_model)),
              "cv_gain": best["gain"], "threshold": CONFIRM_MIN_DROP, "refined_from": None,
              "folds_improved": best["folds_improved"], "folds": best["folds"],
              "ranking": [{"label": f"{family}({', '.join(str(v) for v in r['params'].values())})", "family": family,

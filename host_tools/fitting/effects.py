@@ -105,7 +105,7 @@ def _fmt(v):
     return str(v)
 
 
-def _term(gen, effect, **params) -> dict:
+def effect_term(gen, effect, **params) -> dict:
     return {"gen": gen, "weight": 1.0, "effect": effect, **params}
 
 
@@ -150,41 +150,41 @@ def library(train_logs, config, *, tau_grid=TAU_GRID_S, exchange_taus=EXCHANGE_T
     if "thermal_lag" in want:
         for tau in lag_taus:
             out.append(Candidate("thermal_lag", {"tau_s": tau},
-                                 (_term("input", "thermal_lag", column=pcol, ref=pref, span=pspan, tau_s=tau),),
+                                 (effect_term("input", "thermal_lag", column=pcol, ref=pref, span=pspan, tau_s=tau),),
                                  "tau_s"))
     if "thermal_lag" in want:     # lag-state polynomial block: lag, lag^2, lag^3 (one k7 sum)
         for tau in lag_taus:
             out.append(Candidate("thermal_lag", {"tau_s": tau, "order": LAG_BLOCK_ORDER},
-                                 tuple(_term("input", "thermal_lag", column=pcol, ref=pref, span=pspan, tau_s=tau,
+                                 tuple(effect_term("input", "thermal_lag", column=pcol, ref=pref, span=pspan, tau_s=tau,
                                              power=k) for k in range(1, LAG_BLOCK_ORDER + 1)), "tau_s"))
     if "turn_on" in want:
         for tau in (t for t in tau_grid if t <= MAX_TURN_ON_FRACTION * dur):
-            out.append(Candidate("turn_on", {"tau_s": tau}, (_term("decay_on", "turn_on", tau_s=tau),), "tau_s"))
+            out.append(Candidate("turn_on", {"tau_s": tau}, (effect_term("decay_on", "turn_on", tau_s=tau),), "tau_s"))
     if reversal and "exchange_transient" in want:
         for sign in (False, True):
             for tau in exchange_taus:
-                terms = (_term("decay_exchange", "exchange_transient", tau_s=tau, sign=sign),)
+                terms = (effect_term("decay_exchange", "exchange_transient", tau_s=tau, sign=sign),)
                 if sign:   # the combiner leaves s * (transient - its mean over the other window)
-                    terms += (_term("one", "exchange_transient", sign=True),)
+                    terms += (effect_term("one", "exchange_transient", sign=True),)
                 out.append(Candidate("exchange_transient", {"tau_s": tau, "sign": sign}, terms, "tau_s"))
     settle = config.reversal.settle_s if reversal else 0.0
     if reversal and "exchange_settling" in want and config.reversal.order == "regress_first" and settle > 0:
         for tau in (t for t in exchange_taus if t <= SETTLING_TAU_FACTOR * settle):
             out.append(Candidate("exchange_settling", {"tau_s": tau},
-                                 (_term("decay_exchange", "exchange_settling", tau_s=tau),), "tau_s",
+                                 (effect_term("decay_exchange", "exchange_settling", tau_s=tau),), "tau_s",
                                  {"shared": True, "max_tau_s": SETTLING_TAU_FACTOR * settle}))
     if reversal and "imperfect_reversal" in want:
         r = config.rate
-        for which, term in (("s", _term("one", "imperfect_reversal", sign=True)),
-                            ("s*u", _term("input", "imperfect_reversal", column=pcol, ref=pref, span=pspan,
+        for which, term in (("s", effect_term("one", "imperfect_reversal", sign=True)),
+                            ("s*u", effect_term("input", "imperfect_reversal", column=pcol, ref=pref, span=pspan,
                                           sign=True)),
-                            ("s*v", _term("rate", "imperfect_reversal", column=pcol, estimator=r.estimator,
+                            ("s*v", effect_term("rate", "imperfect_reversal", column=pcol, estimator=r.estimator,
                                           n=r.n, shift=r.shift, span=r.span, sign=True))):
             out.append(Candidate("imperfect_reversal", {"which": which}, (term,)))
     if "proxy_high_order" in want:
         for power in (4, 5):
             out.append(Candidate("proxy_high_order", {"power": power},
-                                 (_term("input", "proxy_high_order", column=pcol, ref=pref, span=pspan,
+                                 (effect_term("input", "proxy_high_order", column=pcol, ref=pref, span=pspan,
                                         power=power),)))
     columns = []
     if "board_temp" in want:
@@ -200,23 +200,23 @@ def library(train_logs, config, *, tau_grid=TAU_GRID_S, exchange_taus=EXCHANGE_T
             continue
         for tau in (0.0,) + tuple(lag_taus):
             out.append(Candidate(family, {"column": col, "tau_s": tau},
-                                 (_term("input", family, column=col, ref=rng[0], span=rng[1], tau_s=tau),),
+                                 (effect_term("input", family, column=col, ref=rng[0], span=rng[1], tau_s=tau),),
                                  "tau_s"))
         if family != "board_temp" and "aux" in want:
-            joint.append(_term("input", "aux", column=col, ref=rng[0], span=rng[1], tau_s=0.0))
+            joint.append(effect_term("input", "aux", column=col, ref=rng[0], span=rng[1], tau_s=0.0))
     if len(joint) >= 2:     # every aux column at once: a sensitivity to supply and to g on every axis
         out.append(Candidate("aux", {"columns": "+".join(t["column"] for t in joint), "tau_s": 0.0}, tuple(joint)))
     if "aging" in want:
         kmax = max(int(np.rint(log.t_s[-1] * fs)) for log in logs)
         n_samples = max(1, int(math.ceil((1.0 + RAMP_MARGIN) * max(kmax, 1))))
         out.append(Candidate("aging", {"n_samples": n_samples},
-                             (_term("ramp", "aging", n_samples=n_samples),)))
+                             (effect_term("ramp", "aging", n_samples=n_samples),)))
         # a drift that has not settled in the run: exp(-t/tau) beyond every turn-on tau (a decay
         # that does not finish in the run is a drift, one that does is a turn-on transient)
         tau = float(tau_grid[0])
         while tau <= AGING_MAX_FRACTION * dur:
             if tau > MAX_TURN_ON_FRACTION * dur:
-                out.append(Candidate("aging", {"tau_s": tau}, (_term("decay_on", "aging", tau_s=tau),), "tau_s",
+                out.append(Candidate("aging", {"tau_s": tau}, (effect_term("decay_on", "aging", tau_s=tau),), "tau_s",
                                      {"max_tau_s": AGING_MAX_FRACTION * dur, "min_tau_s": MAX_TURN_ON_FRACTION * dur}))
             tau *= 2.0
     if "periodic" in want:
@@ -228,8 +228,8 @@ def library(train_logs, config, *, tau_grid=TAU_GRID_S, exchange_taus=EXCHANGE_T
 def periodic(period_s: float) -> Candidate:
     """The 'periodic' candidate at ``period_s``: a sin and a cos oscillator term."""
     return Candidate("periodic", {"period_s": float(period_s)},
-                     (_term("osc", "periodic", period_s=float(period_s), part="sin"),
-                      _term("osc", "periodic", period_s=float(period_s), part="cos")), "period_s")
+                     (effect_term("osc", "periodic", period_s=float(period_s), part="sin"),
+                      effect_term("osc", "periodic", period_s=float(period_s), part="cos")), "period_s")
 
 
 def with_param(cand: Candidate, name: str, value: float) -> Candidate:

@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from host_tools.fitting.fit_kernel import _A, _name, _predict, Accumulator, accumulate_groups  # noqa: F401
+from host_tools.fitting.fit_kernel import TERM_BASIS, term_label, predict_kernel, Accumulator, accumulate_groups  # noqa: F401
 from host_tools.golden.model import jsonable
 from firmware_ref.terms import K_AUX, N_TERMS, PAPER_TERMS, TERM_NAMES, TERM_POWERS, parse_terms
 from host_tools.errors import HdrgError
@@ -124,7 +124,7 @@ def _solve_terms(fac: _Factor, terms, rcond, explain=True):
     (17), kept, collinear {dropped: kept terms it is a combination of (if explain)}, Rk (R of
     the scaled kept columns), norms (their norms), rss."""
     terms = list(terms)
-    W = fac.R @ _A[:, terms]
+    W = fac.R @ TERM_BASIS[:, terms]
     norms = np.sqrt(np.einsum("ij,ij->j", W, W))
     keep = [j for j in range(len(terms)) if norms[j] > 0]
     dropped = [j for j in range(len(terms)) if norms[j] == 0]
@@ -162,14 +162,14 @@ def _unidentifiable_message(collinear):
     parts = []
     for k, with_ in collinear.items():
         if not with_:
-            parts.append(f"{_name(k)} is zero on all used samples" + (" (no z given)" if k == K_AUX else ""))
+            parts.append(f"{term_label(k)} is zero on all used samples" + (" (no z given)" if k == K_AUX else ""))
         else:
-            parts.append(f"{_name(k)} is collinear with " + ", ".join(_name(j) for j in with_))
+            parts.append(f"{term_label(k)} is collinear with " + ", ".join(term_label(j) for j in with_))
     hint = ""
     if any(TERM_POWERS[k] is not None and TERM_POWERS[k][1] > 0 for k in collinear):
         hint = ("  Typical cause: too few distinct rates, e.g. one run at one constant rate (the rate "
                 "terms then repeat the constant and temperature terms); fit runs at several rates.")
-    return ("the data cannot identify " + ", ".join(_name(k) for k in collinear) + ": "
+    return ("the data cannot identify " + ", ".join(term_label(k) for k in collinear) + ": "
             + "; ".join(parts) + "." + hint + "  Select fewer terms or pass drop_unidentifiable=True.")
 
 
@@ -293,7 +293,7 @@ def solve(acc: Accumulator, terms=None, *, drop_unidentifiable=False, rcond=RCON
 def _heldout_sse(coef, G, b, yy):
     """sum w (y - X c)^2 on a held-out system, from its internal-basis sums (host_tools.fitting.cv.heldout_sse)."""
     from host_tools.fitting.cv import heldout_sse
-    return max(heldout_sse(_A @ coef, yy, b, G), 0.0)
+    return max(heldout_sse(TERM_BASIS @ coef, yy, b, G), 0.0)
 
 
 def heldout_error(train: Accumulator, test: Accumulator, terms, *, demean: bool = False, rcond=RCOND) -> float:
@@ -305,7 +305,7 @@ def heldout_error(train: Accumulator, test: Accumulator, terms, *, demean: bool 
     if test.n == 0:
         return 0.0
     coef = _solve_terms(_factor(train), tuple(sorted(terms)), rcond, explain=False)["coef"] if train.n else np.zeros(N_TERMS)
-    a = _A @ coef
+    a = TERM_BASIS @ coef
     sse = _heldout_sse(coef, G, b, yy)
     if demean and G[0, 0] > 0:
         sse -= (b[0] - float(G[0] @ a)) ** 2 / G[0, 0]
@@ -541,7 +541,7 @@ def predict(coef, u, v, z=None) -> np.ndarray:
     if not has_z and coef[K_AUX] != 0:
         raise ValueError("coef has a non-zero k7 (z) term but no z was given")
     out = np.empty_like(u)
-    _predict(flat, u, v, zz, has_z, out)
+    predict_kernel(flat, u, v, zz, has_z, out)
     return out
 
 

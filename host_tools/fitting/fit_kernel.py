@@ -56,11 +56,11 @@ def _tables():
     return c, lin, amat
 
 
-_C, _LIN, _A = _tables()
+_C, _LIN, TERM_BASIS = _tables()
 _POLY_TERMS = tuple(k for k in range(N_TERMS) if k != K_AUX)
 
 
-def _name(k):
+def term_label(k):
     return f"k{k} ({TERM_NAMES[k]})"
 
 
@@ -180,7 +180,7 @@ def _accumulate(u, v, z, y, w, g, has_z, has_w, has_g, M, Y, Z, S, nm, nq):
 
 
 @nb.njit(cache=True, nogil=True)
-def _predict(coef, u, v, z, has_z, out):
+def predict_kernel(coef, u, v, z, has_z, out):
     for i in range(u.shape[0]):
         ui = u[i]
         vi = v[i]

@@ -116,7 +116,7 @@ def md_text(text) -> str:
     return _MD_SPECIAL.sub(r"\\\1", s)
 
 
-def _table(rows) -> str:
+def markdown_table(rows) -> str:
     head = "| run | output | std 1 s | p-p 1 s | std 100 s | p-p 100 s |\n|---|---|---:|---:|---:|---:|\n"
     return head + "".join(
         f"| {md_text(r['run'])} | {md_text(r['output'])} | {_fmt(r['std1_dph'])} | {_fmt(r['pp1_dph'])} | "
@@ -524,7 +524,7 @@ def markdown(doc, label) -> str:
            "for a mode-reversal run it is mode reversal alone (the combiner on the raw output, as `hdrg metrics`), "
            "for an FTR run the raw output; the raw output per mode of a mode-reversal run is shown for reference, "
            "it is not an output the instrument gives.", "",
-           _table(doc["rows"]).rstrip("\n"), ""]
+           markdown_table(doc["rows"]).rstrip("\n"), ""]
     out += [f"* {md_text(line)}" for line in summary_lines(doc)]
     for note in doc["notes"]:
         out.append(f"* {md_text(note)}")

@@ -51,7 +51,7 @@ The **bound** on |fixed - golden| (deg/h, golden fed with the dequantized input 
 coefficient quantization (exact), the evaluator's roundings (1.5 LSB_e per row, 0.5 LSB_E per
 alignment, 1.5 LSB_E outer, 0.5 LSB_E for k7, 0.5 LSB_21), the u and v errors (gain and centre
 quantization, rounding, iir state rounding) times the Lipschitz constants ``sum i |c_ij|`` and
-``sum j |c_ij|``, |k7| times the z generators' error (analytic per generator, ``_aux_part``;
+``sum j |c_ij|``, |k7| times the z generators' error (analytic per generator, ``aux_part``;
 the oscillator's at the horizon K < 2^31), the combiner (window-mean and slope roundings, for
 trend at the table's timing) and the final output rounding 2^-11 deg/h.  Two banks: the B
 bound is the larger of the banks'; order 1 adds the residual word's rounding 2^-11 deg/h to the
@@ -82,7 +82,7 @@ from firmware_ref import formats as F
 from firmware_ref.table import Table, TableError
 from firmware_ref.terms import N_TERMS
 from host_tools.fixed.quantize_bound import error_bound, measure, measure_aux
-from host_tools.fixed.quantize_parts import (QuantizeError, _aux_part, _coef_part, _proxy_part, _rate_part, _timing,
+from host_tools.fixed.quantize_parts import (QuantizeError, aux_part, coef_part, proxy_part, rate_part, timing_part,
                                        group_exponent, rhu)
 
 FORMAT = "hdrg-fixed-table"
@@ -172,32 +172,32 @@ def quantize(model, exchange_s: float = 30.0, dwell_s: float = 120.0, power_on_s
     fs = cfg.rate.fs
     where = f"{model.source}: cannot quantize"
     try:
-        pp = _proxy_part(cfg.proxy)
-        rp = _rate_part(cfg.rate, pp["_lsb"])
+        pp = proxy_part(cfg.proxy)
+        rp = rate_part(cfg.rate, pp["_lsb"])
         rev = cfg.reversal
         two = rev is not None and rev.order == "regress_first"
-        cp = _coef_part(model.coef)
+        cp = coef_part(model.coef)
         if two:
             try:
-                cp2 = _coef_part(model.coef_mode2)
+                cp2 = coef_part(model.coef_mode2)
             except QuantizeError as exc:
                 raise QuantizeError(f"bank 2 (mode 2): {exc}") from None
         fs_q16 = rhu(Fraction(fs) * (1 << 16))
         if not 0 < fs_q16 <= F.UINT32_MAX:
             raise QuantizeError(f"sample rate {fs} Hz outside the fs_q16 word (2^-16 .. 65536 Hz)")
         comb = 0 if rev is None else {"pair": 1, "trend": 2, "none": 3}[rev.combiner]
-        settle_n = 0 if rev is None else _timing(rev.settle_s, fs, "settle_s")
-        stale_n = 0 if rev is None else _timing(rev.max_stale_s, fs, "max_stale_s")
-        timing = {"power_on_n": _timing(power_on_s, fs, "power_on_s"),
-                  "exchange_n": _timing(exchange_s, fs, "exchange_s"),
-                  "dwell_n": _timing(dwell_s, fs, "dwell_s", 1)}
+        settle_n = 0 if rev is None else timing_part(rev.settle_s, fs, "settle_s")
+        stale_n = 0 if rev is None else timing_part(rev.max_stale_s, fs, "max_stale_s")
+        timing = {"power_on_n": timing_part(power_on_s, fs, "power_on_s"),
+                  "exchange_n": timing_part(exchange_s, fs, "exchange_s"),
+                  "dwell_n": timing_part(dwell_s, fs, "dwell_s", 1)}
         out_range = F.INT32_SYM * 2.0 ** -F.OUT_FRAC
         for name, coef in (("", model.coef),) + ((("bank 2 (mode 2): ", model.coef_mode2),) if two else ()):
             total = float(sum(abs(Fraction(float(c))) for c in coef))
             if total > out_range:
                 raise QuantizeError(f"{name}the bias bound sum |k| = {total:.6g} deg/h exceeds the output word "
                                     f"range +-{out_range:.6g} deg/h")
-        ap = _aux_part(cfg, pp)
+        ap = aux_part(cfg, pp)
         table = Table(proxy_kind=pp["proxy_kind"], p_ref=pp["p_ref"], g_u=pp["g_u"], u_off=pp["u_off"],
                       sh_u=pp["sh_u"],
                       rate_est=rp["rate_est"], rate_n=rp["rate_n"], rate_shift=rp["rate_shift"],

@@ -11,7 +11,7 @@ import numpy as np
 from firmware_ref import formats as F
 from firmware_ref.table import Table
 from firmware_ref.terms import K_AUX, N_TERMS, TERM_POWERS
-from host_tools.fixed.quantize_parts import (_aux_part, _norm_error, _proxy_part, _rate_error, _rate_part, aux_channel_fracs,
+from host_tools.fixed.quantize_parts import (aux_part, norm_error, proxy_part, rate_error, rate_part, aux_channel_fracs,
                                        group_exponent)
 
 def error_bound(table: Table, model, parts: dict | None = None) -> dict:
@@ -47,17 +47,17 @@ def _error_bound_bank(table: Table, model, parts, bank, coef_f) -> dict:
         rnd += Fraction(1, 2) / (1 << F.Y_FRAC)
     # input-map errors
     if parts is None:
-        parts = {**_proxy_part(cfg.proxy), **_rate_part(cfg.rate, _proxy_part(cfg.proxy)["_lsb"])}
+        parts = {**proxy_part(cfg.proxy), **rate_part(cfg.rate, proxy_part(cfg.proxy)["_lsb"])}
     tb = table
-    du = _norm_error(cfg.proxy.ref, {"lsb": parts["_lsb"], "span_lsb": parts["_span_lsb"], "g": tb.g_u,
+    du = norm_error(cfg.proxy.ref, {"lsb": parts["_lsb"], "span_lsb": parts["_span_lsb"], "g": tb.g_u,
                                      "sh": tb.sh_u, "off": tb.u_off, "ref": tb.p_ref})
-    dv = _rate_error(cfg.rate, parts["_s_span"], tb.g_v, tb.sh_v)
+    dv = rate_error(cfg.rate, parts["_s_span"], tb.g_v, tb.sh_v)
     lip_u = sum(TERM_POWERS[k][0] * abs(coef[k]) for k in range(N_TERMS) if k != K_AUX)
     lip_v = sum(TERM_POWERS[k][1] * abs(coef[k]) for k in range(N_TERMS) if k != K_AUX)
     float_eps = sum(abs(c) for c in coef) * Fraction(1, 1 << 48)   # golden float64 roundings
     dz = Fraction(0)
     if tb.aux_gen == 1:
-        dz = Fraction(parts["_aux"]["z_error"]) if "_aux" in parts else Fraction(_aux_part(cfg, parts)["_z_error"])
+        dz = Fraction(parts["_aux"]["z_error"]) if "_aux" in parts else Fraction(aux_part(cfg, parts)["_z_error"])
     bias_b = eps_coef + rnd + lip_u * du + lip_v * dv + abs(coef[K_AUX]) * dz + float_eps
     half_out = Fraction(1, 1 << (F.OUT_FRAC + 1))
     # combiner

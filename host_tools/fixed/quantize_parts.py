@@ -56,7 +56,7 @@ def _norm_part(ref: float, span: float, frac: int, unsigned: bool, what: str, un
     return {"ref": p_ref, "g": g, "off": off, "sh": sh, "span_lsb": span_lsb, "lsb": lsb}
 
 
-def _norm_error(ref: float, n: dict) -> Fraction:
+def norm_error(ref: float, n: dict) -> Fraction:
     """Bound on |q_fixed - (x - ref) / span| at dequantized inputs (gain and centre quantization,
     the rounding), in units of q."""
     lsb, span_lsb = n["lsb"], n["span_lsb"]
@@ -66,7 +66,7 @@ def _norm_error(ref: float, n: dict) -> Fraction:
             + abs(Fraction(ref) / lsb - n["ref"]) * abs(g - 1 / span_lsb))
 
 
-def _proxy_part(pc) -> dict:
+def proxy_part(pc) -> dict:
     frac = F.FREQ_FRAC if pc.kind == "freq" else F.TEMP_FRAC
     word = "drive-frequency word (0 .. 16384 Hz)" if pc.kind == "freq" else "temperature word (+-32768 degC)"
     n = _norm_part(pc.ref, pc.span, frac, pc.kind == "freq", "proxy", pc.unit, word)
@@ -85,7 +85,7 @@ def _gain(num: Fraction, den: Fraction, gmax: int):
     return best
 
 
-def _rate_part(rc, lsb: Fraction) -> dict:
+def rate_part(rc, lsb: Fraction) -> dict:
     est = F.ESTIMATORS.index(rc.estimator)
     n = rc.n if rc.estimator in ("diffn", "lsq") else 1
     if n > F.N_HIST_MAX:
@@ -113,14 +113,14 @@ def _rate_part(rc, lsb: Fraction) -> dict:
             "g_v": g, "sh_v": sh, "_s_span": s_span}
 
 
-def _timing(value_s: float, fs: float, name: str, minimum: int = 0) -> int:
+def timing_part(value_s: float, fs: float, name: str, minimum: int = 0) -> int:
     n = int(round(value_s * fs))
     if not minimum <= n <= F.TIMER_MAX - 1:
         raise QuantizeError(f"{name} = {value_s} s at {fs} Hz gives {n} samples; needs {minimum}..{F.TIMER_MAX - 1}")
     return n
 
 
-def _coef_part(coef) -> dict:
+def coef_part(coef) -> dict:
     c = [Fraction(float(x)) for x in coef]
     e_max = []
     for g, ks in enumerate(GROUPS):
@@ -148,7 +148,7 @@ def _coef_part(coef) -> dict:
                         "at any legal exponent (sum of |coefficients| too large)")
 
 
-def _rate_error(rc, s_span: Fraction, g_v: int, sh_v: int) -> Fraction:
+def rate_error(rc, s_span: Fraction, g_v: int, sh_v: int) -> Fraction:
     """Bound on |v_fixed - v_golden| (units of v): rounding, gain quantization, iir state rounding."""
     dv = Fraction(1, 1 << (F.Q + 1)) + (s_span + 1) * abs(Fraction(g_v, 1 << (F.Q + sh_v)) - 1 / s_span)
     if rc.estimator == "iir":
@@ -205,7 +205,7 @@ def _coef_shift(b: Fraction, what: str, n_samples: float) -> tuple:
     return best
 
 
-def _aux_part(cfg, pp: dict) -> dict:
+def aux_part(cfg, pp: dict) -> dict:
     """aux_gen, aux_params (the table words) and the z-error bound ``_z_error`` (units of z) of the
     model's AuxConfig; QuantizeError names the term and the reason."""
     from firmware_ref.aux import aux_columns
@@ -245,7 +245,7 @@ def _aux_part(cfg, pp: dict) -> dict:
                                     f"temp_c and aux_* columns)")
             n = _norm_part(tm["ref"], tm["span"], frac, unsigned, f"{where} {col}", unit, word)
             c[:4] = [n["ref"], n["g"], n["off"], n["sh"]]
-            err = _norm_error(tm["ref"], n)
+            err = norm_error(tm["ref"], n)
             if tm["tau_s"] > 0:
                 a = math.exp(-1.0 / (fs * tm["tau_s"]))
                 b = Fraction(1.0 - a)                             # the golden's b (float)
@@ -266,10 +266,10 @@ def _aux_part(cfg, pp: dict) -> dict:
             if not same:
                 raise QuantizeError(f"{where}: the estimator {rt.estimator} n={rt.n} shift={rt.shift} differs from "
                                     f"the model's ({r.estimator} n={r.n} shift={r.shift}): the firmware has one rate sum")
-            rp = _rate_part(rt, pp["_lsb"])
+            rp = rate_part(rt, pp["_lsb"])
             c[:3] = [rp["s_bits"], rp["g_v"], rp["sh_v"]]
             src = pp["proxy_kind"]
-            err = _rate_error(rt, rp["_s_span"], rp["g_v"], rp["sh_v"])
+            err = rate_error(rt, rp["_s_span"], rp["g_v"], rp["sh_v"])
         elif gen == "one":
             pass
         elif gen in ("decay_on", "decay_exchange"):

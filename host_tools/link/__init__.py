@@ -22,4 +22,4 @@ from host_tools.link.codec import CAP_NAMES, CAP_SAMPLES, CAP_TABLE_READ, CAP_TA
 from host_tools.link.frame import CRC_SIZE, HEADER_SIZE, MAX_PAYLOAD, OVERHEAD, PROTO_MAJOR, PROTO_MINOR, SYNC, \
     T_ACK, T_GET_INFO, T_INFO, T_NACK, T_READ_TABLE, T_SAMPLE, T_TABLE, TYPE_NAMES, Decoder, DecoderStats, Frame, \
     ProtocolError, ProtocolVersionError, crc16, encode_frame, version_byte, version_message
-from host_tools.link.host import HostLink, LinkStats, UploadError, UploadResult, _is_reply_to, open_port, upload
+from host_tools.link.host import HostLink, LinkStats, UploadError, UploadResult, is_reply_to, open_port, upload

@@ -138,7 +138,7 @@ class HostLink:
         return DeviceInfo.unpack(fr.payload)
 
     def read_table(self, timeout_s: float = 2.0, on_frame=None) -> bytes:
-        fr = self.request(T_READ_TABLE, b"", lambda f, s: f.type == T_TABLE or _is_reply_to(f, T_READ_TABLE, s),
+        fr = self.request(T_READ_TABLE, b"", lambda f, s: f.type == T_TABLE or is_reply_to(f, T_READ_TABLE, s),
                           timeout_s, on_frame)
         if fr is None:
             raise UploadError(f"no answer to READ_TABLE within {timeout_s:g} s")
@@ -148,7 +148,7 @@ class HostLink:
         return fr.payload
 
 
-def _is_reply_to(fr: Frame, req_type: int, seq: int) -> bool:
+def is_reply_to(fr: Frame, req_type: int, seq: int) -> bool:
     """``fr`` is the ACK/NACK of the request (``req_type``, ``seq``)."""
     if fr.type not in (T_ACK, T_NACK):
         return False
@@ -192,7 +192,7 @@ def upload(link: HostLink, table, timeout_s: float = 2.0, retries: int = 3, on_f
                           f"version {T.VERSION}")
     reply = None
     for attempt in range(1, retries + 1):
-        fr = link.request(T_TABLE, data, lambda f, s: _is_reply_to(f, T_TABLE, s), timeout_s, on_frame)
+        fr = link.request(T_TABLE, data, lambda f, s: is_reply_to(f, T_TABLE, s), timeout_s, on_frame)
         if fr is not None:
             reply = Reply.unpack(fr.payload)
             break

@@ -92,7 +92,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from host_tools.golden.runlog import RunLog
-from host_tools.simulation.sim_params import DEFAULT_EFFECTS, EFFECTS, SimConfig, SimParams, _spec, effect_params
+from host_tools.simulation.sim_params import DEFAULT_EFFECTS, EFFECTS, SimConfig, SimParams, param_spec, effect_params
 from host_tools.simulation.sim_physics import run_physics
 from host_tools.simulation.sim_profiles import Profile, constant_profile, cycle_profile, slow_ramp_profile
 
@@ -171,7 +171,7 @@ def _effect_items(value, what: str) -> dict:
     if isinstance(value, dict):
         out = {}
         for name, params in value.items():
-            _spec(name)
+            param_spec(name)
             if params is None:
                 params = {}
             elif dataclasses.is_dataclass(params):
@@ -195,7 +195,7 @@ def parse_inject(text: str) -> tuple[str, dict]:
     text = text.strip()
     name, _, rest = text.partition(":")
     name = name.strip()
-    _spec(name)
+    param_spec(name)
     params = {}
     for item in [p for p in rest.split(",") if p.strip()]:
         key, eq, val = item.partition("=")

@@ -278,7 +278,7 @@ MISSING_EFFECTS = ("thermal_lag", "turn_on", "exchange_transient", "imperfect_re
 
 def effect_params(name: str, **values):
     """The parameter dataclass of effect ``name`` with ``values`` replacing defaults (validated)."""
-    spec = _spec(name)
+    spec = param_spec(name)
     known = {f.name: f for f in fields(spec.cls)}
     for key in values:
         if key not in known:
@@ -288,7 +288,7 @@ def effect_params(name: str, **values):
     return obj
 
 
-def _spec(name: str) -> EffectSpec:
+def param_spec(name: str) -> EffectSpec:
     if name not in EFFECTS:
         raise ValueError(f"unknown effect {name!r}; known effects: {', '.join(EFFECTS)}")
     return EFFECTS[name]

@@ -11,8 +11,8 @@ from firmware_ref import formats as F
 from firmware_ref.table import Table
 from host_tools.vectors.spec import AUX_FIELDS, AUX_INPUTS
 from host_tools.vectors.files import VectorSet
-from host_tools.vectors.pipeline import _Cases, compute_pipeline
-from host_tools.vectors.e2e import _jsonable, _round_sig
+from host_tools.vectors.pipeline import Cases, compute_pipeline
+from host_tools.vectors.e2e import jsonable_value, round_sig
 
 
 # -- aux generators ----------------------------------------------------------------------------------------
@@ -62,7 +62,7 @@ def aux_set(rng) -> VectorSet:
     from firmware_ref.table import AuxTerm
     from host_tools.vectors.builders import aux_stream, make_model, random_aux_model, with_aux
 
-    cs = _Cases()
+    cs = Cases()
     base_model = make_model(coef=[3e3, -2e3, 1e3, -5e2, 7e2, -3e2, 1e2, 5e2, -4e2, 3e2, -2e2, 1e2, -9e1, 8e1, -7e1,
                                   6e1, -5e1], settle_s=2.0, max_stale_s=25.0)
     temp_model = make_model("temp", ref=20.0, span=30.0, estimator="lsq", n=5, rate_span=0.5, combiner="trend",
@@ -173,7 +173,7 @@ AUX_SIM = ("paper-mr-cycle-4dpm", 13, 2400.0, {"turn_on": {"amp_dph": 3.0, "tau_
 
 
 def aux_sim_case() -> tuple:
-    """(the arguments of _Cases.add, configuration) of the simulated aux run: host_tools.simulation.sim with an
+    """(the arguments of Cases.add, configuration) of the simulated aux run: host_tools.simulation.sim with an
     undeclared turn-on transient, a model with a decay_on, a lagged-proxy and a board-temperature
     term (fixed generator parameters), fitted, rounded to 7 significant digits, quantized."""
     import warnings as _warnings
@@ -196,15 +196,15 @@ def aux_sim_case() -> tuple:
     cfg0 = hc.fit_config_from_logs([log], reversal=ReversalConfig("pair", order="combine_first"))
     tr = (float(np.min(log["temp_c"])), float(np.max(log["temp_c"])))
     terms = [{"gen": "decay_on", "tau_s": 300.0, "weight": 0.5},
-             {"gen": "input", "column": cfg0.proxy.column, "ref": _round_sig(cfg0.proxy.ref),
-              "span": _round_sig(cfg0.proxy.span), "tau_s": 900.0, "weight": -0.25},
-             {"gen": "input", "column": "temp_c", "ref": _round_sig(0.5 * (tr[0] + tr[1])),
-              "span": _round_sig(0.6 * (tr[1] - tr[0])), "tau_s": 60.0, "weight": 0.25, "sign": True}]
-    cfg = ModelConfig(ProxyConfig(cfg0.proxy.kind, _round_sig(cfg0.proxy.ref), _round_sig(cfg0.proxy.span)),
-                      RateConfig(cfg0.rate.estimator, cfg0.rate.n, cfg0.rate.shift, _round_sig(cfg0.rate.span),
+             {"gen": "input", "column": cfg0.proxy.column, "ref": round_sig(cfg0.proxy.ref),
+              "span": round_sig(cfg0.proxy.span), "tau_s": 900.0, "weight": -0.25},
+             {"gen": "input", "column": "temp_c", "ref": round_sig(0.5 * (tr[0] + tr[1])),
+              "span": round_sig(0.6 * (tr[1] - tr[0])), "tau_s": 60.0, "weight": 0.25, "sign": True}]
+    cfg = ModelConfig(ProxyConfig(cfg0.proxy.kind, round_sig(cfg0.proxy.ref), round_sig(cfg0.proxy.span)),
+                      RateConfig(cfg0.rate.estimator, cfg0.rate.n, cfg0.rate.shift, round_sig(cfg0.rate.span),
                                  cfg0.rate.fs), cfg0.reversal, AuxConfig.from_terms(terms, cfg0.rate.fs))
     fitted, _ = fit_logs([log], cfg, tuple(range(17)))
-    coef = np.array([_round_sig(c) for c in fitted.coef], np.float64)
+    coef = np.array([round_sig(c) for c in fitted.coef], np.float64)
     model = BiasModel(cfg, fitted.terms, coef, source="<vectors aux sim>")
     table = quantize_aux(model)
     w = log_words(log, cfg)
@@ -214,4 +214,4 @@ def aux_sim_case() -> tuple:
             f"aux decay_on + lagged proxy + s x lagged board temperature, fitted, quantized; log-driven")
     config = {"scenario": scenario, "seed": seed, "duration_s": repr(duration), "undeclared": undeclared,
               "model": {"config": cfg.to_dict(), "terms": list(model.terms), "coef": list(model.coef)}}
-    return ("sim_aux", desc, table, s), _jsonable(config)
+    return ("sim_aux", desc, table, s), jsonable_value(config)

@@ -11,7 +11,7 @@ import numpy as np
 from firmware_ref.table import Table, TableError
 from host_tools.vectors.spec import (DEFAULT_DIR, FORMAT_VERSION, GENERATOR_VERSION, PRIM_OPS, PY_CHECK, SEED,
                                      SETS, VectorsError)
-from host_tools.vectors.files import VectorSet, _sha256, parse_csv, read_manifest, render_all, source_fingerprint
+from host_tools.vectors.files import VectorSet, sha256_of, parse_csv, read_manifest, render_all, source_fingerprint
 from host_tools.vectors.primitives import compute_primitives, primitives_set
 from host_tools.vectors.evaluator import compute_evaluator, evaluator_set
 from host_tools.vectors.pipeline import compute_pipeline
@@ -84,7 +84,7 @@ def generate(directory, names=SETS, force: bool = False) -> dict:
 
 # -- verify -------------------------------------------------------------------------------------------
 
-def _set_order(manifest: dict, names=None) -> list:
+def set_order(manifest: dict, names=None) -> list:
     """The manifest's sets in SETS order (then any others), restricted to ``names``; ValueError
     for a name the manifest lacks."""
     have = manifest["sets"]
@@ -134,11 +134,11 @@ def _first_diff(name: str, meta: dict, got: dict, want: dict) -> str:
     if not bad.any():
         return f"set {name}: the files differ from the re-rendered values (format, not values)"
     i = int(np.argmax(bad))
-    return _describe_row(name, meta, want, i) + "\n  " + "; ".join(
+    return describe_row(name, meta, want, i) + "\n  " + "; ".join(
         f"{col}: file {want[col][i]}, recomputed {got[col][i]}" for col in want if got[col][i] != want[col][i])
 
 
-def _describe_row(name: str, meta: dict, cols: dict, i: int) -> str:
+def describe_row(name: str, meta: dict, cols: dict, i: int) -> str:
     ins = " ".join(f"{k}={PRIM_OPS[cols[k][i]] if k == 'op' else cols[k][i]}" for k in meta["inputs"]
                    if k not in ("case", "i"))
     case = ""
@@ -161,8 +161,8 @@ def verify(directory, names=None, log=print) -> list:
             problems.append(f"{path}: missing")
             continue
         data = path.read_bytes()
-        if _sha256(data) != meta["sha256"] or len(data) != meta["bytes"]:
-            problems.append(f"{path}: SHA-256 {_sha256(data)[:16]}... differs from the manifest's "
+        if sha256_of(data) != meta["sha256"] or len(data) != meta["bytes"]:
+            problems.append(f"{path}: SHA-256 {sha256_of(data)[:16]}... differs from the manifest's "
                             f"{meta['sha256'][:16]}... (file changed)")
     fp = source_fingerprint()
     if fp["sha256"] != manifest.get("sources_sha256"):
@@ -170,7 +170,7 @@ def verify(directory, names=None, log=print) -> list:
                          if fp["files"].get(k) != manifest.get("sources", {}).get(k))
         log(f"note: the algorithm sources differ from those the vectors were generated from "
             f"({', '.join(changed)}); the recomputation below decides")
-    for name in _set_order(manifest, names):
+    for name in set_order(manifest, names):
         meta = manifest["sets"][name]
         try:
             vs = load_set(directory, name, meta)

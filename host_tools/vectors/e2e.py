@@ -6,7 +6,7 @@ import numpy as np
 
 from host_tools.vectors.spec import E2E_FIELDS, SEQ_INPUTS
 from host_tools.vectors.files import VectorSet
-from host_tools.vectors.pipeline import _Cases, compute_pipeline
+from host_tools.vectors.pipeline import Cases, compute_pipeline
 
 
 # -- end to end --------------------------------------------------------------------------------------
@@ -25,15 +25,15 @@ E2E_RUNS = (
 )
 
 
-def _round_sig(x: float, digits: int = 7) -> float:
+def round_sig(x: float, digits: int = 7) -> float:
     return float(f"{float(x):.{digits}g}")
 
 
-def _jsonable(x):
+def jsonable_value(x):
     if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
+        return {str(k): jsonable_value(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
+        return [jsonable_value(v) for v in x]
     if isinstance(x, (float, np.floating)):
         return repr(float(x))
     if isinstance(x, np.integer):
@@ -56,12 +56,12 @@ def e2e_model(log, reversal=None):
 
     rev = None if reversal is None else ReversalConfig(reversal[1], order=reversal[0])
     cfg0 = hc.fit_config_from_logs([log], reversal=rev)
-    cfg = ModelConfig(ProxyConfig(cfg0.proxy.kind, _round_sig(cfg0.proxy.ref), _round_sig(cfg0.proxy.span)),
-                      RateConfig(cfg0.rate.estimator, cfg0.rate.n, cfg0.rate.shift, _round_sig(cfg0.rate.span),
+    cfg = ModelConfig(ProxyConfig(cfg0.proxy.kind, round_sig(cfg0.proxy.ref), round_sig(cfg0.proxy.span)),
+                      RateConfig(cfg0.rate.estimator, cfg0.rate.n, cfg0.rate.shift, round_sig(cfg0.rate.span),
                                  cfg0.rate.fs), cfg0.reversal, cfg0.aux)
     fitted, _ = fit_logs([log], cfg, terms="all")            # pinned: the default became "auto"
-    coef = np.array([_round_sig(c) for c in fitted.coef], np.float64)
-    coef2 = None if fitted.coef_mode2 is None else np.array([_round_sig(c) for c in fitted.coef_mode2], np.float64)
+    coef = np.array([round_sig(c) for c in fitted.coef], np.float64)
+    coef2 = None if fitted.coef_mode2 is None else np.array([round_sig(c) for c in fitted.coef_mode2], np.float64)
     model = BiasModel(cfg, fitted.terms, coef, source=f"<vectors e2e {log.source}>", coef_mode2=coef2)
     return model, quantize(model, n_random=10).table
 
@@ -72,7 +72,7 @@ def e2e_set() -> tuple:
     from host_tools.fixed.fixed_point import log_words
     from host_tools.simulation.sim import simulate
 
-    cs = _Cases()
+    cs = Cases()
     config = {}
     for name, scenario, seed, duration, desc, reversal in E2E_RUNS:
         log = simulate(scenario, seed=seed, duration_s=duration)
@@ -91,4 +91,4 @@ def e2e_set() -> tuple:
                    "sequencer set's columns plus the evaluator's Horner rows (row0..row3, zterm, t at 2^-E)",
                    cs.columns(), SEQ_INPUTS, E2E_FIELDS, cs.cases, cs.tables)
     compute_pipeline(vs, rows=True)
-    return vs, _jsonable(config)
+    return vs, jsonable_value(config)

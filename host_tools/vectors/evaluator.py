@@ -42,7 +42,7 @@ def reference_rows(table, u, v, z, bank=None) -> dict:
 
 # -- tables -----------------------------------------------------------------------------------------
 
-def _qtable(est="diff", combiner="pair", n=5, shift=2, settle_s=2.0, max_stale_s=25.0, coef=None, kind=None,
+def qtable(est="diff", combiner="pair", n=5, shift=2, settle_s=2.0, max_stale_s=25.0, coef=None, kind=None,
             order="combine_first", coef2=None, **timing) -> Table:
     """A quantized table of host_tools.vectors.builders.make_model (as tests/test_c_twin.py's table_of);
     ``order`` "regress_first": two banks (``coef2``: make_model's default)."""
@@ -93,7 +93,7 @@ def evaluator_set(rng) -> VectorSet:
     from host_tools.vectors.builders import random_model
     from host_tools.fixed.quantize import quantize
 
-    base = _qtable()
+    base = qtable()
     tables, cases, parts = [], [], []
     edge = np.array([F.ONE, -F.ONE, F.ONE - 1, -F.ONE + 1, 0, 1, -1], np.int64)
     zedge = np.array([0, F.ONE, -F.ONE, F.ONE + 1, -F.ONE - 1, F.INT32_SYM, -F.INT32_SYM - 1, 12345], np.int64)

@@ -15,7 +15,7 @@ from firmware_ref.table import Table
 from host_tools.vectors.spec import FORMAT_VERSION, GENERATOR_VERSION, PRIM_OPS, ROOT, SOURCE_GLOBS, VectorsError
 
 
-def _sha256(data: bytes) -> str:
+def sha256_of(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
@@ -25,9 +25,9 @@ def source_fingerprint(root: Path = ROOT) -> dict:
     files = {}
     for pattern in SOURCE_GLOBS:
         for path in sorted(root.glob(pattern)):
-            files[path.relative_to(root).as_posix()] = _sha256(path.read_bytes().replace(b"\r\n", b"\n"))
+            files[path.relative_to(root).as_posix()] = sha256_of(path.read_bytes().replace(b"\r\n", b"\n"))
     files = dict(sorted(files.items()))
-    total = _sha256("".join(f"{k} {v}\n" for k, v in files.items()).encode())
+    total = sha256_of("".join(f"{k} {v}\n" for k, v in files.items()).encode())
     return {"sha256": total, "files": files}
 
 
@@ -142,7 +142,7 @@ def make_manifest(sets, config, files: dict) -> dict:
             "cases": vs.cases,
             "tables": [_table_entry(t) for t in vs.tables],
         } for vs in sets},
-        "files": {name: {"sha256": _sha256(data), "bytes": len(data)} for name, data in sorted(files.items())},
+        "files": {name: {"sha256": sha256_of(data), "bytes": len(data)} for name, data in sorted(files.items())},
     }
 
 

@@ -66,7 +66,7 @@ def compute_pipeline(vs: VectorSet, rows: bool) -> None:
     vs.columns = cols
 
 
-class _Cases:
+class Cases:
     """Collects the cases of a pipeline set: input columns, tables, descriptions."""
 
     def __init__(self):

@@ -18,8 +18,8 @@ import numpy as np
 
 from host_tools.vectors.spec import (AUX_IN_FIELDS, DEFAULT_DIR, IN_FIELDS, O_NAMES, PRIM_ARITY, PRIM_FLAGGED,
                                      PRIM_OPS, VectorsError)
-from host_tools.vectors.files import VectorSet, _sha256, read_manifest
-from host_tools.vectors.build import _describe_row, load_set, _set_order
+from host_tools.vectors.files import VectorSet, sha256_of, read_manifest
+from host_tools.vectors.build import describe_row, load_set, set_order
 
 
 # -- check-impl ---------------------------------------------------------------------------------------
@@ -181,12 +181,12 @@ def check_impl(cmd, directory=DEFAULT_DIR, names=None, fields=None, timeout: flo
             raise ValueError(f"--fields: unknown field(s) {', '.join(bad)}; fields: {', '.join(O_NAMES)}")
     manifest = read_manifest(directory)
     corrupt = [f for f, meta in manifest["files"].items()
-               if not (directory / f).is_file() or _sha256((directory / f).read_bytes()) != meta["sha256"]]
+               if not (directory / f).is_file() or sha256_of((directory / f).read_bytes()) != meta["sha256"]]
     if corrupt:
         raise VectorsError(f"{directory}: files missing or changed since generation ({', '.join(corrupt)}); "
                            f"run `hdrg vectors verify`")
     report = {"sets": {}, "mismatches": 0, "first": None}
-    for name in _set_order(manifest, names):
+    for name in set_order(manifest, names):
         meta = manifest["sets"][name]
         vs = load_set(directory, name, meta)
         reqs = requests(vs, fields)
@@ -211,7 +211,7 @@ def check_impl(cmd, directory=DEFAULT_DIR, names=None, fields=None, timeout: flo
                 continue
             nbad += 1
             if first is None:
-                where = (_describe_row(name, meta, vs.columns, row) if row is not None
+                where = (describe_row(name, meta, vs.columns, row) if row is not None
                          else f"set {name}, table request {k}")
                 if ans is None:
                     gtxt = (f"(no answer: the program exited with status {rc}"

@@ -10,8 +10,8 @@ from firmware_ref import formats as F
 from firmware_ref.terms import N_TERMS
 from host_tools.vectors.spec import SEQ_FIELDS, SEQ_INPUTS
 from host_tools.vectors.files import VectorSet
-from host_tools.vectors.evaluator import _qtable
-from host_tools.vectors.pipeline import _Cases, compute_pipeline
+from host_tools.vectors.evaluator import qtable
+from host_tools.vectors.pipeline import Cases, compute_pipeline
 
 
 def _ramp(table, n, rng, rate_lsb=600.0) -> dict:
@@ -37,36 +37,36 @@ def sequencer_set(rng) -> VectorSet:
     from host_tools.vectors.builders import corner_stream, random_model, random_stream
     from host_tools.fixed.quantize import quantize
 
-    cs = _Cases()
-    t = _qtable("diff", "pair", power_on_s=7.0, exchange_s=3.0, dwell_s=9.0)
+    cs = Cases()
+    t = qtable("diff", "pair", power_on_s=7.0, exchange_s=3.0, dwell_s=9.0)
     cs.add("power_on_timed", "self-timed from power-on (7), exchange 3, dwell 9, settle 2, pair", t,
            _ramp(t, 160, rng), True)
-    t = _qtable("diffn", "trend", n=8, settle_s=5.0, max_stale_s=300.0)
+    t = qtable("diffn", "trend", n=8, settle_s=5.0, max_stale_s=300.0)
     cs.add("paper_cycles_timed", "self-timed at the paper's timing (exchange 30, dwell 120, no power-on), "
            "trend, settle 5, 2.5 cycles", t, _ramp(t, 780, rng), True)
-    t = _qtable("diff", None, power_on_s=5.0)
+    t = qtable("diff", None, power_on_s=5.0)
     cs.add("ftr_timed", "self-timed FTR table: power-on (5) then FTR forever", t, _ramp(t, 60, rng), True)
-    t = _qtable("iir", "pair", shift=3, exchange_s=0.0, dwell_s=4.0)
+    t = qtable("iir", "pair", shift=3, exchange_s=0.0, dwell_s=4.0)
     cs.add("no_exchange_timed", "self-timed, exchange_n = 0, power_on_n = 0: modes 1/2 alternate directly", t,
            _ramp(t, 100, rng), True)
-    t = _qtable("diff", "trend", settle_s=0.0, power_on_s=2.0, exchange_s=1.0, dwell_s=1.0)
+    t = qtable("diff", "trend", settle_s=0.0, power_on_s=2.0, exchange_s=1.0, dwell_s=1.0)
     cs.add("dwell1_timed", "self-timed, one-sample windows (dwell 1, exchange 1), trend", t, _ramp(t, 80, rng), True)
-    t = _qtable("diff", "pair", settle_s=5.0, exchange_s=2.0, dwell_s=5.0)
+    t = qtable("diff", "pair", settle_s=5.0, exchange_s=2.0, dwell_s=5.0)
     cs.add("settle_eq_dwell_timed", "self-timed, settle_n = dwell_n = 5: never valid (stale)", t, _ramp(t, 60, rng),
            True)
     # staleness limit edge: max_stale 10, the other window's age runs through 10 and 11
-    t = _qtable("diff", "pair", settle_s=0.0, max_stale_s=10.0)
+    t = qtable("diff", "pair", settle_s=0.0, max_stale_s=10.0)
     modes = [1] * 5 + [2] * 15 + [3] * 3 + [1] * 12 + [3] * 8 + [2] * 6 + [3] * 9 + [1] * 4 + [2] * 3
     s = _ramp(t, len(modes), rng)
     s["mode"] = np.array(modes)
     cs.add("stale_edge_log", "log-driven, max_stale_n = 10: ages 1..15 of the other window (valid up to 10)", t, s)
     # trend slope clamp and output saturation: extreme rate words in short windows
-    t = _qtable("diff", "trend", settle_s=0.0, max_stale_s=50.0)
+    t = qtable("diff", "trend", settle_s=0.0, max_stale_s=50.0)
     s = _extreme_stream(t)
     cs.add("slope_clamp_log", "log-driven trend with +-(2^31 - 1) rate words in 2-sample windows: slope clamp, "
            "OUT saturation (flag 128)", t, s)
     # BIAS / OUT saturation: E = 0, B = m_0 << 21
-    big = dataclasses.replace(_qtable("diff", None), e_row=(0, 0, 0, 0), e_7=0, e_acc=0,
+    big = dataclasses.replace(qtable("diff", None), e_row=(0, 0, 0, 0), e_7=0, e_acc=0,
                               mant=tuple(F.INT32_SYM if k == 0 else 0 for k in range(N_TERMS)))
     s = _ramp(big, 40, rng)
     s["r"][::3] = -F.INT32_SYM
@@ -76,7 +76,7 @@ def sequencer_set(rng) -> VectorSet:
     s["r"][::2] = F.INT32_SYM
     cs.add("bias_saturation_neg_log", "FTR, B = -(2^31 - 1) deg/h", neg, s)
     # long windows with extreme rates: |acc| up to 700 (2^31 - 1)
-    t = _qtable("lsq", "trend", n=16, settle_s=3.0, max_stale_s=2000.0)
+    t = qtable("lsq", "trend", n=16, settle_s=3.0, max_stale_s=2000.0)
     modes = [3] * 5 + [1] * 700 + [3] * 4 + [2] * 700 + [3] * 2 + [1] * 60
     s = _ramp(t, len(modes), rng)
     s["mode"] = np.array(modes)
@@ -86,7 +86,7 @@ def sequencer_set(rng) -> VectorSet:
     cs.add("long_windows_log", "log-driven, 700-sample windows of near-full-scale rate words (|acc| ~ 2^40.5), "
            "lsq n=16, restart inside a window", t, s)
     # long self-timed run: many short cycles
-    t = _qtable("iir", "trend", shift=4, settle_s=1.0, max_stale_s=12.0, power_on_s=3.0, exchange_s=2.0,
+    t = qtable("iir", "trend", shift=4, settle_s=1.0, max_stale_s=12.0, power_on_s=3.0, exchange_s=2.0,
                 dwell_s=5.0)
     s = random_stream(rng, t, 2500)
     s["restart"][:] = 0
@@ -96,30 +96,30 @@ def sequencer_set(rng) -> VectorSet:
     # corner streams of host_tools.vectors.builders
     for est, comb in (("diff", "pair"), ("diffn", "trend"), ("lsq", None), ("iir", "trend"), ("lsq", "pair"),
                       ("iir", None)):
-        t = _qtable(est, comb)
+        t = qtable(est, comb)
         cs.add(f"corner_{est}_{comb or 'ftr'}", "host_tools.vectors.builders.corner_stream (log-driven)", t,
                corner_stream(t, reversal=comb is not None))
-    t = _qtable("diffn", "pair", n=8, exchange_s=2.0, dwell_s=5.0)
+    t = qtable("diffn", "pair", n=8, exchange_s=2.0, dwell_s=5.0)
     cs.add("corner_diffn_pair_timed", "host_tools.vectors.builders.corner_stream words, self-timed", t,
            corner_stream(t), True)
     # regress, then reverse (order 1): two banks (bank 2 on mode-2 samples), the residual combiner
     for comb in ("pair", "trend", "none"):
-        t = _qtable("diff", comb, order="regress_first", power_on_s=2.0, exchange_s=3.0, dwell_s=9.0)
+        t = qtable("diff", comb, order="regress_first", power_on_s=2.0, exchange_s=3.0, dwell_s=9.0)
         cs.add(f"rtr_{comb}_timed", f"regress_first {comb}: self-timed, power-on 2, exchange 3, dwell 9, settle 2; "
                "windows sum r = c - B of the mode's bank", t, _ramp(t, 200, rng), True)
-    t = _qtable("diff", "pair", order="regress_first", settle_s=0.0, max_stale_s=10.0)
+    t = qtable("diff", "pair", order="regress_first", settle_s=0.0, max_stale_s=10.0)
     modes = [1] * 5 + [2] * 15 + [3] * 3 + [1] * 12 + [3] * 8 + [2] * 6 + [3] * 9 + [1] * 4 + [2] * 3
     s = _ramp(t, len(modes), rng)
     s["mode"] = np.array(modes)
     cs.add("rtr_stale_edge_log", "regress_first pair, log-driven, max_stale_n = 10: ages 1..15 of the other window",
            t, s)
     big2 = np.array([2.0 ** 21 * 0.9] + [0.0] * (N_TERMS - 1))
-    t = _qtable("diff", "trend", order="regress_first", settle_s=0.0, max_stale_s=50.0,
+    t = qtable("diff", "trend", order="regress_first", settle_s=0.0, max_stale_s=50.0,
                 coef=[1.0] + [0.0] * (N_TERMS - 1), coef2=big2)
     s = _extreme_stream(t)
     cs.add("rtr_residual_saturation_log", "regress_first trend, bank 2 B = 0.9 2^21 deg/h, +-(2^31 - 1) rate "
            "words: the residual word r saturates (flag 128), slope clamp", t, s)
-    t = _qtable("lsq", "pair", n=16, order="regress_first", settle_s=0.0, max_stale_s=200.0)
+    t = qtable("lsq", "pair", n=16, order="regress_first", settle_s=0.0, max_stale_s=200.0)
     modes = [1] * 30 + [2] * 30 + [1] * 30 + [2] * 30
     s = _ramp(t, len(modes), rng)
     s["mode"] = np.array(modes)
@@ -128,7 +128,7 @@ def sequencer_set(rng) -> VectorSet:
     cs.add("rtr_warmup_log", "regress_first pair, lsq n=16: rate warm-up samples (after power-on and a restart "
            "inside a window) are not used (no sum, not valid)", t, s)
     for est, comb in (("diffn", "pair"), ("iir", "none"), ("lsq", "trend")):
-        t = _qtable(est, comb, order="regress_first")
+        t = qtable(est, comb, order="regress_first")
         cs.add(f"rtr_corner_{est}_{comb}", "regress_first: host_tools.vectors.builders.corner_stream (log-driven)", t,
                corner_stream(t))
     for k in range(3):
@@ -149,7 +149,7 @@ def sequencer_set(rng) -> VectorSet:
                f"{', self-timed' if timed else ''}", t, random_stream(rng, t, 500, reversal=reversal), timed)
     # the iir's start-up gear (shift min(10, floor(log2 k))) through every step, k saturating at 2^10,
     # a restart after the saturation and a second segment whose gear reaches 10
-    t = _qtable("iir", "pair", shift=10, settle_s=1.0, max_stale_s=40.0)
+    t = qtable("iir", "pair", shift=10, settle_s=1.0, max_stale_s=40.0)
     s = random_stream(rng, t, 3200)
     s["restart"][:] = 0
     s["restart"][[0, 2000]] = 1
