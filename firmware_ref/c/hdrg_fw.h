@@ -55,9 +55,12 @@
  *   -DHDRG_FIX_EST=k     rate_est (0 diff, 1 diffn, 2 lsq, 3 iir)
  *   -DHDRG_FIX_COMB=k    combiner (0 ftr, 1 pair, 2 trend, 3 none)
  *   -DHDRG_FIX_ORDER=k   order (0 combine_first, 1 regress_first; n_banks follows)
- * What `hdrg fit` picks for mode-reversal logs by default (regress_first pair, diff, freq proxy,
- * no aux generators): -DHDRG_FIX_PROXY=0 -DHDRG_FIX_EST=0 -DHDRG_FIX_COMB=1 -DHDRG_FIX_ORDER=1
- * -DHDRG_AUX_GEN=0.  Bit for bit the same answers for every table it accepts. */
+ * Fix the fields of the table you ship (the exported header lists them: rate_est, combiner, ...):
+ * `hdrg fit` chooses the rate estimator per device (cross-validated, iir preferred) and may add
+ * aux terms (a lag block), so a build fixed for one device's table may refuse another's.  The
+ * build `hdrg cost` measures (regress_first pair, diff, freq proxy, no aux generators):
+ * -DHDRG_FIX_PROXY=0 -DHDRG_FIX_EST=0 -DHDRG_FIX_COMB=1 -DHDRG_FIX_ORDER=1 -DHDRG_AUX_GEN=0.
+ * Bit for bit the same answers for every table it accepts. */
 #if defined(HDRG_FIX_PROXY) && (HDRG_FIX_PROXY < 0 || HDRG_FIX_PROXY > 1)
 #error "HDRG_FIX_PROXY must be 0 or 1"
 #endif

@@ -73,9 +73,9 @@ PRIMITIVES = ("hdrg_asr", "hdrg_rhu", "hdrg_mul_rhu", "hdrg_floor_div", "hdrg_di
 STAGE_OF = {f: s for s, fs in STAGES.items() for f in fs}
 # the O fields the lean driver (-DHDRG_DRIVER_LEAN: hdrg_step_out) answers; the rest are 0
 LEAN_FIELDS = ("acc", "cnt", "y", "out", "bias", "valid", "flags")
-# the configuration-specialized build (hdrg_fw.h HDRG_FIX_*): what `hdrg fit` picks for mode-reversal logs
-# by default (DEFAULT_RATE's estimator, reversal's DEFAULT_ORDER + DEFAULT_COMBINER, the freq proxy, no
-# aux generators); table field -> value, and the -D flags that fix them
+# the configuration-specialized build (hdrg_fw.h HDRG_FIX_*) the cost benchmark measures: DEFAULT_RATE's
+# estimator (diff), reversal's DEFAULT_ORDER + DEFAULT_COMBINER, the freq proxy, no aux generators (`hdrg fit`
+# chooses the rate estimator and aux terms per device); table field -> value, and the -D flags that fix them
 SPECIAL = {"proxy_kind": VOC.PROXY_KINDS.index("freq"), "rate_est": VOC.ESTIMATORS.index(DEFAULT_RATE["estimator"]),
            "combiner": VOC.COMBINERS.index(DEFAULT_COMBINER), "order": VOC.ORDERS.index(DEFAULT_ORDER),
            "aux_gen": 0}
