@@ -9,7 +9,7 @@ no_self_heating is what the clean physics' self-heating costs; the loop benchmar
 what the loop found on those runs.  The held-out error is the loop's: the std of 100-s means of the
 compensated held-out output (1-s where 100 s is undefined), deg/h.
 
-    python docs/studies/self_heating_cost.py docs/studies/loop_seed0.json > docs/studies/self_heating_cost_seed0.jsonl
+    python docs/studies/self_heating_cost.py docs/studies/loop_seed0_previous_defaults.json > docs/studies/self_heating_cost_seed0.jsonl
 """
 import copy
 import json
