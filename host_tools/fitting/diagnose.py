@@ -198,24 +198,24 @@ def base_model(train, opts, terms=None):
 FLOOR_RATIO = 1.05   # the final model's held-out error may exceed the flight stack's cubic's by this factor at most
 
 
-def cubic_floor(train, hold, model) -> dict:
+def cubic_floor(train, hold, model) -> tuple:
     """The loop's floor: the flight stack's cubic in the temperature sensor
     (host_tools.fitting.baseline.fit_baseline on the training runs, ``model``'s reversal
     settings) against ``model`` on the held-out runs, the same metric as every step
     (host_tools.fitting.diagnose_confirm.HELDOUT_METRIC, samples valid under both).
-    {"cubic_dph", "model_dph", "limit", "replaced" (model_dph > limit x cubic_dph), "_model"
-    (the cubic, when replaced)}; {"error": why} when the cubic cannot be fitted (no temp_c)."""
+    ``(info, final)``: info {"cubic_dph", "model_dph", "limit", "replaced" (model_dph > limit x
+    cubic_dph)}, or {"error": why} when the cubic cannot be fitted (no temp_c); final: the cubic
+    when replaced, else ``model``."""
     from host_tools.fitting.baseline import fit_baseline
     if not all("temp_c" in log for log in train + hold):
-        return {"error": "no temp_c column: no flight-stack cubic to compare with"}
+        return {"error": "no temp_c column: no flight-stack cubic to compare with"}, model
     try:
         cubic = fit_baseline(train, model.config)
-        c = heldout_score(error_stats(hold, cubic, model))[0]
-        m = heldout_score(error_stats(hold, model, cubic))[0]
+        c, m = (heldout_score(st)[0] for st in step_errors(hold, cubic, model))
     except ValueError as exc:
-        return {"error": str(exc)}
+        return {"error": str(exc)}, model
     replaced = bool(c is not None and m is not None and m > FLOOR_RATIO * c)
-    return {"cubic_dph": c, "model_dph": m, "limit": FLOOR_RATIO, "replaced": replaced, "_model": cubic if replaced else None}
+    return {"cubic_dph": c, "model_dph": m, "limit": FLOOR_RATIO, "replaced": replaced}, (cubic if replaced else model)
 
 
 def _metric_text(entry) -> str:
@@ -397,13 +397,10 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                         f" ({_metric_text(entry)})")
         stops[phase] = stopped
     stopped = stops.get("effect") or stops.get("structure")
-    floor = cubic_floor(train, hold, model) if hold else None
+    floor, model = cubic_floor(train, hold, model) if hold else (None, model)
     if floor and floor.get("replaced"):
-        model = floor.pop("_model")
         say(f"the final model's held-out error {floor['model_dph']:.4g} deg/h is above {FLOOR_RATIO:g} x the "
             f"flight stack's cubic ({floor['cubic_dph']:.4g} deg/h): the cubic is the final model")
-    elif floor:
-        floor.pop("_model", None)
     final = error_stats(evals, model)
     verdict = verdict_of(iterations)
     final_train = error_stats(train, model) if hold else final

@@ -86,9 +86,14 @@ def error_stats(logs, model: BiasModel, other: BiasModel | None = None) -> dict:
         valid = np.asarray(out["valid"]) == 1
         if other is not None:
             valid &= np.asarray(compensate(log, other)["valid"]) == 1
-        rows.append({"run": log.source, **stats_one(out.rate_dph, log.t_s, valid),
-                     "rms_legs_dph": leg_rms(out.rate_dph, valid, log.segments), "problems": problems(out)})
+        rows.append(_run_row(log, out, valid))
     return {**_mean_stats(rows), "runs": rows}
+
+
+def _run_row(log, out, valid) -> dict:
+    """One run's row of :func:`error_stats`: ``out`` (compensated ``log``) judged on ``valid``."""
+    return {"run": log.source, **stats_one(out.rate_dph, log.t_s, valid),
+            "rms_legs_dph": leg_rms(out.rate_dph, valid, log.segments), "problems": problems(out)}
 
 
 def residuals(logs, model):
@@ -130,7 +135,13 @@ def step_errors(logs, before: BiasModel, after: BiasModel) -> tuple:
     by host_tools.bench.loop to score it: ``(stats_before, stats_after)`` of :func:`error_stats` on
     ``logs``, each restricted to the samples valid under BOTH models (a longer rate warm-up or
     settle window must not win or lose by hiding samples); ``heldout_score(stats)[0]`` is the number."""
-    return error_stats(logs, before, after), error_stats(logs, after, before)
+    rows_b, rows_a = [], []
+    for log in logs:      # each model compensated once per run (error_stats(logs, a, b) twice would do it twice)
+        out_b, out_a = compensate(log, before), compensate(log, after)
+        valid = (np.asarray(out_b["valid"]) == 1) & (np.asarray(out_a["valid"]) == 1)
+        rows_b.append(_run_row(log, out_b, valid))
+        rows_a.append(_run_row(log, out_a, valid))
+    return {**_mean_stats(rows_b), "runs": rows_b}, {**_mean_stats(rows_a), "runs": rows_a}
 
 
 def confirmed_on_holdout(before, after) -> bool:
