@@ -296,20 +296,20 @@ def _heldout_sse(coef, G, b, yy):
     return max(heldout_sse(TERM_BASIS @ coef, yy, b, G), 0.0)
 
 
-def heldout_error(train: Accumulator, test: Accumulator, terms, *, demean: bool = False, rcond=RCOND) -> float:
+def heldout_error(train: Accumulator, test: Accumulator, terms, *, rcond=RCOND) -> float:
     """sum w (y - X c)^2 [(deg/h)^2 x weight] over the samples of ``test`` of the coefficients
-    of ``terms`` fitted on ``train`` (terms unidentifiable on ``train`` dropped).  ``demean``:
-    the test samples' weighted mean residual is removed first (the held-out part's own offset,
-    which its power-on sets and a stability figure does not see)."""
-    G, b, yy = test.system()
+    of ``terms`` fitted on ``train`` (terms unidentifiable on ``train`` dropped): one fold of
+    :class:`_CV`, for callers with their own folds (host_tools.fitting.legs.leg_cv)."""
     if test.n == 0:
         return 0.0
-    coef = _solve_terms(_factor(train), tuple(sorted(terms)), rcond, explain=False)["coef"] if train.n else np.zeros(N_TERMS)
-    a = TERM_BASIS @ coef
-    sse = _heldout_sse(coef, G, b, yy)
-    if demean and G[0, 0] > 0:
-        sse -= (b[0] - float(G[0] @ a)) ** 2 / G[0, 0]
-    return max(sse, 0.0)
+    return _fold_sse(_factor(train) if train.n else None, test.system(), tuple(sorted(terms)), rcond)
+
+
+def _fold_sse(fac, test, terms, rcond) -> float:
+    """Held-out sum of squared errors on the system ``test`` = (G, b, yy) of ``terms`` (sorted)
+    fitted through the training factor ``fac`` (None: no training sample, all coefficients 0)."""
+    coef = np.zeros(N_TERMS) if fac is None else _solve_terms(fac, terms, rcond, explain=False)["coef"]
+    return _heldout_sse(coef, *test)
 
 
 def _banks_of(group) -> tuple:
@@ -344,10 +344,7 @@ class _CV:
             out = np.zeros(len(self.accs))
             for f, (facs, tests) in enumerate(zip(self.trains, self.tests)):
                 for fac, test in zip(facs, tests):
-                    coef = np.zeros(N_TERMS)
-                    if fac is not None:
-                        coef = _solve_terms(fac, key, self.rcond, explain=False)["coef"]
-                    out[f] += _heldout_sse(coef, *test)
+                    out[f] += _fold_sse(fac, test, key, self.rcond)
             self.cache[key] = out
         return self.cache[key]
 
@@ -566,7 +563,7 @@ def design_matrix(u, v, z=None, terms=range(N_TERMS)) -> np.ndarray:
 # -- run-log glue and the `hdrg fit` command ------------------------------------------------------
 
 def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8, significance=None,
-             min_gain=0.02, blocks=None, masks=None, candidates=None):
+             min_gain=0.02, blocks=None, masks=None):
     """Fit a :class:`host_tools.golden.model.BiasModel` with ``config`` (a ModelConfig) to RunLogs.
 
     Each log goes through the golden pipeline (:func:`host_tools.golden.compensate.prepare`): only its
@@ -581,7 +578,7 @@ def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8
     'auto'.  ``significance`` of the 'auto' selection (:func:`select_terms`): None ->
     host_tools.golden.compensate.DEFAULT_SIGNIFICANCE.  ``masks``: None, or one bool array per log
     (its length) AND-ed with the used samples (e.g. the samples valid for several rate estimators,
-    host_tools.fitting.fit_rate.fit_auto_rate).  ``candidates``: the terms 'auto' may select from (None: all).
+    host_tools.fitting.fit_rate.fit_auto_rate).
     Returns (model, FitResult)."""
     from host_tools.golden.compensate import DEFAULT_SIGNIFICANCE, DEFAULT_TERMS, prepare
     from host_tools.golden.model import BiasModel
@@ -612,7 +609,7 @@ def fit_logs(logs, config, terms=None, *, drop_unidentifiable=False, cv_blocks=8
             banks = tuple(Accumulator().add(pr.u, pr.v, pr.z, pr.y, w) for w in bank_w)
             accs[f"{log.source}#{i}"] = banks if two else banks[0]
     res = fit_accumulators(accs, terms, drop_unidentifiable=drop_unidentifiable,
-                           significance=significance, min_gain=min_gain, candidates=candidates)
+                           significance=significance, min_gain=min_gain)
     info = res.to_dict()
     info["train"] = [log.source for log in logs]
     # terms the data do not support: |coef| < 2 standard errors (the standard errors are already

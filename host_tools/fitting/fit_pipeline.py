@@ -41,7 +41,7 @@ class FitPolicy:
     * ``lag_block``: 'auto' (the lag-state block as k7 when cross-validation lowers the rms by
       ``lag_margin`` of the kind, 'ftr' or 'mr') or 'off';
     * ``guard_margin`` / ``guard_margin_extrapolated``: the 17-term model must beat the best cubic's
-      leave-one-leg-out rms by this fraction (the second when a sign of dT/dt has one leg);
+      leave-one-leg-out rms by this fraction (the second with one leg of each sign of dT/dt);
     * ``cv_blocks``: time blocks of the cross-validation on one run;
     * ``order``, ``combiner``, ``settle_s`` [s], ``max_stale_s`` [s]: the mode-reversal settings;
     * ``run_offset_passes``, ``min_offset_overlap``: the per-run offsets of several runs;
@@ -143,18 +143,15 @@ def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, c
     if guard not in ("auto", "off"):
         raise ValueError(f"guard must be 'auto' or 'off', not {guard!r}")
     check_cv_blocks(cv_blocks)
-    if lag_block not in (None, "auto", "off"):
-        raise ValueError(f"lag_block must be 'auto' or 'off', not {lag_block!r}")
-    if run_offsets not in ("auto", "off"):
-        raise ValueError(f"run_offsets must be 'auto' or 'off', not {run_offsets!r}")
+    _check_options(lag_block, run_offsets)
     logs = list(logs)
-    probe = compensate.fit_config_from_logs(logs, **{k: v for k, v in config_kw.items() if k != "aux"})
-    calibrated = probe if config_kw.get("proxy_range") is not None else compensate.fit_config_from_logs(
+    # the range the model will meet: the training runs' (no margin) or the given one
+    calibrated = compensate.fit_config_from_logs(
         logs, **{**{k: v for k, v in config_kw.items() if k != "aux"}, "proxy_margin": 0.0})
     ident = identifiability(logs, calibrated)
     auto_terms = terms is None or (isinstance(terms, str) and terms.strip().lower() == "auto")
     if not ident["rate_terms_identified"] and auto_terms:   # one sign of dT/dt
-        model, res = _cubic(logs, probe, config_kw)
+        model, res = _cubic(logs, calibrated, config_kw)
         ident["restricted_to"] = list(PROXY_TERMS)
         model.fit["identifiability"] = ident
         model.fit["guard"] = {"chosen": GUARD_CANDIDATES[1], "why": "the rate terms are not identified: the cubic in "
@@ -233,8 +230,16 @@ def _cubic(logs, probe, config_kw):
     return fit_logs(logs, _cubic_config(logs, probe, config_kw), list(BASELINE_TERMS))
 
 
+def _check_options(lag_block, run_offsets) -> None:
+    """ValueError for a ``lag_block`` (None, 'auto', 'off') or ``run_offsets`` ('auto', 'off') outside its choices."""
+    if lag_block not in (None, "auto", "off"):
+        raise ValueError(f"lag_block must be 'auto' or 'off', not {lag_block!r}")
+    if run_offsets not in ("auto", "off"):
+        raise ValueError(f"run_offsets must be 'auto' or 'off', not {run_offsets!r}")
+
+
 def fit_model(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, cv_blocks=DEFAULT_CV_BLOCKS,
-              rate_prefer="default", run_offsets="auto", candidates=None, **config_kw):
+              rate_prefer="default", run_offsets="auto", **config_kw):
     """What `hdrg fit` does without rate flags: mode-reversal logs with
     host_tools.golden.compensate.DEFAULT_RATE_SELECTION_MR 'auto' -> :func:`fit_auto_rate`, else
     :func:`fit_logs` with the default configuration (host_tools.golden.compensate.fit_config_from_logs
@@ -245,26 +250,23 @@ def fit_model(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, cv_
     ``rate_prefer``: fit_auto_rate's ``prefer`` ('default': host_tools.fitting.fit_rate.RATE_PREFERRED;
     None: plain least CV rms, the start of `hdrg diagnose`).  ``run_offsets`` 'auto': with several
     runs, :func:`fit_without_run_offsets` around all of this; 'off': never.  Returns (model, FitResult)."""
-    if run_offsets not in ("auto", "off"):
-        raise ValueError(f"run_offsets must be 'auto' or 'off', not {run_offsets!r}")
+    _check_options(lag_block, run_offsets)
     logs = list(logs)
     if run_offsets == "auto":
         return fit_without_run_offsets(logs, lambda lg: fit_model(
             lg, terms, drop_unidentifiable=drop_unidentifiable, lag_block=lag_block, cv_blocks=cv_blocks,
-            rate_prefer=rate_prefer, run_offsets="off", candidates=candidates, **config_kw))
+            rate_prefer=rate_prefer, run_offsets="off", **config_kw))
     lag_block = compensate.DEFAULT_LAG_BLOCK if lag_block is None else lag_block
-    if lag_block not in ("auto", "off"):
-        raise ValueError(f"lag_block must be 'auto' or 'off', not {lag_block!r}")
     lag = lag_block == "auto" and config_kw.get("aux") is None
     reversal = bool(logs) and all(log.reversal for log in logs)
     selection = compensate.DEFAULT_RATE_SELECTION_MR if reversal else compensate.DEFAULT_RATE_SELECTION_FTR
     rate_given = any(config_kw.get(k) is not None for k in ("rate_estimator", "n", "shift"))
     if selection == "auto" and logs and not rate_given:
         model, res = fit_auto_rate(logs, terms, drop_unidentifiable=drop_unidentifiable is not False,
-                                   cv_blocks=cv_blocks, prefer=rate_prefer, candidates_terms=candidates, **config_kw)
+                                   cv_blocks=cv_blocks, prefer=rate_prefer, **config_kw)
     else:
         model, res = fit_logs(logs, compensate.fit_config_from_logs(logs, **config_kw), terms, blocks=True if lag else None,
-                              drop_unidentifiable=bool(drop_unidentifiable), cv_blocks=cv_blocks, candidates=candidates)
+                              drop_unidentifiable=bool(drop_unidentifiable), cv_blocks=cv_blocks)
     if lag:
         model, res = add_lag_block(logs, model, res, terms, cv_blocks=cv_blocks,
                                    drop_unidentifiable=drop_unidentifiable is not False)

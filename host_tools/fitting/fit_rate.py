@@ -20,8 +20,7 @@ def _rate_label(est, n, shift):
 
 
 def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, significance=None, min_gain=0.02,
-                  drop_unidentifiable=True, samples="own", prefer="default", prefer_margin=None, candidates_terms=None,
-                  **config_kw):
+                  drop_unidentifiable=True, samples="own", prefer="default", prefer_margin=None, **config_kw):
     """Rate estimator 'auto': for every candidate (estimator, n, shift) build the config
     (host_tools.golden.compensate.fit_config_from_logs with ``config_kw``), fit ``terms`` with
     cross-validation over the runs (one run: ``cv_blocks`` time blocks, see :func:`fit_logs`), and
@@ -53,7 +52,7 @@ def fit_auto_rate(logs, terms=None, *, candidates=RATE_CANDIDATES, cv_blocks=8, 
     preferred = None if prefer is None else _rate_label(*prefer)
     logs = list(logs)
     kw = dict(cv_blocks=cv_blocks, blocks=True, drop_unidentifiable=drop_unidentifiable,
-              significance=significance, min_gain=min_gain, candidates=candidates_terms)
+              significance=significance, min_gain=min_gain)
     rows, cfgs, unidentifiable = {}, {}, None
     for est, n, shift in candidates:
         label = _rate_label(est, n, shift)

@@ -37,7 +37,6 @@ LEG_WINDOW_S = 600.0     # centred window of the slope that decides a leg's sign
 HOLD_FRACTION = 0.1      # |slope| below this x the run's 95th percentile of |slope|: a hold
 MIN_LEG_S = 300.0        # shorter stretches of one sign join the leg before them [s]
 MIN_SIGN_SHARE = 0.15    # each sign of dT/dt on at least this share of the samples identifies the rate terms
-MIN_LEGS_PER_SIGN = 1    # and at least this many legs of each sign
 CV_LEGS_PER_SIGN = 2     # fewer legs of a sign: a leg held out leaves none of its sign (see "extrapolated")
 MIN_RATE_RATIO = 1.5     # p75 / p25 of |dT/dt| on the moving samples: more than one chamber rate
 MIN_PROXY_SHARE = 0.5    # training proxy range below this share of the model's range: warned
@@ -68,15 +67,16 @@ def window_slope(t_s, p, window_s: float = LEG_WINDOW_S) -> np.ndarray:
     return out
 
 
-def find_legs(t_s, p, window_s: float = LEG_WINDOW_S, min_leg_s: float = MIN_LEG_S) -> list:
+def find_legs(t_s, p, window_s: float = LEG_WINDOW_S, min_leg_s: float = MIN_LEG_S, slope=None) -> list:
     """Legs of one run: a list of (start, stop, sign) sample index ranges [start, stop) covering
-    every sample in order, sign +1 (proxy rising), -1 (falling) or 0 (no change)."""
+    every sample in order, sign +1 (proxy rising), -1 (falling) or 0 (no change).  ``slope``: the
+    run's :func:`window_slope` when the caller has it already."""
     t = np.asarray(t_s, np.float64)
     p = np.asarray(p, np.float64)
     n = len(t)
     if n == 0:
         return []
-    slope = window_slope(t, p, window_s)
+    slope = window_slope(t, p, window_s) if slope is None else slope
     finite = np.isfinite(slope)
     if not finite.any():
         return [(0, n, _sign(p[-1] - p[0]))]
@@ -128,39 +128,35 @@ def identifiability(logs, config=None) -> dict:
     "proxy": [first, last]}], "groups": {"proxy" | "rate" | "rate_curvature": {"identified":
     bool, "why": str, "record": str (empty when identified)}}, "rate_terms_identified": bool}."""
     kind = None if config is None else config.proxy.kind
-    _, table = leg_ids(logs, kind)
     n_sign = {1: 0, -1: 0, 0: 0}
     n_legs = {1: 0, -1: 0, 0: 0}
     slopes, lo, hi = [], math.inf, -math.inf
     legs = []
-    for i, a, b, s in table:
-        log = logs[i]
-        _, p = log.proxy(kind)
-        n_sign[s] += b - a
-        n_legs[s] += 1
-        legs.append({"run": log.source, "sign": {1: "rising", -1: "falling", 0: "hold"}[s],
-                     "t0_s": float(log.t_s[a]), "t1_s": float(log.t_s[b - 1]),
-                     "proxy": [float(p[a]), float(p[b - 1])]})
     for log in logs:
         _, p = log.proxy(kind)
+        slope = window_slope(log.t_s, p)
+        for a, b, s in find_legs(log.t_s, p, slope=slope):
+            n_sign[s] += b - a
+            n_legs[s] += 1
+            legs.append({"run": log.source, "sign": {1: "rising", -1: "falling", 0: "hold"}[s],
+                         "t0_s": float(log.t_s[a]), "t1_s": float(log.t_s[b - 1]),
+                         "proxy": [float(p[a]), float(p[b - 1])]})
         lo, hi = min(lo, float(np.min(p))), max(hi, float(np.max(p)))
-        sl = np.abs(window_slope(log.t_s, p))
-        sl = sl[np.isfinite(sl)]
+        sl = np.abs(slope[np.isfinite(slope)])
         if sl.size:
             slopes.append(sl[sl > HOLD_FRACTION * np.percentile(sl, 95)])
     total = sum(n_sign.values()) or 1
     share_up, share_down = n_sign[1] / total, n_sign[-1] / total
-    rate_ok = (share_up >= MIN_SIGN_SHARE and share_down >= MIN_SIGN_SHARE
-               and n_legs[1] >= MIN_LEGS_PER_SIGN and n_legs[-1] >= MIN_LEGS_PER_SIGN)
+    rate_ok = share_up >= MIN_SIGN_SHARE and share_down >= MIN_SIGN_SHARE   # so a leg of each sign
     seen = (f"{n_legs[1]} rising leg(s) on {100 * share_up:.0f} % and {n_legs[-1]} falling leg(s) on "
             f"{100 * share_down:.0f} % of the samples")
     if rate_ok:
         rate = {"identified": True, "record": "", "why": f"both signs of dT/dt: {seen}"}
     else:
         short = [name for sgn, name in ((1, "heating"), (-1, "cooling"))
-                 if n_legs[sgn] < MIN_LEGS_PER_SIGN or (n_sign[sgn] / total) < MIN_SIGN_SHARE]
+                 if n_sign[sgn] / total < MIN_SIGN_SHARE]
         rate = {"identified": False,
-                "why": f"{seen} (needs >= {MIN_LEGS_PER_SIGN} legs and >= {100 * MIN_SIGN_SHARE:.0f} % of the samples "
+                "why": f"{seen} (needs >= {100 * MIN_SIGN_SHARE:.0f} % of the samples "
                        f"of each sign): the rate terms and the lag block are left out",
                 "record": f"more {' and '.join(short)} legs over the same temperature range (e.g. two full chamber cycles)"}
     moving = np.concatenate(slopes) if slopes else np.zeros(0)
