@@ -37,18 +37,22 @@ def _special(path: str) -> bool:
     return os.path.exists(path) and not os.path.isfile(path) and not os.path.isdir(path)
 
 
-def _fifo_probe(path: str):
+class FifoWithoutReader(OSError):
+    """An output path is a FIFO that no process reads: writing to it would wait forever."""
+
+
+def fifo_writer(path: str):
     """For a FIFO: a write end opened without blocking (held while the caller writes, so its
-    reader sees one stream), or OSError when no process reads it (writing would wait forever);
-    None for any other special file."""
+    reader sees one stream), or FifoWithoutReader when no process reads it; None for any other
+    path."""
     if not stat.S_ISFIFO(os.stat(path).st_mode):
         return None
     try:
         return os.open(path, os.O_WRONLY | os.O_NONBLOCK)
     except OSError as exc:
         if exc.errno == errno.ENXIO:
-            raise OSError(f"{path}: is a FIFO that no process is reading (writing would wait forever); "
-                                       f"start the reader first or write to a file") from None
+            raise FifoWithoutReader(f"{path}: is a FIFO that no process is reading (writing would wait forever); "
+                                    f"start the reader first or write to a file") from None
         raise
 
 
@@ -116,7 +120,7 @@ def atomic_path(path):
     """Yield a temporary path next to ``path``; on success fsync it and rename it to ``path``."""
     path = os.path.realpath(os.fspath(path))    # a symlink: its target is replaced, the link kept
     if _special(path):
-        probe = _fifo_probe(path)
+        probe = fifo_writer(path)
         try:
             yield path
         finally:

@@ -180,7 +180,6 @@ def writable_output(path, option: str = "-o") -> None:
     process is reading (writing to it would wait forever), a socket.  A regular file, a missing
     path, a terminal or a device such as /dev/null, and a FIFO with a reader are accepted (the
     FIFO's probe stays open until the process exits, so the reader sees one stream)."""
-    import errno
     import os
     import stat
     if path is None:
@@ -195,13 +194,11 @@ def writable_output(path, option: str = "-o") -> None:
     if stat.S_ISSOCK(st.st_mode):
         raise UserError(f"{option} {path}: is a socket, not a file to write")
     if stat.S_ISFIFO(st.st_mode):
+        from host_tools.atomic import FifoWithoutReader, fifo_writer
         try:
-            fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK)
-        except OSError as exc:
-            if exc.errno == errno.ENXIO:
-                raise UserError(f"{option} {path}: is a FIFO that no process is reading (writing would wait "
-                                 f"forever); start the reader first or write to a file") from None
-            raise
+            fd = fifo_writer(path)
+        except FifoWithoutReader as exc:
+            raise UserError(f"{option} {exc}") from None
         _HELD_WRITERS.append(fd)    # kept open until exit: closing it now would end the reader's input
         #                             (EOF) before the real writer opens, which would then wait forever
 
