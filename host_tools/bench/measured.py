@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections import Counter
 import warnings
 from pathlib import Path
 
@@ -48,16 +49,12 @@ def pieces(log) -> list:
     if len(legs) < 2:
         h = len(log) // 2
         return [("half1", log.select(np.arange(h))), ("half2", log.select(np.arange(h, len(log))))]
-    count, out = {}, []
-    for a, b, s in legs:
-        kind = {1: "heat", -1: "cool", 0: "hold"}[s]
-        count[kind] = count.get(kind, 0) + 1
-        out.append((kind, a, b))
-    out2 = []
-    for kind, a, b in out:
-        name = kind if sum(k == kind for k, _, _ in out) == 1 else f"{kind}{sum(1 for k, _, _ in out2 if k.startswith(kind)) + 1}"
-        out2.append((name, a, b))
-    return [(name, log.select(np.arange(a, b))) for name, a, b in out2]
+    kinds = [{1: "heat", -1: "cool", 0: "hold"}[s] for _, _, s in legs]
+    total, seen, out = Counter(kinds), Counter(), []
+    for kind, (a, b, _) in zip(kinds, legs):
+        seen[kind] += 1
+        out.append((kind if total[kind] == 1 else f"{kind}{seen[kind]}", log.select(np.arange(a, b))))
+    return out
 
 
 def splits(pcs) -> list:
