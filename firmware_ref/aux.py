@@ -2,19 +2,25 @@
 (Python-integer reference of host_tools.golden.regressors.aux_regressor, whose module doc is the spec).
 
 Inputs per sample: the channel words (code 0 F, 1 T, 2 + c the aux word A_c; firmware_ref.inputs),
-the sample counter K since power-on, the mode m (logged or the timer's), restart, and the rate
-stage's sum S (before its clamp) and warm-up flag.  With ``s_m`` = +1 (m = 0, 1), -1 (m = 2),
+the sample counter K since power-on, the mode m (logged or the timer's), restart, the input-invalid
+bit INV (FORMATS.md "The input-invalid bit"), and the rate stage's sum S (before its clamp) and
+warm-up flag (the rate stage restarts at an invalid sample and the one after it, so a rate term
+re-warms with it).  With ``s_m`` = +1 (m = 0, 1), -1 (m = 2),
 0 (m = 3) and ``kk = max(K, 0)``, every term j gives g_j (Q1.30), then::
 
     acc = sum_j w_j (s_m g_j if sign_j else g_j)         (exact int64: |.| <= 6 2^60)
     z   = clamp(RHU(acc, 30), -2^30, 2^30)               (flag 32 when clamped)
 
 Terms (table.AUX_COEF names the coefficients; RHUW = arith.mul_rshift_round_wide; Y_j, ex_j the
-term's state, reset at power-on and at every restart as the golden's seg_start)::
+term's state, reset at power-on and at every restart as the golden's seg_start; PEND one bit of
+the stage, 0 at power-on: a restart met on an invalid sample, which the input filters take at the
+next valid one; ``rs = restart or PEND``)::
 
     input:  dX = clamp(X - REF, +-(2^31 - 1));  q = clamp(RHU(dX G + OFF, SH), +-2^30)
             SB = 0: y = q
-            else:   Y_j = q 2^30 if restart else Y_j + RHUW(B, q 2^30 - Y_j, SB);  y = RHU(Y_j, 30)
+            else:   if INV: Y_j = 0 if rs else held;  elif rs: Y_j = q 2^30
+                    else: Y_j = Y_j + RHUW(B, q 2^30 - Y_j, SB)
+                    y = RHU(Y_j, 30)
             g = y; then power - 1 times g = RHU(g y, 30)
     rate:   g = 0 in warm-up, else clamp(RHU(clamp(S, +-(2^SB - 1)) G_V, SH_V), +-2^30)
     one:    g = 2^30
@@ -26,6 +32,10 @@ term's state, reset at power-on and at every restart as the golden's seg_start):
                      g = RHU(Y_j, 30)
     ramp:   g = 2^30 if kk >= N else RHU(kk G, SH)
     osc:    g = sin_q30((kk W + part 2^62) mod 2^64)          (part 1: cos = sin + a quarter turn)
+    after the terms: PEND = INV and rs
+
+decay_on, decay_exchange, ramp, osc and one read no input word (restart, mode, K only) and an
+unfiltered input no past one: INV does not change them.
 
 :func:`sin_q30` of a uint64 phase (turns x 2^64): quadrant ``Q = phase >> 62``, the quarter-turn
 fraction ``r = RHU(phase mod 2^62, 32)`` (0..2^30), ``x = r`` (Q even) or ``2^30 - r`` (Q odd),
@@ -81,15 +91,19 @@ class AuxStage:
         n = 0 if self.aux is None else len(self.aux.terms)
         self.y = [0] * n
         self.ex = [0] * n
+        self.pend = False            # a restart on an invalid sample, for the input filters
 
-    def step(self, chan, k: int, mode: int, restart: bool, s: int, warm: bool) -> tuple[int, bool, list]:
+    def step(self, chan, k: int, mode: int, restart: bool, s: int, warm: bool,
+             invalid: bool = False) -> tuple[int, bool, list]:
         """``(z, clamped, g)`` of one sample: ``chan`` the channel words by code (F, T, A_0..),
-        ``k`` the counter K, ``mode`` 0..3, ``restart``, ``s`` and ``warm`` from the rate stage;
-        ``g`` the terms' values (sign applied, weight not)."""
+        ``k`` the counter K, ``mode`` 0..3, ``restart``, ``s`` and ``warm`` from the rate stage,
+        ``invalid`` the input-invalid bit; ``g`` the terms' values (sign applied, weight not)."""
         kk = max(int(k), 0)
         sm = mode_sign(mode)
         acc = 0
         gs = []
+        rs = bool(restart) or self.pend
+        self.pend = bool(invalid) and rs
         for j, t in enumerate(self.aux.terms):
             c = t.c
             if t.kind == KIND_INPUT:
@@ -97,7 +111,10 @@ class AuxStage:
                 if c[5] == 0:
                     y = q
                 else:
-                    if restart:
+                    if invalid:              # the invalid word never enters the filter: held,
+                        if rs:               # or 0 at a (pending) restart
+                            self.y[j] = 0
+                    elif rs:
                         self.y[j] = q << F.Q
                     else:
                         self.y[j] += mul_rshift_round_wide(c[4], (q << F.Q) - self.y[j], c[5])

@@ -95,9 +95,10 @@ def _sin_q30(ph):
 
 
 @numba.njit(cache=True)
-def _aux_pass(terms, ch, kin, has_k, kc, c0, m_blk, restart, a_m, a_sraw, a_w, ystate, exst, zgen):
+def _aux_pass(terms, ch, kin, has_k, kc, c0, m_blk, restart, a_m, a_sraw, a_w, ystate, exst, zgen, bad):
     """The aux_gen 1 generators (firmware_ref.aux) over one block: the raw sum RHU(acc, 30) of
-    every sample into zgen (pass B clamps it and sets flag 32); returns the internal counter."""
+    every sample into zgen (pass B clamps it and sets flag 32); returns the internal counter.
+    exst[nt] is the stage's PEND bit (a restart on an input-invalid sample)."""
     one = np.int64(_ONE)
     h = np.int64(1) << 29
     s_one = np.int64(1) << 60
@@ -109,6 +110,9 @@ def _aux_pass(terms, ch, kin, has_k, kc, c0, m_blk, restart, a_m, a_sraw, a_w, y
         if kk < 0:
             kk = np.int64(0)
         ars = restart[i] != 0 or i == 0
+        inv = bad[i] != 0
+        irs = ars or exst[nt] != 0                     # the input filters' restart (PEND included)
+        exst[nt] = 1 if (inv and irs) else 0
         m = a_m[jb]
         sm = np.int64(1) if m <= 1 else (np.int64(-1) if m == 2 else np.int64(0))
         acc = np.int64(0)
@@ -125,7 +129,10 @@ def _aux_pass(terms, ch, kin, has_k, kc, c0, m_blk, restart, a_m, a_sraw, a_w, y
                 if terms[j, 10] == 0:
                     y = q
                 else:
-                    if ars:
+                    if inv:                                # held over an input-invalid sample
+                        if irs:
+                            ystate[j] = 0
+                    elif irs:
                         ystate[j] = q << 30
                     else:
                         ystate[j] += _rhu_wide(terms[j, 9], (q << 30) - ystate[j], terms[j, 10])
@@ -304,7 +311,7 @@ def _pass_out(order, a_y, a_b, a_fb, a_f, a_ok, out, bias, flags):
 
 @numba.njit(cache=True)
 def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
-            out, bias, valid, flags, u_o, v_o, b_o, y_o, st_o, s_o, terms, ch, kin, has_k, z_o):
+            out, bias, valid, flags, u_o, v_o, b_o, y_o, st_o, s_o, terms, ch, kin, has_k, z_o, bad):
     n = p.shape[0]
     one = np.int64(_ONE)
     nt = terms.shape[0]
@@ -365,6 +372,7 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
     out_hold = np.int32(0)
     bias_hold = np.int32(0)
     last_window = 0
+    taint = False                      # the open window held an input-invalid sample
     # -- block scratch
     a_s = np.empty(CHUNK, np.int64)    # clamped rate sum (0 in warm-up)
     a_w = np.empty(CHUNK, np.uint8)    # flags 4 warm-up, 2 rate sum clamped
@@ -377,16 +385,17 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
     a_b = np.empty(CHUNK, np.int64)    # B of the sample's bank
     a_fb = np.empty(CHUNK, np.uint8)   # pass-B flags (1, 2, 32)
     ystate = np.zeros(max(nt, 1), np.int64)
-    exst = np.zeros(max(nt, 1), np.int64)
+    exst = np.zeros(nt + 1, np.int64)  # exchange flags; [nt]: the PEND bit
     kc = np.int64(0)
     zero_z = np.zeros(CHUNK, np.int64)
     for c0 in range(0, n, CHUNK):
         m_blk = min(CHUNK, n - c0)
         # ---------------- rate estimator sums, read straight from the word array (the firmware
         # keeps the last n + 1 words in a ring; within a segment both read the same words)
-        for jb in range(m_blk):
-            if restart[c0 + jb] != 0:
-                seg = c0 + jb
+        for jb in range(m_blk):                      # restarts: segment, invalid sample and the one after
+            i = c0 + jb
+            if restart[i] != 0 or bad[i] != 0 or (i > 0 and bad[i - 1] != 0):
+                seg = i
             a_k[jb] = c0 + jb - seg                  # samples since the segment start
         if est <= 1:
             for jb in range(m_blk):
@@ -467,7 +476,8 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
             a_m[jb] = m
         # ---------------- aux generators (aux_gen 1): sequential, z before its clamp
         if nt > 0:
-            kc = _aux_pass(terms, ch, kin, has_k, kc, c0, m_blk, restart, a_m, a_sraw, a_w, ystate, exst, zgen)
+            kc = _aux_pass(terms, ch, kin, has_k, kc, c0, m_blk, restart, a_m, a_sraw, a_w, ystate, exst, zgen,
+                           bad)
             zb = zgen[:m_blk]
         else:
             zb = z[c0:c0 + m_blk] if has_z else zero_z[:m_blk]
@@ -481,6 +491,9 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
             m = a_m[jb]
             fl = a_w[jb]
             warm = (fl & 4) != 0
+            inv = bad[i] != 0
+            if inv:
+                fl |= 64
             cvalid = False
             if comb == 0:
                 y_hold = np.int64(r[i]) << 11
@@ -496,7 +509,7 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
                         nc2 = 0
                         sl1 = np.int64(0)
                         sl2 = np.int64(0)
-                    if cur != 0 and cnt >= 1:
+                    if cur != 0 and cnt >= 1 and not taint:
                         mean = _div_round_scaled(acc, cnt, 10)
                         sp = cnt - 1
                         if cur == 1:
@@ -532,7 +545,9 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
                         cur = 0
                     acc = np.int64(0)
                     cnt = np.int64(0)
-                if cur != 0 and i >= used_from and not (order == 1 and warm):
+                    taint = False
+                taint = taint or (cur != 0 and inv)
+                if cur != 0 and i >= used_from and not inv and not (order == 1 and warm):
                     c = sgn * r[i]
                     if order == 1:
                         c = ((c << 11) - a_b[jb] + 1024) >> 11        # r = c - B, LSB 2^-10 deg/h
@@ -565,7 +580,7 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
                 fl |= 16
             a_y[jb] = y_hold
             a_f[jb] = fl
-            valid[i] = 1 if (cvalid and not warm and m != 3) else 0
+            valid[i] = 1 if (cvalid and not warm and m != 3 and not inv) else 0
         # ---------------- output words and flags
         _pass_out(order, a_y[:m_blk], a_b[:m_blk], a_fb[:m_blk], a_f[:m_blk], valid[c0:c0 + m_blk],
                   out[c0:c0 + m_blk], bias[c0:c0 + m_blk], flags[c0:c0 + m_blk])
@@ -594,7 +609,7 @@ def _kernel(cfg, p, r, mode_in, restart, z, has_z, self_timed, detail,
 
 
 def run_words(table, p, r, mode=None, restart=None, z=None, self_timed: bool = False,
-              detail: bool = False, f=None, t=None, aux=None, k=None) -> dict:
+              detail: bool = False, f=None, t=None, aux=None, k=None, invalid=None) -> dict:
     """Run the kernel.  ``p`` proxy words, ``r`` rate words (int64[n]); ``mode`` 0..3 (int8[n]
     preferred; ignored and optional when ``self_timed``); ``restart`` bool/int[n] (default: only sample 0 restarts,
     which is the power-on state anyway); ``z`` Q1.30 words (default 0; aux_gen 0 only).  An aux_gen 1
@@ -603,7 +618,8 @@ def run_words(table, p, r, mode=None, restart=None, z=None, self_timed: bool = F
     and the counter ``k`` (int64[n], K since power-on, |K| <= 2^62; default 0, 1, 2, ...).  Returns
     a dict of arrays: ``out``, ``bias`` (int32 words, LSB 2^-10 deg/h), ``valid`` (uint8), ``flags``
     (uint8) and with ``detail`` also ``u``, ``v``, ``z`` (Q1.30, z clamped), ``b``, ``y`` (LSB
-    2^-21 deg/h), ``state`` and ``s`` (the rate estimator's sum before its clamp)."""
+    2^-21 deg/h), ``state`` and ``s`` (the rate estimator's sum before its clamp).  ``invalid``:
+    the input-invalid bits (bool/int[n], default none; FORMATS.md "The input-invalid bit")."""
     from firmware_ref.aux import channel_rows
 
     p = np.ascontiguousarray(p, np.int64)
@@ -622,9 +638,10 @@ def run_words(table, p, r, mode=None, restart=None, z=None, self_timed: bool = F
         mode = mode.astype(np.int8)
     mode = np.ascontiguousarray(mode)
     restart = np.zeros(n, np.uint8) if restart is None else np.ascontiguousarray(restart, np.uint8)
+    bad = np.zeros(n, np.uint8) if invalid is None else np.ascontiguousarray(invalid, np.uint8)
     has_z = z is not None
     z = np.zeros(1, np.int64) if z is None else np.ascontiguousarray(z, np.int64)
-    for name, arr in (("mode", mode), ("restart", restart)) + ((("z", z),) if has_z else ()):
+    for name, arr in (("mode", mode), ("restart", restart), ("invalid", bad)) + ((("z", z),) if has_z else ()):
         if arr.shape != (n,):
             raise ValueError(f"{name}: shape {arr.shape}, expected ({n},)")
     terms = table.aux_array()
@@ -647,7 +664,7 @@ def run_words(table, p, r, mode=None, restart=None, z=None, self_timed: bool = F
         res[name] = np.zeros(m, np.int64)
     _kernel(table.config_array(), p, r, mode, restart, z, has_z, bool(self_timed), bool(detail), res["out"], res["bias"],
             res["valid"], res["flags"], res["u"], res["v"], res["b"], res["y"], res["state"], res["s"],
-            terms, ch, kin, has_k, res["z"])
+            terms, ch, kin, has_k, res["z"], bad)
     if not detail:
         for name in names:
             del res[name]

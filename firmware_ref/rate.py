@@ -10,7 +10,10 @@ Copies host_tools.golden.rate (its module doc is the spec) with integer sums of 
 
 k counts samples since the last restart, saturating at ``K_SAT = max(W, 2^shift)`` for iir (the
 gear needs k up to 2^shift) and at W otherwise; a restart (segment start) resets k and y as at
-power-on, and past words are only read within the segment.  Then::
+power-on, and past words are only read within the segment.  The estimator also restarts at an
+input-invalid sample and at the sample after it (FORMATS.md "The input-invalid bit"; one bit of
+state, the previous sample's bit): the flagged word never enters its memory, the estimator
+re-warms (flag 4) as after a gap.  Then::
 
     warm-up (k < W):  v = 0, warmup, not clamped
     else:             Sc = clamp(S, +-(2^SB - 1));  v_raw = RHU(Sc * G_V, SH_V)
@@ -47,6 +50,7 @@ class RateState:
         self.table = table
         self.n = table.rate_n if table.rate_est in (DIFFN, LSQ) else 1
         self.k_sat = k_saturation(table.rate_est, table.rate_shift, table.rate_warmup)
+        self.prev_invalid = False    # the previous sample was input-invalid (not reset by reset())
         self.reset()
 
     def reset(self):
@@ -54,11 +58,12 @@ class RateState:
         self.k = 0
         self.y = 0
 
-    def step(self, p: int, restart: bool) -> tuple[int, bool, bool, int]:
-        """One sample: ``(v, clamped, warmup, S)``."""
+    def step(self, p: int, restart: bool, invalid: bool = False) -> tuple[int, bool, bool, int]:
+        """One sample: ``(v, clamped, warmup, S)``; ``invalid``: the sample's input-invalid bit."""
         t = self.table
-        if restart:
+        if restart or invalid or self.prev_invalid:
             self.reset()
+        self.prev_invalid = bool(invalid)
         self.hist.append(p)
         k, n = self.k, self.n
         s = 0

@@ -66,6 +66,18 @@ warm-up samples enter the window and only the output is invalid).  Combiner 3 (n
 11``, valid at every used sample.  The pipeline then outputs OUT = RHU(y, 11) (B is already in y)
 instead of RHU(y - B, 11).
 
+Input-invalid samples (FORMATS.md "The input-invalid bit"; golden host_tools.golden.reversal)
+-----------------------------------------------------------------------------------------
+One more bit of state, ``taint`` (the open window held an input-invalid sample; cleared at a
+restart and whenever a window opens).  An input-invalid sample of a mode-1/2 window sets it (at
+any position, settling included) and is never used (no sum, not valid); at the mode change a
+tainted window is not committed (as if its count were 0), so W, span, age, slope and ncommit of
+that mode keep the last clean window's values and no pairing uses the tainted one::
+
+    if cur != 0 and invalid: taint = 1
+    commit only if cnt >= 1 and not taint;  on a window switch: taint = 0
+    if cur != 0 and pos >= settle_n and invalid: not used, not valid
+
 FTR (combiner 0): ``y = R << 11``, always valid.  The centre of a window is (first + last)/2, so
 ``2 (i - centre[o]) = 2 age[o] + span[o]`` and the golden ``slope (i - centre)`` equals
 ``(W - W_prev) / dc2 * d``.  Invalid samples keep the last valid y (0 before the first).
@@ -160,10 +172,13 @@ class Combiner:
         self.span = [0, 0, 0]
         self.age = [0, 0, 0]
         self.slope = [0, 0, 0]
+        self.taint = False
 
-    def step(self, mode: int, r: int, restart: bool, b: int = 0, warm: bool = False) -> tuple[bool, int, bool]:
+    def step(self, mode: int, r: int, restart: bool, b: int = 0, warm: bool = False,
+             invalid: bool = False) -> tuple[bool, int, bool]:
         """One sample: ``(valid, y, sat)`` (y held when not valid).  ``b`` (the sample's bias B,
-        LSB 2^-21 deg/h) and ``warm`` (rate estimator in warm-up) are read by order 1 only."""
+        LSB 2^-21 deg/h) and ``warm`` (rate estimator in warm-up) are read by order 1 only;
+        ``invalid``: the sample's input-invalid bit (see the module doc)."""
         t = self.table
         sat = False
         if t.combiner == FTR:
@@ -174,11 +189,12 @@ class Combiner:
             self.acc = self.cnt = self.pos = 0
             self.ncommit[1] = self.ncommit[2] = 0
             self.slope[1] = self.slope[2] = 0
+            self.taint = False
         for o in (1, 2):
             self.age[o] = min(self.age[o] + 1, F.COUNT_MAX)
         cur = self.cur
         if mode != cur:
-            if cur != 0 and self.cnt >= 1:
+            if cur != 0 and self.cnt >= 1 and not self.taint:
                 mean = div_round_scaled(self.acc, self.cnt, F.MEAN_EXTRA)
                 sp = self.cnt - 1
                 if self.ncommit[cur] >= 1:
@@ -194,10 +210,15 @@ class Combiner:
             if cur:
                 self.last_window = cur
             self.acc = self.cnt = self.pos = 0
+            self.taint = False
         valid = False
         if cur != 0:
             c = r if cur == 1 else -r
+            if invalid:
+                self.taint = True
             if self.pos >= t.settle_n:
+                if invalid:
+                    return False, self.y_hold, sat
                 if t.order == 1:
                     if warm:
                         return False, self.y_hold, sat
@@ -260,12 +281,13 @@ class Sequencer:
             return state, F.STATE_MODE[state]
         return state_of_mode(int(mode), self.comb.last_window), int(mode)
 
-    def combine_step(self, state: int, mode: int, r: int, restart: bool, b: int = 0, warm: bool = False) -> SeqOut:
-        """Second half: the combiner (``b``, ``warm``: see Combiner.step)."""
-        valid, y, sat = self.comb.step(mode, r, restart, b, warm)
+    def combine_step(self, state: int, mode: int, r: int, restart: bool, b: int = 0, warm: bool = False,
+                     invalid: bool = False) -> SeqOut:
+        """Second half: the combiner (``b``, ``warm``, ``invalid``: see Combiner.step)."""
+        valid, y, sat = self.comb.step(mode, r, restart, b, warm, invalid)
         return SeqOut(state, mode, F.STATE_VS[state], F.STATE_SIGN[state], valid, self.comb.acc,
                       self.comb.cnt, y, sat)
 
-    def step(self, mode, r: int, restart: bool, b: int = 0, warm: bool = False) -> SeqOut:
+    def step(self, mode, r: int, restart: bool, b: int = 0, warm: bool = False, invalid: bool = False) -> SeqOut:
         state, mode = self.mode_step(mode, restart)
-        return self.combine_step(state, mode, r, restart, b, warm)
+        return self.combine_step(state, mode, r, restart, b, warm, invalid)

@@ -30,7 +30,7 @@ FLAG_WARMUP = 4
 FLAG_EXCHANGE = 8
 FLAG_STALE = 16
 FLAG_AUX_CLAMPED = 32      # z outside [-2^30, 2^30] was clamped
-FLAG_INPUT_SAT = 64        # an input value beyond its word's range was saturated (inputs stage, host side)
+FLAG_INPUT_SAT = 64        # the input-invalid bit (an input outside what the sensor can report), or a saturated aux word
 FLAG_SAT = 128             # a saturation inside the pipeline (window count, trend slope/distance, output words)
 FLAGS = {
     FLAG_PROXY_CLAMPED: ("proxy_clamped", "u outside [-1, 1] was clamped (golden: same rule, |u_raw| > 1)"),
@@ -39,7 +39,8 @@ FLAGS = {
     FLAG_EXCHANGE: ("exchange", "mode 3 (exchange or power-on)"),
     FLAG_STALE: ("stale", "mode 1/2 sample without a valid combination (settling, no window, too old)"),
     FLAG_AUX_CLAMPED: ("aux_clamped", "z word outside [-2^30, 2^30] was clamped"),
-    FLAG_INPUT_SAT: ("input_saturated", "a float input beyond its word's range was saturated (host)"),
+    FLAG_INPUT_SAT: ("input_saturated", "input-invalid: the sample's invalid bit (an input outside the declared "
+                                        "full scale or its word's range; host input stage), or an aux word saturated"),
     FLAG_SAT: ("saturated", "saturation in the pipeline: window count, trend slope/distance, output word"),
 }
 # The flags of the float golden model (host_tools.golden.compensate): bits 1..16, same meanings.

@@ -7,7 +7,8 @@ package's ``__pycache__``, then ``~/.cache``) fail with "cannot cache function .
 available":
 
 1. ``NUMBA_CACHE_DIR`` set by the user: kept;
-2. the package's own ``__pycache__`` directories writable: numba's default (nothing changes);
+2. the ``__pycache__`` directories next to every kernel module writable (host_tools' and the
+   sibling package firmware_ref's): numba's default (nothing changes);
 3. else the per-user cache ``$XDG_CACHE_HOME/hdrg/numba`` or ``~/.cache/hdrg/numba``, when it
    can be created and written;
 4. else a private temporary directory ``<tmp>/hdrg-numba-<uid>`` (mode 0700, owned by the user);
@@ -23,6 +24,7 @@ import sys
 import tempfile
 
 _KERNEL_DIRS = ("golden", "fitting")      # the subpackages holding numba kernels with cache=True
+_KERNEL_SIBLINGS = ("firmware_ref",)      # sibling packages (next to host_tools) holding such kernels too
 
 
 def _writable_dir(path: str, create: bool) -> bool:
@@ -72,7 +74,9 @@ def choose_numba_cache(environ=os.environ, stderr=None) -> str:
 
 def _choose(environ, stderr) -> str:
     here = os.path.dirname(os.path.abspath(__file__))
-    if all(_writable_dir(os.path.join(here, sub, "__pycache__"), create=False) for sub in _KERNEL_DIRS):
+    dirs = [os.path.join(here, sub) for sub in _KERNEL_DIRS]
+    dirs += [d for d in (os.path.join(os.path.dirname(here), sib) for sib in _KERNEL_SIBLINGS) if os.path.isdir(d)]
+    if all(_writable_dir(os.path.join(d, "__pycache__"), create=False) for d in dirs):
         return "package"
     stderr = sys.stderr if stderr is None else stderr
     bases = []

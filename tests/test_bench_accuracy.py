@@ -84,6 +84,13 @@ def test_cli(tmp_path, capsys):
     assert data["records"][0]["seed"] == 0 and set(data["summary"]) == {"ftr/diff", "ftr/raw"}
     assert cli.main(["bench", "accuracy", "--devices", "1", "--pipelines", "nope/*"]) == 2
     assert "matches no option" in capsys.readouterr().err
+    two = tmp_path / "two.json"         # 2 local processes: the same records
+    assert cli.main(["bench", "accuracy", "--devices", "1", "--duration", "2500", "--pipelines", "ftr/diff",
+                     "ftr/raw", "--json", str(two), "--workers", "2"]) == 0
+    capsys.readouterr()
+    assert json.loads(two.read_text())["records"] == data["records"]
+    assert cli.main(["bench", "accuracy", "--devices", "1", "--workers", "0"]) == 2
+    assert "--workers must be >= 1" in capsys.readouterr().err
 
 
 def test_bench_registry_offers_only_importable_benchmarks(monkeypatch):
@@ -165,10 +172,21 @@ def test_variant_options_and_split_runs_merge_to_the_whole():
     whole = ba.run_benchmark(2, patterns=pipes, duration_s=2500.0)
     parts = [ba.run_benchmark(1, patterns=pipes, duration_s=2500.0, start=i) for i in (1, 0)]
     merged = ba.merge(json.loads(json.dumps(p)) for p in parts)
-    assert sorted(r["seed"] for r in merged["records"]) == [0, 1] and merged["config"]["devices"] == 2
+    assert [r["seed"] for r in merged["records"]] == [0, 1] and merged["config"]["devices"] == 2
+    assert json.dumps(merged["records"]) == json.dumps(whole["records"])         # the serial run's, in order
     for name in pipes:   # (the damping-change subset is empty here: nan == nan fails)
         assert merged["summary"][name]["all"] == whole["summary"][name]["all"]
         assert merged["summary"][name]["damping_change"]["n"] == whole["summary"][name]["damping_change"]["n"]
+    for kw in ({"workers": 2}, {"scheduler": "dask"}):   # the engine of hdrg lot: the serial records, in order
+        if "scheduler" in kw:
+            distributed = pytest.importorskip("distributed")
+            with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                          dashboard_address=None) as cluster:
+                par = ba.run_benchmark(2, patterns=pipes, duration_s=2500.0, scheduler=cluster.scheduler_address)
+        else:
+            par = ba.run_benchmark(2, patterns=pipes, duration_s=2500.0, **kw)
+        assert json.dumps(par["records"]) == json.dumps(whole["records"]), kw
+        assert json.dumps(par["summary"]) == json.dumps(whole["summary"])
     with pytest.raises(ValueError, match="share a device"):
         ba.merge([parts[0], parts[0]])
     other = ba.run_benchmark(1, patterns=["ftr/raw"], duration_s=2500.0, start=2)

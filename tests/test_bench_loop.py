@@ -49,6 +49,35 @@ def test_fast_subset_structure_and_never_worse(result):
     assert s["false_discovery"]["n"] == 1
 
 
+def _same(a: list, b: list) -> bool:
+    """The records equal but for their wall-clock seconds (NaN equal to NaN)."""
+    def strip(recs):
+        return json.dumps([{k: v for k, v in r.items() if k != "seconds"} for r in recs], sort_keys=True)
+    return strip(a) == strip(b)
+
+
+def test_two_workers_and_shards_give_the_serial_records(result, tmp_path, capsys):
+    """The engine of hdrg lot (host_tools.lot.parallel): 2 local processes give the serial run's
+    records in run order; the shards of --shard K/M merged give them too (through the command)."""
+    par = bl.run_benchmark(3, seed=0, duration_s=1500.0, n_surrogates=5, workers=2, json_path=tmp_path / "p.json")
+    assert [r["i"] for r in par["records"]] == [0, 1, 2] and _same(par["records"], result["records"])
+    assert par["summary"] == result["summary"]
+    assert _same(json.loads((tmp_path / "p.json").read_text())["records"], result["records"])
+    parts = [bl.run_benchmark(3, seed=0, duration_s=1500.0, n_surrogates=5, shard=(k, 2)) for k in (1, 0)]
+    for k, part in zip((1, 0), parts):
+        (tmp_path / f"s{k}.json").write_text(json.dumps(part))
+    assert cli.main(["bench", "loop", "--merge", str(tmp_path / "s0.json"), str(tmp_path / "s1.json"),
+                     "--json", str(tmp_path / "m.json")]) == 0
+    capsys.readouterr()
+    merged = json.loads((tmp_path / "m.json").read_text())
+    assert merged["summary"] == json.loads(json.dumps(result["summary"]))
+    assert _same(merged["records"], result["records"])          # in run order
+    assert cli.main(["bench", "loop", "--merge", str(tmp_path / "s0.json"), str(tmp_path / "s0.json")]) == 2
+    assert "share a run" in capsys.readouterr().err
+    assert cli.main(["bench", "loop", "--runs", "1", "--workers", "0"]) == 2
+    assert "--workers must be >= 1" in capsys.readouterr().err
+
+
 def test_cli_is_registered_and_merges_shards(result, tmp_path, capsys):
     assert bench.available()["loop"] == ("host_tools.cli.bench_loop", "host_tools.bench.loop")
     a, b = tmp_path / "a.json", tmp_path / "b.json"

@@ -592,7 +592,7 @@ def test_protocol_errors(c_exe):
     lines = ["S 0 0 0 0 1 0", "EVAL 0 0 0", "RESET", "BOGUS 1", table_line(table), "# a comment", "",
              f"S {table.p_ref} 0 5 1 1 0  # trailing comment", "S 1 2 3", "S x 0 0 1 0 0",
              f"S {1 << 32} 0 0 1 0 0", f"S 0 {1 << 31} 0 1 0 0", f"S 0 0 {-(1 << 31) - 1} 1 0 0",
-             "S 0 0 0 4 0 0", "S 0 0 0 1 2 0", "S 0 0 0 -1 0 0", "RESET", "S 0 0 0 -1 0 0",
+             "S 0 0 0 4 0 0", "S 0 0 0 1 4 0", "S 0 0 0 -1 0 0", "RESET", "S 0 0 0 -1 0 0",
              "S 0 0 0 2 0 0", "TABLE BUILTIN", "TABLE 47524448 zz", f"RHU 1 {1 << 70}", "SAT 1 64",
              "RESET"]
     out = run_text(c_exe, lines, expect_rc=1)
@@ -936,3 +936,38 @@ def test_evaluator_bank_select_and_version_1_table(c_exe):
     out = run_text(c_exe, lines)
     assert out[0] == f"T {N_FIXED_V1 + 1} {v1[-1]:08x}" and N_FIXED == 72
     assert out[1:] == run_text(c_exe, [table_line(one)] + lines[1:])[1:]
+
+
+# -- the input-invalid bit (FORMATS.md "The input-invalid bit"; RESTART bit 1 of the protocol) ---------------
+
+@pytest.mark.parametrize("seed,estimator,reversal,order,self_timed", [
+    (0, "diff", True, "combine_first", False), (1, "lsq", True, "regress_first", False),
+    (2, "iir", True, "combine_first", True), (3, "diffn", False, "combine_first", False),
+    (4, "iir", True, "regress_first", False)])
+def test_invalid_bit_equals_numba_and_reference(c_exe, seed, estimator, reversal, order, self_timed):
+    """Random streams with 3 % of the samples (and bursts) input-invalid: the C twin (BIN block,
+    RESTART = restart + 2 invalid) equals the numba kernel and the Python reference, every column."""
+    rng = np.random.default_rng(1300 + seed)
+    kw = {"order": order} if order == "regress_first" else {"reversal": reversal}
+    table = quantize(random_model(rng, estimator=estimator, **kw), exchange_s=3.0, dwell_s=7.0, power_on_s=2.0,
+                     n_random=10).table
+    s = random_stream(rng, table, 6000, reversal=reversal)
+    inv = rng.random(6000) < 0.03
+    inv[1000:1012] = True
+    s["restart"] = np.asarray(s["restart"], np.int64)
+    rec = input_records(table, s, self_timed)
+    rec[:, 4] = s["restart"] + 2 * inv
+    n = len(rec)
+    data = f"{table_line(table)}\nBIN {n}\n".encode() + rec.astype("<i8").tobytes()
+    pr = subprocess.run([str(c_exe)], input=data, capture_output=True)
+    assert pr.returncode == 0 and not pr.stderr, pr.stderr.decode(errors="replace")[-2000:]
+    j = pr.stdout.index(b"\n", pr.stdout.index(b"\n") + 1)
+    arr = np.frombuffer(pr.stdout[j + 1:], "<i8").reshape(n, len(FIELDS))
+    got = {name: arr[:, c].astype(np.int64) for c, name in enumerate(FIELDS)}
+    mode = None if self_timed else s["mode"]
+    k = run_words(table, s["p"], s["r"], mode, s["restart"], s.get("z"), self_timed=self_timed, detail=True,
+                  invalid=inv)
+    ref = run_reference(table, s["p"], s["r"], mode, s["restart"], s.get("z"), self_timed=self_timed, invalid=inv)
+    assert_same(k, got, what=f"seed {seed} numba")
+    assert_same(ref, got, REF_KEYS, f"seed {seed} reference")
+    assert ((got["flags"] & F.FLAG_INPUT_SAT) != 0).tolist() == inv.tolist() and not got["valid"][inv].any()

@@ -622,8 +622,36 @@ def test_the_report_warns_when_the_held_out_error_is_far_above_the_training_erro
     runlog.write(tr, str(tr_p))
     runlog.write(ho, str(ho_p))
     import contextlib, io
-    buf = io.StringIO()
-    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(io.StringIO()):
+    buf, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(err):
         assert main(["diagnose", str(tr_p), "--holdout", str(ho_p), "--out", str(tmp_path / "c"), "--max-iter", "0",
                      "--no-plots"]) == 0
-    assert "warning: the held-out error" in buf.getvalue()
+    assert "hdrg diagnose: warning: the held-out error" in err.getvalue() and "warning:" not in buf.getvalue()
+
+
+def test_cli_summary_warnings_go_to_stderr(tmp_path, capsys, monkeypatch):
+    """The console summary's warnings (held-out error far above training, a held-out run also in
+    training, extrapolation) go to stderr as "hdrg diagnose: warning: ...", after the summary on
+    stdout; notes stay on stdout; the report files are written by api.diagnose as before."""
+    from host_tools import api
+    from host_tools.cli import diagnose as cli_diagnose
+
+    base = {"std_dph": 1.0, "std100_dph": 0.5}
+    report = {"verdict": "no effect found", "verdict_detail": "nothing kept", "evaluated_on": "holdout",
+              "baseline": {"holdout": base}, "iterations": [],
+              "generalization": {"warning": "the held-out error (1 deg/h) is 12.0 x the training error"},
+              "holdout_in_training": ["run2.csv is also a training run"],
+              "extrapolation": ["proxy 1.3 x the fitted range"], "not_scanned": ["aux_vdd: no such column"],
+              "several_runs": None, "artifacts": {"lines": []}, "stopped": None}
+    monkeypatch.setattr(api, "diagnose", lambda *a, **k: (report, None))
+    paths = []
+    for s in (1, 2):
+        p = tmp_path / f"run{s}.csv"
+        runlog.write(world(s), p)
+        paths.append(str(p))
+    assert main(["diagnose", paths[0], "--holdout", paths[1], "--out", str(tmp_path / "o"), "--no-plots"]) == 0
+    cap = capsys.readouterr()
+    assert "warning:" not in cap.out and "note: not scanned: aux_vdd" in cap.out and "written:" in cap.out
+    lines = [x for x in cap.err.splitlines() if "warning:" in x]
+    assert lines == ["hdrg diagnose: warning: " + m for m in cli_diagnose.summary_warnings(report)]
+    assert len(lines) == 3 and "12.0 x the training error" in lines[0] and "extrapolation" in lines[2]

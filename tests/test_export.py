@@ -125,7 +125,7 @@ int main(void)
 {
     unsigned bad = 0;
     int e = hdrg_init(&st, HDRG_TABLE, HDRG_TABLE_WORDS, &bad);
-    hdrg_input_t in = {0, 0, 1024, 0, -1, 1};
+    hdrg_input_t in = {0, 0, 1024, 0, -1, 1, 0};
     hdrg_sample_t o;
     if (e != HDRG_OK) {
         printf("init %s word %u\n", hdrg_error_name(e), bad);

@@ -317,3 +317,25 @@ def test_regress_first_outputs_are_the_residual_combination():
                 mean = (int(r[used].sum()) * 2 ** 10 * 2 + len(used)) // (2 * len(used))
                 exp[i] = ((int(r[i]) << 10) + mean + 1024) >> 11
             assert ok.sum() > n // 2 and np.array_equal(ref["out"][ok], exp[ok])
+
+
+@pytest.mark.parametrize("seed,estimator,order", [(0, "diff", "combine_first"), (1, "diffn", "combine_first"),
+                                                   (2, "lsq", "regress_first"), (3, "iir", "regress_first"),
+                                                   (4, "iir", "combine_first"), (5, None, "regress_first")])
+def test_reference_equals_numba_invalid_bit(seed, estimator, order):
+    """The input-invalid bit (FORMATS.md): 3 % of the samples flagged, a burst, flags at restarts."""
+    rng = np.random.default_rng(700 + seed)
+    kw = {"order": order} if order == "regress_first" else {}
+    table = quantize(random_model(rng, estimator=estimator, **kw), exchange_s=3.0, dwell_s=7.0, n_random=10).table
+    s = random_stream(rng, table, 3000)
+    inv = rng.random(3000) < 0.03
+    inv[500:510] = True
+    inv[np.flatnonzero(np.asarray(s["restart"]) != 0)[:3]] = True
+    ref = run_reference(table, s["p"], s["r"], s["mode"], s["restart"], s["z"], invalid=inv)
+    got = run_words(table, s["p"], s["r"], s["mode"], s["restart"], s["z"], detail=True, invalid=inv)
+    assert_same(ref, got, f"seed {seed}")
+    assert ((ref["flags"] & F.FLAG_INPUT_SAT) != 0).tolist() == inv.tolist() and not ref["valid"][inv].any()
+    # without the bit, the same stream is unchanged by the new input
+    ref0 = run_reference(table, s["p"], s["r"], s["mode"], s["restart"], s["z"])
+    assert_same(ref0, run_words(table, s["p"], s["r"], s["mode"], s["restart"], s["z"], detail=True,
+                                invalid=np.zeros(3000, bool)), f"seed {seed} no bit")

@@ -454,3 +454,20 @@ def test_benchmark_compensate_1e6(benchmark, est):
     model = BiasModel(ModelConfig(model.config.proxy, RateConfig(est, 16, 4, 0.05, 1.0)), model.terms, model.coef)
     out = benchmark(comp.compensate, log, model)
     assert len(out) == len(log)
+
+
+def test_input_invalid_sample_golden():
+    """An input-invalid sample (host_tools.golden.input_check): the sample and the rate estimator's
+    re-warm after it are not valid (flags 64, 4); the proxy after it never enters the estimate."""
+    n = 60
+    t = np.arange(n, dtype=float)
+    freq = 6227.0 + 1e-3 * t
+    freq[20] = 20000.0                              # outside the declared plausible range
+    log = rl.RunLog.from_arrays({"sample_rate_hz": "1", "freq_range_hz": "6000..6500"}, t_s=t, freq_hz=freq,
+                                rate_dph=np.ones(n), mode=np.zeros(n, np.int64))
+    cfg = ModelConfig(ProxyConfig("freq", 6226.9, 6227.2), RateConfig("diffn", 3, 4, 0.01, 1.0), None, AuxConfig())
+    pr = comp.prepare(log, cfg)
+    assert np.flatnonzero(~pr.valid).tolist() == [0, 1, 2, 20, 21, 22, 23]    # warm-up 3 after the restarts 20, 21
+    assert pr.flags[20] & 64 and not (pr.flags[21:] & 64).any() and (pr.flags[21:24] & 4).all()
+    np.testing.assert_allclose(pr.v[pr.valid], 1e-3 / 0.01)                  # the glitch is in no slope
+    assert np.array_equal(combine(log, bad=~pr.valid).valid, pr.valid)

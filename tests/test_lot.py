@@ -159,30 +159,33 @@ def test_an_interrupted_lot_resumes_without_refitting(lot, reference, tmp_path):
     assert results["bad-short"]["stage"] != "check" and results["bad-short"]["train"] == ["bad-short/train.csv"]
 
 
+# `hdrg lot` in a child process whose device "zz-slow" never finishes (it waits for ever where
+# it would read its runs), so that the kill lands while it is calibrated, whatever the machine's speed
+_SLOW_LOT = """
+import sys, time
+from host_tools.cli import main
+from host_tools.lot import engine
+real = engine.calibrate
+def calibrate(job):
+    if job["device"].id == "zz-slow":
+        time.sleep(3600)
+    return real(job)
+engine.calibrate = calibrate
+sys.exit(main(sys.argv[1:]))
+"""
+
+
 def test_a_killed_command_resumes(lot, reference, tmp_path):
     """SIGKILL `hdrg lot` while it calibrates its last device; the second command refits none of
-    the devices finished before the kill.  The last device's training log is a FIFO: the command
-    hashes it (the test writes the data), finishes the other devices, then blocks reading it
-    again, so the kill lands there whatever the machine's speed."""
-    import threading
-
+    the devices finished before the kill, and calibrates the last one."""
     inp = tmp_path / "in"
     shutil.copytree(lot, inp)
-    data = (lot / "foreign-0" / "train.csv").read_bytes()
-    (inp / "zz-fifo").mkdir()
-    fifo = inp / "zz-fifo" / "train.csv"
-    os.mkfifo(fifo)
+    (inp / "zz-slow").mkdir()
+    shutil.copyfile(lot / "foreign-0" / "train.csv", inp / "zz-slow" / "train.csv")
     with open(inp / "manifest.csv", "a") as fh:
-        fh.write("zz-fifo,zz-fifo/train.csv,,\n")
-
-    def feed():         # the hash's read; the second read (the fit's) finds no writer and blocks
-        with open(fifo, "wb") as fh:
-            fh.write(data)
-
-    feeder = threading.Thread(target=feed, daemon=True)
-    feeder.start()
+        fh.write("zz-slow,zz-slow/train.csv,,\n")
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "host_tools.cli", "lot", str(inp / "manifest.csv"), "-o", str(out),
+    cmd = [sys.executable, "-c", _SLOW_LOT, "lot", str(inp / "manifest.csv"), "-o", str(out),
            "--spec", str(inp / "spec.json"), "--workers", "1", "--no-progress"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     others = reference[1]["computed"]
@@ -196,21 +199,19 @@ def test_a_killed_command_resumes(lot, reference, tmp_path):
         proc.send_signal(signal.SIGKILL)
     finally:
         proc.wait()
-        feeder.join(timeout=0)
     assert proc.returncode == -signal.SIGKILL and not (out / "lot.csv").exists()
+    assert not (out / "devices" / "zz-slow" / MARKER).exists()
     stamps = {d: os.stat(out / "devices" / d / MARKER).st_mtime_ns for d in others}
-    fifo.unlink()
-    fifo.write_bytes(data)          # the same bytes in a plain file: the same input
     res = run_lot(inp / "manifest.csv", out, spec=inp / "spec.json", workers=2, progress=False)
-    assert res["computed"] == ["zz-fifo"] and res["reused"] == others
+    assert res["computed"] == ["zz-slow"] and res["reused"] == others
     assert {d: os.stat(out / "devices" / d / MARKER).st_mtime_ns for d in others} == stamps
     ref = _files(reference[0])
     got = _files(out)
-    assert {k: v for k, v in got.items() if k.startswith("devices/") and "zz-fifo" not in k} == \
+    assert {k: v for k, v in got.items() if k.startswith("devices/") and "zz-slow" not in k} == \
         {k: v for k, v in ref.items() if k.startswith("devices/")}
     rows = got["lot.csv"].decode().splitlines()
-    assert [r for r in rows if not r.startswith("zz-fifo,")] == ref["lot.csv"].decode().splitlines()
-    assert next(r for r in rows if r.startswith("zz-fifo,")).split(",")[1] == "pass"
+    assert [r for r in rows if not r.startswith("zz-slow,")] == ref["lot.csv"].decode().splitlines()
+    assert next(r for r in rows if r.startswith("zz-slow,")).split(",")[1] == "pass"
 
 
 def test_the_commands(lot, tmp_path, capsys):
@@ -355,3 +356,32 @@ def test_a_dask_local_cluster_gives_the_same_bytes(lot, reference, tmp_path):
                       progress=False)
     assert res["computed"] == reference[1]["computed"]
     assert _files(tmp_path) == _files(reference[0])
+
+
+def _threads(_):
+    from host_tools.lot.parallel import blas_threads
+    return os.environ.get("OPENBLAS_NUM_THREADS"), os.environ.get("OMP_NUM_THREADS"), blas_threads()
+
+
+def test_every_engine_runs_its_jobs_with_one_thread(monkeypatch):
+    """host_tools.lot.parallel: the jobs see one BLAS thread and the thread variables at 1, in this
+    process (restored after) and in the pool's processes; results come back in the items' order."""
+    from host_tools.lot import parallel
+
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "2")
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    restore = parallel._limit_blas(2)       # conftest starts the tests with one BLAS thread
+    try:
+        before = parallel.blas_threads()
+        assert before and set(before) == {2}
+        for workers in (1, 2):
+            got = parallel.map_ordered(_threads, range(3), workers=workers)
+            assert all(a == b == "1" and counts and set(counts) == {1} for a, b, counts in got), (workers, got)
+        assert parallel.blas_threads() == before and os.environ["OPENBLAS_NUM_THREADS"] == "2"
+        assert "OMP_NUM_THREADS" not in os.environ
+        with parallel.single_threaded(), parallel.single_threaded():      # re-entrant
+            assert set(parallel.blas_threads()) == {1}
+        assert parallel.blas_threads() == before
+    finally:
+        restore()
+    assert parallel.map_ordered(abs, [-3, 2, -1], workers=2) == [3, 2, 1]

@@ -461,3 +461,25 @@ def test_compensated_log_flags_reach_the_notes():
     assert any("extrapolation: 50 of 200 samples (25.0 %) proxy_clamped" in s for s in notes)
     clean = metrics.run_metrics(log.with_columns(flags=np.zeros(n, np.int64)), taus=(1,))["notes"]
     assert "flags: none" in clean and not any("extrapolation" in s for s in clean)
+
+
+def test_raw_log_input_invalid_sample_is_left_out():
+    """A raw mode-reversal log with one 1e9 deg/h sample in a mode-1 window: the sample is
+    input-invalid (host_tools.golden.input_check): it is not valid, its window is never committed
+    (the next mode-2 window pairs with the older clean mode-1 window), and the
+    mode-reversal-alone figure stays near the clean log's (before: that window's mean, 5e7 deg/h,
+    went into every pairing with it); an FTR log leaves the sample out."""
+    log, mode, rate = _mr_log(0.0)
+    spiked = rate.copy()
+    row = 5 + 50 + 7                                    # the second mode-1 window
+    assert mode[row] == 1
+    spiked[row] = 1e9
+    r = metrics.run_metrics(log.with_columns(rate_dph=spiked), taus=(1, 10))
+    clean = metrics.run_metrics(log, taus=(1, 10))
+    assert abs(r["mean_dph"] - clean["mean_dph"]) < 1.0 and max(abs(v) for v in r["allan"]["adev_dph"]) < 100
+    assert r["n_valid"] == clean["n_valid"] - 1
+    assert any(n.startswith("input: 1 of 200 samples") and "first row 62" in n for n in r["notes"])
+    assert not any(n.startswith("input:") for n in clean["notes"])
+    ftr = _ftr_log(np.arange(100.0), np.r_[np.ones(50), 1e9, np.ones(49)])
+    f = metrics.run_metrics(ftr, taus=(1, 10))
+    assert f["n_valid"] == 99 and f["mean_dph"] == pytest.approx(1.0)

@@ -1,6 +1,7 @@
 """The RTL (vectors/hdl): the whole pipeline hdrg_top behind the check-impl protocol (tb_top.v) and
 the time-multiplexed evaluator alone (hdrg_eval_tm.v through tb_eval_tm.v): bit-exact under Icarus
-(the first cases of every pipeline set in the default run; every vector under @slow) and under
+(the first cases of every pipeline set and the whole validity set in the default run; every vector
+under @slow) and under
 Verilator (@slow), cycles per sample within the goal, lint-clean under Verilator -Wall, and a
 deliberately broken build (-DHDRG_BREAK_ROUNDING) caught."""
 import shutil
@@ -105,6 +106,16 @@ def test_top_bit_exact_icarus_subset(tmp_path):
 
 
 @pytest.mark.skipif(not ICARUS, reason="Icarus Verilog not installed (Debian package iverilog)")
+def test_top_validity_set_icarus(tmp_path):
+    """The input-invalid bit (FORMATS.md "The input-invalid bit") in hdrg_top: every vector of the
+    validity set (RESTART bit 1; aux_gen 1 cases whose input filters hold over a flagged sample)."""
+    manifest = V.read_manifest(V.DEFAULT_DIR)
+    r = cost_rtl.check_top("icarus", tmp_path, sets=("validity",), log=lambda s: None)["validity"]
+    assert r["vectors"] == manifest["sets"]["validity"]["rows"] > 3000 and r["mismatches"] == 0, r["first"]
+    assert r["cycles_max"] <= CYCLES_GOAL
+
+
+@pytest.mark.skipif(not ICARUS, reason="Icarus Verilog not installed (Debian package iverilog)")
 def test_broken_top_is_caught(tmp_path):
     expected, _, bad, _ = _run_subset(tmp_path, "icarus", (cost_rtl.BREAK,))
     assert len(bad) > len(expected) // 10
@@ -123,9 +134,9 @@ def test_top_lint_clean(top):
 @pytest.mark.parametrize("sim", ["icarus", "verilator"])
 @pytest.mark.skipif(not (ICARUS and VERILATOR), reason="iverilog or verilator not installed")
 def test_top_every_vector(sim, tmp_path):
-    """check-impl of every pipeline set (evaluator, sequencer, e2e, aux) on hdrg_top."""
+    """check-impl of every pipeline set (evaluator, sequencer, e2e, aux, validity) on hdrg_top."""
     manifest = V.read_manifest(V.DEFAULT_DIR)
-    r = cost_rtl.check_top(sim, tmp_path, log=lambda s: None)
+    r = cost_rtl.check_top(sim, tmp_path, sets=cost_rtl.SETS + ("validity",), log=lambda s: None)
     for name, x in r.items():
         assert x["vectors"] == manifest["sets"][name]["rows"] and x["mismatches"] == 0, (name, x["first"])
     assert max(x["cycles_max"] for x in r.values()) <= CYCLES_GOAL

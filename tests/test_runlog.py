@@ -90,11 +90,21 @@ def test_truncated_last_line_warns_and_repairs(tmp_path):
         assert len(runlog.read(p2)) == 2
 
 
-def test_complete_last_line_without_newline_is_fine(tmp_path):
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        log = runlog.read(write(tmp_path, "t_s,rate_dph,temp_c\n0,1,2\n1,1,2"))
-    assert len(log) == 2
+def test_last_line_without_line_end_is_dropped_with_a_warning(tmp_path):
+    """A last line without its line end may be cut inside its last number ('2.5' of '2.5678'): it is
+    discarded, never read as a shorter number; the warning names it and gives the rows kept."""
+    p = write(tmp_path, "t_s,rate_dph,temp_c\n0,1,2\n1,1,2\n2,1,2.5")
+    with pytest.warns(RunLogWarning, match=r":4: truncated last line '2,1,2.5' \(no line end.*3 of 3 cells\); "
+                                           r"repair: the partial line is discarded, the 2 complete rows are kept"):
+        log = runlog.read(p)
+    assert len(log) == 2 and log["temp_c"][-1] == 2.0
+    # trailing blank lines after a complete line are harmless; the line end may be CR LF
+    for tail in ("\n", "\n\n  \n", "\r\n", "\n  "):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            assert len(runlog.read(write(tmp_path, "t_s,rate_dph,temp_c\n0,1,2\n1,1,2.5" + tail))) == 2
+    with pytest.warns(RunLogWarning, match="truncated"), pytest.raises(RunLogError, match=r":2: no complete data rows"):
+        runlog.read(write(tmp_path, "t_s,rate_dph,temp_c\n0,1,2"))
 
 
 def test_gaps_warn_and_split_segments(tmp_path):
@@ -219,3 +229,97 @@ def test_writers_are_atomic(tmp_path, monkeypatch):
         monkeypatch.undo()
         assert dest.read_bytes() == b"old"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "a.npz"]
+
+
+# -- the fast reader: exact numbers, the same errors, bounded memory, escaped metadata --------------
+
+def _random_doubles(n, seed):
+    rng = np.random.default_rng(seed)
+    bits = rng.integers(0, 2 ** 63, n, dtype=np.uint64) | (rng.integers(0, 2, n, dtype=np.uint64) << np.uint64(63))
+    x = bits.view(np.float64)
+    x = x[np.isfinite(x)]
+    return np.concatenate([x, rng.standard_normal(n) * 10.0 ** rng.integers(-30, 30, n), [0.0, -0.0, 5e-324,
+                           2.2250738585072014e-308, 1.7976931348623157e308, 9007199254740993.0, 0.1, 1e23]])
+
+
+@pytest.mark.parametrize("chunk", [None, 97])
+def test_every_double_reads_back_bit_exact(tmp_path, monkeypatch, chunk):
+    """The kernel's conversion (Clinger / Eisel-Lemire, float() for the rest) gives the double
+    nearest each decimal, as float(): every double's repr reads back bit for bit, in blocks of any
+    size (``chunk``: lines split across blocks)."""
+    from host_tools.golden import runlog_csv
+    if chunk:
+        monkeypatch.setattr(runlog_csv, "CHUNK_BYTES", chunk)
+    x = _random_doubles(4000, 7)
+    log = RunLog.from_arrays(t_s=np.arange(len(x), dtype=float), rate_dph=np.ones(len(x)), temp_c=np.ones(len(x)),
+                             aux_x=x, mode=np.arange(len(x)) % 4)
+    runlog.write(log, tmp_path / "x.csv")
+    back = runlog.read(tmp_path / "x.csv")
+    assert back["aux_x"].view(np.int64).tolist() == x.view(np.int64).tolist()
+    assert back.mode.tolist() == log.mode.tolist() and back.mode.dtype == np.int64
+    # other spellings of the same numbers: exponents, signs, spaces, digits beyond 19
+    cells = ["1e5", "+1.5E-3", " 2.5 ", "\t.5", "5.", "0.000", "-0", "1.0000000000000000000000001", "1e-400", "0e999"]
+    text = "t_s,rate_dph,temp_c\n" + "".join(f"{i},{c},0\n" for i, c in enumerate(cells))
+    got = runlog.read(write(tmp_path, text, "s.csv")).rate_dph
+    assert got.view(np.int64).tolist() == np.array([float(c) for c in cells]).view(np.int64).tolist()
+
+
+@pytest.mark.parametrize("chunk", [None, 40])
+def test_errors_name_the_same_line_in_any_block(tmp_path, monkeypatch, chunk):
+    from host_tools.golden import runlog_csv
+    if chunk:
+        monkeypatch.setattr(runlog_csv, "CHUNK_BYTES", chunk)
+    rows = [f"{i},1.5,20.25" for i in range(40)]
+    for k, bad, problem in [(30, "30,1x,2", "'rate_dph': '1x' is not a number"), (25, "", "blank line inside"),
+                            (33, "33,1,2,3", "4 cells"), (12, "12,1\r,2", "carriage return"),
+                            (20, "20,1,\xe9", "not a number"), (38, "38,,1", "'rate_dph': empty cell")]:
+        text = "# a: b\nt_s,rate_dph,temp_c\n" + "\n".join(rows[:k] + [bad] + rows[k + 1:]) + "\n"
+        with pytest.raises(RunLogError, match=problem) as err:
+            runlog.read(write(tmp_path, text))
+        assert err.value.line == k + 3
+    with pytest.raises(RunLogError, match=r":7: mode '1.9999' is not an integer"):
+        runlog.read(write(tmp_path, "t_s,rate_dph,temp_c,mode\n" + "".join(f"{i},1,2,1\n" for i in range(5)) +
+                          "5,1,2,1.9999\n"))
+    (tmp_path / "u.csv").write_bytes(b"t_s,rate_dph,temp_c\n0,1,2\n1,1,\xff\n")
+    with pytest.raises(RunLogError, match=r"u.csv: not a text file \(UTF-8 decoding failed at byte 30\)"):
+        runlog.read(tmp_path / "u.csv")
+
+
+def test_reading_memory_is_proportional_to_the_data(tmp_path):
+    """Peak memory (tracemalloc) of reading a 200,000-row CSV: at most 3x the final arrays."""
+    import tracemalloc
+    n = 200_000
+    rng = np.random.default_rng(3)
+    log = RunLog.from_arrays({"device": "m"}, t_s=np.arange(n) * 1.0, freq_hz=6227 + rng.standard_normal(n),
+                             rate_dph=rng.standard_normal(n), mode=rng.integers(1, 3, n), temp_c=rng.standard_normal(n))
+    runlog.write(log, tmp_path / "m.csv")
+    runlog.read(tmp_path / "m.csv")                         # compiled / loaded before measuring
+    tracemalloc.start()
+    try:
+        back = runlog.read(tmp_path / "m.csv")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    final = sum(v.nbytes for v in back.columns.values())
+    assert peak <= 3 * final, (peak, final)
+    assert all(np.array_equal(back[k], log[k]) for k in log.columns)
+
+
+def test_writer_output_is_unchanged_and_metadata_is_escaped(tmp_path):
+    log = RunLog.from_arrays({"device": "d1", "#3": "free text", "note": "a: b"}, t_s=[0.0, 0.5], rate_dph=[1.25, -0.0],
+                             temp_c=[20.0, 1e-7], mode=[1, 2])
+    runlog.write(log, tmp_path / "n.csv")
+    assert (tmp_path / "n.csv").read_text() == ("# device: d1\n# free text\n# note: a: b\nt_s,rate_dph,temp_c,mode\n"
+                                                "0.0,1.25,20.0,1\n0.5,-0.0,1e-07,2\n")
+    evil = {"op\nt_s,rate_dph,temp_c": "x\r\n0,1,2\n# reversal: on", "esc": "\x1b[31m\x00\u2028", "k:v": "w"}
+    runlog.write(RunLog.from_arrays(evil, t_s=[0.0, 1.0], rate_dph=[1.0, 2.0], temp_c=[3.0, 4.0]), tmp_path / "e.csv")
+    back = runlog.read(tmp_path / "e.csv")
+    assert len(back) == 2 and "reversal" not in back.metadata
+    assert back.metadata == {"op\\nt_s,rate_dph,temp_c": "x\\r\\n0,1,2\\n# reversal: on", "esc": "\\x1b[31m\\x00\\u2028",
+                             "k_v": "w"}
+    runlog.write(back, tmp_path / "e2.csv")                 # escaping is stable: a second round trip changes nothing
+    assert (tmp_path / "e2.csv").read_text() == (tmp_path / "e.csv").read_text()
+    runlog.write(RunLog.from_arrays(evil, t_s=[0.0, 1.0], rate_dph=[1.0, 2.0], temp_c=[3.0, 4.0]), tmp_path / "e.npz")
+    assert runlog.read(tmp_path / "e.npz").metadata == evil  # NPZ keeps the text as it is (JSON)
+    with pytest.raises(RunLogError, match="column name 'a,b' cannot be written"):
+        runlog.write(RunLog.from_arrays(t_s=[0.0], rate_dph=[1.0], temp_c=[3.0], **{"a,b": [1.0]}), tmp_path / "c.csv")

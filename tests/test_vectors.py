@@ -226,7 +226,7 @@ def test_pipeline_vectors_equal_python_reference_on_whole_cases(manifest):
 def test_verify_committed_passes():
     lines = []
     assert V.verify(VECTORS, log=lines.append) == []
-    assert len([line for line in lines if "identical" in line]) == len(V.SETS) == 5
+    assert len([line for line in lines if "identical" in line]) == len(V.SETS) == 6
 
 
 def test_verify_reports_first_mismatch_with_inputs(tmp_path):
@@ -331,3 +331,18 @@ def test_cli(capsys, broken_exe):
                                         "--sets", "evaluator"])) == 1
     out = capsys.readouterr().out
     assert "FAIL:" in out and "first mismatch" in out and "set evaluator, row " in out
+
+
+def test_validity_set_exercises_the_invalid_bit(manifest):
+    """Every case of the validity set has flagged samples (RESTART bit 1), each flagged sample is
+    not valid with flag 64, and some flagged samples sit in mode-1, mode-2 and exchange samples."""
+    vs = V.load_set(VECTORS, "validity", manifest["sets"]["validity"])
+    c = vs.columns
+    inv = (c["RESTART"] >> 1) & 1 == 1
+    assert np.all((c["RESTART"] >= 0) & (c["RESTART"] <= 3))
+    assert not c["valid"][inv].any() and np.all(c["flags"][inv] & 64)
+    assert np.array_equal((c["flags"] & 64) != 0, inv)
+    assert {1, 2, 3} <= set(c["mode"][inv].tolist())
+    for case in vs.cases:
+        lo, hi = case["rows"]
+        assert inv[lo:hi].any() and c["valid"][lo:hi].any(), case["name"]

@@ -800,6 +800,7 @@ static void comb_restart(hdrg_state_t *st)
     st->ncommit[2] = 0;
     st->slope[1] = 0;
     st->slope[2] = 0;
+    st->taint = 0;
 }
 
 void hdrg_reset(hdrg_state_t *st)
@@ -812,6 +813,7 @@ void hdrg_reset(hdrg_state_t *st)
         st->hist[o] = 0;
     }
     rate_reset(st);
+    st->prev_invalid = 0;
     comb_restart(st);
     st->last_window = 0;
     for (o = 0; o < 3u; o++) {
@@ -828,6 +830,7 @@ void hdrg_reset(hdrg_state_t *st)
         st->aux_y[o] = 0;
         st->aux_ex[o] = 0;
     }
+    st->aux_pend = 0;
     st->kc = 0;
     st->fresh = 1;
 }
@@ -1007,9 +1010,10 @@ static HDRG_COLD int comb_commit(hdrg_state_t *st, unsigned cur)
 }
 
 /* sequencer.Combiner.step: returns cvalid, sets st->y_hold, HDRG_FLAG_SAT in *flags; b (the sample's B) and warm
- * are read by order 1 (the residual r = c - B) only */
+ * are read by order 1 (the residual r = c - B) only; inv: the input-invalid bit (never used; taints the window,
+ * which is then not committed) */
 static HDRG_INLINE int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int restart, int64_t b, int warm,
-                     unsigned *flags)
+                     int inv, unsigned *flags)
 {
     const hdrg_table_t *t = &st->t;
     unsigned cur, o;
@@ -1028,7 +1032,7 @@ static HDRG_INLINE int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int
     }
     cur = st->cur;
     if (mode != cur) {
-        if (cur != 0u && st->cnt >= 1u) {           /* commit the closing window */
+        if (cur != 0u && st->cnt >= 1u && !st->taint) {   /* commit the closing window (a clean one) */
             if (comb_commit(st, cur)) {
                 *flags |= HDRG_FLAG_SAT;
             }
@@ -1041,10 +1045,17 @@ static HDRG_INLINE int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int
         st->acc = 0;
         st->cnt = 0;
         st->pos = 0;
+        st->taint = 0;
     }
     if (cur != 0u) {
         int64_t c = cur == 1u ? I64(r) : -I64(r);
+        if (inv) {
+            st->taint = 1;
+        }
         if (st->pos >= t->settle_n) {
+            if (inv) {
+                return 0;                           /* not used */
+            }
             if (ORDER(t) == 1u) {
                 int cs = 0;
                 if (warm) {
@@ -1172,14 +1183,18 @@ static int64_t aux_norm(int64_t x, const int64_t *c)
     return hdrg_clamp(hdrg_rhu(dx * c[1] + c[2], (unsigned)c[3]), -HDRG_ONE, HDRG_ONE, NULL);
 }
 
-/* aux.AuxStage.step: the raw sum RHU(acc, 30) (the caller clamps it) */
+/* aux.AuxStage.step: the raw sum RHU(acc, 30) (the caller clamps it); inv: the input-invalid
+ * bit (an input filter holds its state; a restart on an invalid sample waits in aux_pend for the
+ * next valid one) */
 static HDRG_COLD int64_t aux_step(hdrg_state_t *st, const hdrg_input_t *in, const hdrg_aux_input_t *ax, int64_t k,
-                        unsigned mode, int restart, int64_t s, int warm)
+                        unsigned mode, int restart, int64_t s, int warm, int inv)
 {
     const hdrg_table_t *t = &st->t;
     int64_t acc = 0, kk = k < 0 ? 0 : k, sm = mode <= 1u ? 1 : (mode == 2u ? -1 : 0);
     const int64_t one60 = P2(60);
     unsigned j, i;
+    int irs = restart || st->aux_pend;              /* the input filters' restart */
+    st->aux_pend = (uint8_t)(inv && irs);
     for (j = 0; j < t->aux_nterms; j++) {
         const hdrg_aux_term_t *a = &t->aux_term[j];
         const int64_t *c = a->c;
@@ -1193,8 +1208,14 @@ static HDRG_COLD int64_t aux_step(hdrg_state_t *st, const hdrg_input_t *in, cons
         case HDRG_AUX_INPUT:
             x = a->src == 0u ? I64(in->f) : a->src == 1u ? I64(in->t) : (ax != NULL ? I64(ax->a[a->src - 2u]) : 0);
             g = y = aux_norm(x, c);
-            if (c[5] != 0) {
+            if (c[5] != 0 && inv) {                 /* held over an invalid sample (0 at a restart) */
+                if (irs) {
+                    *ys = 0;
+                }
+                g = y = hdrg_rhu(*ys, HDRG_Q);
+            } else if (c[5] != 0) {
                 filt = 1;
+                set = irs;
                 setv = target = y * HDRG_ONE;
                 coef = c[4];
                 sh = (unsigned)c[5];
@@ -1265,7 +1286,8 @@ static HDRG_INLINE int step_core(hdrg_state_t *st, const hdrg_input_t *in, const
 {
     const hdrg_table_t *t = &st->t;
     int restart = in->restart != 0;
-    int cvalid, valid, warm;
+    int inv = in->invalid != 0;
+    int cvalid, valid, warm, rrestart;
     unsigned state, mode, flags = 0;                /* flags are set where they arise */
     uint32_t pw;
     int64_t b, s;
@@ -1297,7 +1319,9 @@ static HDRG_INLINE int step_core(hdrg_state_t *st, const hdrg_input_t *in, const
     pw = PROXY_KIND(t) == 0u ? in->f : (uint32_t)in->t;   /* bit pattern, decoded by pword */
     u = proxy_u(t, pw, &flags);
     SET(u, u);
-    v = rate_step(st, pw, restart, &s, &flags);
+    rrestart = restart || inv || st->prev_invalid;  /* the estimator restarts at an invalid sample and the next */
+    st->prev_invalid = (uint8_t)inv;
+    v = rate_step(st, pw, rrestart, &s, &flags);
     SET(v, v);
     SET(s, s);
     warm = (flags & HDRG_FLAG_WARMUP) != 0u;
@@ -1307,7 +1331,7 @@ static HDRG_INLINE int step_core(hdrg_state_t *st, const hdrg_input_t *in, const
     if (t->aux_gen == 1u) {
         int64_t k = (ax != NULL && ax->k_given) ? ax->k : st->kc;
         st->kc = k < HDRG_K_LIMIT ? k + 1 : HDRG_K_LIMIT;
-        z = clamp_one(aux_step(st, in, ax, k, mode, restart || st->fresh, s, warm), &flags,
+        z = clamp_one(aux_step(st, in, ax, k, mode, restart || st->fresh, s, warm, inv), &flags,
                       HDRG_FLAG_AUX_CLAMPED);
         st->fresh = 0;
     } else
@@ -1320,9 +1344,12 @@ static HDRG_INLINE int step_core(hdrg_state_t *st, const hdrg_input_t *in, const
     b = evaluate_k(mode == 2u ? &t->bank[1] : &t->bank[0], u, v, z);   /* z is clamped */
     SET(b, b);
     /* 5b. combiner (order 1 reads B) */
-    cvalid = comb_step(st, mode, in->r, restart, b, warm, &flags);
+    cvalid = comb_step(st, mode, in->r, restart, b, warm, inv, &flags);
     /* 6. compensate */
-    valid = cvalid && !warm && mode != 3u;
+    valid = cvalid && !warm && mode != 3u && !inv;
+    if (inv) {
+        flags |= HDRG_FLAG_INPUT_SAT;
+    }
     if (valid) {
         int s1 = 0, s2 = 0;
         /* |y| < 2^47, |B| < 2^52; order 1: B is in y already */

@@ -162,7 +162,7 @@ enum hdrg_seq_state {
 #define HDRG_FLAG_EXCHANGE 8u           /* mode 3 (exchange or power-on) */
 #define HDRG_FLAG_STALE 16u             /* mode 1/2 sample without a valid combination (settling, no window, too old) */
 #define HDRG_FLAG_AUX_CLAMPED 32u       /* z word outside [-2^30, 2^30] was clamped */
-#define HDRG_FLAG_INPUT_SAT 64u         /* a float input beyond its word's range was saturated (host) */
+#define HDRG_FLAG_INPUT_SAT 64u         /* input-invalid: the sample's invalid bit (an input outside the declared full scale or its word's range; host input stage), or an aux word saturated */
 #define HDRG_FLAG_SAT 128u              /* saturation in the pipeline: window count, trend slope/distance, output word */
 /* END vocabulary */
 
@@ -253,6 +253,10 @@ typedef struct hdrg_input {
     int32_t z;          /* aux word Z (Q1.30; clamped to [-2^30, 2^30], flag 32) */
     int8_t mode;        /* logged mode 0..3, or -1: the internal sequencer (timer) decides */
     uint8_t restart;    /* 1 at the start of a gap-free segment */
+    uint8_t invalid;    /* 1: the input-invalid bit (the front end's over-range flag; FORMATS.md
+                         * "The input-invalid bit"): the sample is not valid, the rate estimator
+                         * restarts at it and at the next sample, its window is not committed,
+                         * the aux input filters hold their state over it */
 } hdrg_input_t;
 
 /* The extra input words of one sample for an aux_gen 1 table (hdrg_step_aux): the aux words
@@ -299,8 +303,10 @@ typedef struct hdrg_state {
     uint32_t head;                          /* index of the present word */
     uint32_t k;                             /* samples since restart, saturating at t.k_sat */
     int64_t iy;                             /* iir state, 2^-24 P LSB */
+    uint8_t prev_invalid;                   /* the previous sample was input-invalid */
     /* combiner (index 1, 2: the modes) */
     uint8_t cur, last_window;
+    uint8_t taint;                          /* the open window held an input-invalid sample */
     uint8_t ncommit[3];
     int64_t acc;
     uint32_t cnt, pos;
@@ -312,6 +318,7 @@ typedef struct hdrg_state {
     /* aux generators: filter / decay states (Q1.60), exchange flags, sample counter, power-on */
     int64_t aux_y[HDRG_AUX_MAX_TERMS];
     uint8_t aux_ex[HDRG_AUX_MAX_TERMS];
+    uint8_t aux_pend;                       /* a restart on an input-invalid sample, for the input filters */
     int64_t kc;
     uint8_t fresh;
 } hdrg_state_t;

@@ -207,7 +207,7 @@ static const char *make_input(const int64_t *a, int na, hdrg_input_t *in, hdrg_a
     if (a[1] < INT32_MIN || a[1] > INT32_MAX) return "T outside int32";
     if (a[2] < INT32_MIN || a[2] > INT32_MAX) return "R outside int32";
     if (a[3] < -1 || a[3] > 3) return "MODE not in -1..3";
-    if (a[4] != 0 && a[4] != 1) return "RESTART not 0 or 1";
+    if (a[4] < 0 || a[4] > 3) return "RESTART not 0..3 (bit 0 restart, bit 1 input-invalid)";
     if (a[5] < INT32_MIN || a[5] > INT32_MAX) return "Z outside int32";
     if (na > 6 && (a[6] > HDRG_K_LIMIT || a[6] < -HDRG_K_LIMIT)) return "K outside +-2^62";
     for (c = 7; c < na; c++) {
@@ -217,7 +217,8 @@ static const char *make_input(const int64_t *a, int na, hdrg_input_t *in, hdrg_a
     in->t = (int32_t)a[1];
     in->r = (int32_t)a[2];
     in->mode = (int8_t)a[3];
-    in->restart = (uint8_t)a[4];
+    in->restart = (uint8_t)(a[4] & 1);
+    in->invalid = (uint8_t)((a[4] >> 1) & 1);
     in->z = (int32_t)a[5];
     ax->k_given = (uint8_t)(na > 6);
     ax->k = na > 6 ? a[6] : 0;

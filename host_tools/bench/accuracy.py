@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import fnmatch
+import functools
 import math
 import time
 from dataclasses import dataclass
@@ -289,9 +290,12 @@ def summarize(records, options) -> dict:
 
 
 def run_benchmark(n_devices: int = 50, seed: int = 0, patterns=None, train_rate: float = 4.0,
-                  holdout_rate: float = 2.0, duration_s=None, progress=None, start: int = 0) -> dict:
+                  holdout_rate: float = 2.0, duration_s=None, progress=None, start: int = 0, workers: int = 1,
+                  scheduler=None) -> dict:
     """The benchmark (module doc) on devices ``start`` .. ``start + n_devices - 1`` of set ``seed``.
-    Returns {'config', 'records', 'summary'} (JSON-able)."""
+    ``workers``: local processes, or ``scheduler``: a Dask distributed scheduler address
+    (host_tools.lot.parallel); the records are the serial run's, in device order, whatever the
+    engine.  Returns {'config', 'records', 'summary'} (JSON-able)."""
     if not (isinstance(n_devices, int) and n_devices >= 1):
         raise ValueError(f"--devices must be a positive integer, not {n_devices!r}")
     if not (isinstance(seed, int) and seed >= 0):
@@ -301,13 +305,15 @@ def run_benchmark(n_devices: int = 50, seed: int = 0, patterns=None, train_rate:
             raise ValueError(f"{what} must be a positive number of degC/min, not {r!r}")
     if not (isinstance(start, int) and start >= 0):
         raise ValueError(f"--start must be a non-negative integer, not {start!r}")
+    from host_tools.lot.parallel import map_ordered
+
     options = select_options(patterns)
-    records = []
     t0 = time.time()
-    for i in range(n_devices):
-        records.append(evaluate_device(seed * SEED_STRIDE + start + i, options, train_rate, holdout_rate, duration_s))
-        if progress:
-            progress(f"device {i + 1}/{n_devices} ({time.time() - t0:.0f} s)")
+    one = functools.partial(evaluate_device, options=options, train_rate=train_rate, holdout_rate=holdout_rate,
+                            duration_s=duration_s)
+    seeds = [seed * SEED_STRIDE + start + i for i in range(n_devices)]
+    say = None if not progress else (lambda i, rec, done: progress(f"device {done}/{n_devices} ({time.time() - t0:.0f} s)"))
+    records = map_ordered(one, seeds, workers, scheduler, on_result=say)
     config = {"devices": n_devices, "start": start, "seed": seed, "options": [o.name for o in options], "train": {"rate_c_per_min": train_rate, "power_on": 0, "noise_seed": 0},
               "holdout": {"rate_c_per_min": holdout_rate, "power_on": 1, "noise_seed": 1},
               "duration_s": duration_s, "damping_change_dph": DAMPING_CHANGE_DPH, "regress_first": has_order(),
@@ -317,8 +323,8 @@ def run_benchmark(n_devices: int = 50, seed: int = 0, patterns=None, train_rate:
 
 def merge(results) -> dict:
     """One result from several runs of the same options and protocol on disjoint devices (e.g.
-    ``--start 0 --devices 25`` and ``--start 25 --devices 25``): records concatenated, summary
-    recomputed.  Runs that differ in options or protocol, or share a device, are an error."""
+    ``--start 0 --devices 25`` and ``--start 25 --devices 25``): records in device order (the
+    serial run's), summary recomputed.  Runs that differ in options or protocol, or share a device, are an error."""
     results = list(results)
     if not results:
         raise ValueError("nothing to merge")
@@ -331,7 +337,7 @@ def merge(results) -> dict:
         diff = [k for k in key if r["config"].get(k) != c0.get(k)]
         if diff:
             raise ValueError(f"cannot merge benchmark runs that differ in {', '.join(diff)}")
-    records = [rec for r in results for rec in r["records"]]
+    records = sorted((rec for r in results for rec in r["records"]), key=lambda rec: rec["seed"])   # the serial order
     seeds = [rec["seed"] for rec in records]
     if len(set(seeds)) != len(seeds):
         raise ValueError("cannot merge benchmark runs that share a device seed")

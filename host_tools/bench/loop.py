@@ -55,6 +55,7 @@ Summary (the loop's targets):
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 import time
@@ -265,23 +266,34 @@ def summarize(records: list) -> dict:
 
 
 def run_benchmark(n_runs: int, seed: int = 0, duration_s=None, n_surrogates=None, progress=None,
-                  shard=(0, 1), json_path=None, second_train=None) -> dict:
+                  shard=(0, 1), json_path=None, second_train=None, workers: int = 1, scheduler=None) -> dict:
     """The benchmark (module doc); ``shard`` (k, m): only the runs with i % m == k; with
-    ``json_path`` the result so far is written after every run; ``second_train``: see :func:`run_one`."""
-    records = []
+    ``json_path`` the result so far is written after every run (the records finished so far, in
+    run order); ``second_train``: see :func:`run_one`.  ``workers``: local processes, or
+    ``scheduler``: a Dask distributed scheduler address (host_tools.lot.parallel); the records
+    are the serial run's, in run order, whatever the engine."""
+    from host_tools.lot.parallel import run_jobs
+
     specs = [sp for sp in plan(n_runs, seed) if sp["i"] % shard[1] == shard[0]]
-    for spec in specs:
-        rec = run_one(spec, duration_s, n_surrogates, second_train)
-        records.append(rec)
-        if json_path:
-            with atomic_open(json_path, "w", encoding="utf-8") as fh:
-                json.dump({"summary": summarize(records), "records": records}, fh, indent=1)
-        if progress:
-            progress(f"[{len(records)}/{len(specs)}] device {rec['device']} {rec['effect'] or 'clean'} "
-                     f"{'MR' if rec['reversal'] else 'FTR'} x{rec['strength']:.2f}: {rec['verdict']} "
-                     f"{[(s['effect'], s['confirmed']) for s in rec['steps']]} {rec['base']:.3g} -> {rec['final']:.3g}"
-                     f" (ratio {rec['effect_ratio'] if rec['effect_ratio'] is None else round(rec['effect_ratio'], 2)},"
-                     f" {rec['seconds']} s)")
+    one = functools.partial(run_one, duration_s=duration_s, n_surrogates=n_surrogates, second_train=second_train)
+    done = {}
+    run = run_jobs(one, specs, workers, scheduler)
+    try:
+        for spec, rec in run:
+            done[spec["i"]] = rec
+            if json_path:
+                so_far = [done[i] for i in sorted(done)]
+                with atomic_open(json_path, "w", encoding="utf-8") as fh:
+                    json.dump({"summary": summarize(so_far), "records": so_far}, fh, indent=1)
+            if progress:
+                progress(f"[{len(done)}/{len(specs)}] device {rec['device']} {rec['effect'] or 'clean'} "
+                         f"{'MR' if rec['reversal'] else 'FTR'} x{rec['strength']:.2f}: {rec['verdict']} "
+                         f"{[(s['effect'], s['confirmed']) for s in rec['steps']]} {rec['base']:.3g} -> {rec['final']:.3g}"
+                         f" (ratio {rec['effect_ratio'] if rec['effect_ratio'] is None else round(rec['effect_ratio'], 2)},"
+                         f" {rec['seconds']} s)")
+    finally:
+        run.close()
+    records = [done[sp["i"]] for sp in specs]
     return {"config": {"runs": n_runs, "seed": seed, "duration_s": duration_s, "n_surrogates": n_surrogates,
                        "train": "4 degC/min, power-on 0, noise 0" + (
                            f"; and {second_train:g} degC/min, power-on 0, noise {SECOND_TRAIN_NOISE}" if second_train else ""),
@@ -299,23 +311,30 @@ CALIBRATION_SHORT_S = 5000.0          # every other clean run cut to this many s
 CALIBRATION_HDRG_SEEDS = (200, 210)   # hdrg-sim seed triples b+1, b+3 (train), b+2 (held out)
 
 
-def calibration_study(n_clean: int = 16, n_effect: int = 18, seed: int = CALIBRATION_SEED, progress=None) -> dict:
+def _run_cut(item) -> dict:
+    """:func:`run_one` of ``item`` = (spec, duration_s)."""
+    return run_one(item[0], duration_s=item[1])
+
+
+def calibration_study(n_clean: int = 16, n_effect: int = 18, seed: int = CALIBRATION_SEED, progress=None,
+                      workers: int = 1, scheduler=None) -> dict:
     """Calibration runs on seeds disjoint from the benchmark's (``seed`` != the bench's 0):
     the first ``n_clean`` clean runs of ``plan(3 n, seed)`` (every other one cut to
     CALIBRATION_SHORT_S; run type as in the plan: i odd = mode reversal), clean hdrg-sim runs
     (FTR/MR, 1 and 2 cycles, CALIBRATION_HDRG_SEEDS) and the first ``n_effect`` effect runs.
+    ``workers``/``scheduler``: the engine (:func:`run_benchmark`).
     Returns {"clean": summary + records, "hdrg_clean": rows, "effect": summary + records}."""
+    from host_tools.lot.parallel import map_ordered
+
     say = progress or (lambda msg: None)
-    clean = []
-    for k, sp in enumerate([s for s in plan(3 * n_clean, seed) if s["effect"] is None][:n_clean]):
-        rec = run_one(sp, duration_s=None if k % 2 == 0 else CALIBRATION_SHORT_S)
-        clean.append(rec)
-        say(f"clean {sp['i']}: {rec['verdict']}")
-    hdrg = hdrg_clean_study(CALIBRATION_HDRG_SEEDS, progress=say)
-    eff = []
-    for sp in [s for s in plan(3 * n_effect, seed) if s["effect"] is not None][:n_effect]:
-        eff.append(run_one(sp))
-        say(f"effect {sp['i']} {sp['effect']}: {eff[-1]['verdict']}")
+    cut = [(sp, None if k % 2 == 0 else CALIBRATION_SHORT_S)
+           for k, sp in enumerate([s for s in plan(3 * n_clean, seed) if s["effect"] is None][:n_clean])]
+    clean = map_ordered(_run_cut, cut, workers, scheduler,
+                        on_result=lambda k, rec, n: say(f"clean {rec['i']}: {rec['verdict']}"))
+    hdrg = hdrg_clean_study(CALIBRATION_HDRG_SEEDS, progress=say, workers=workers, scheduler=scheduler)
+    eff = map_ordered(_run_cut, [(sp, None) for sp in plan(3 * n_effect, seed) if sp["effect"] is not None][:n_effect],
+                      workers, scheduler, on_result=lambda k, rec, n: say(f"effect {rec['i']} {rec['effect']}: "
+                                                                          f"{rec['verdict']}"))
     return {"seed": seed, "clean": {"summary": summarize(clean), "records": clean}, "hdrg_clean": hdrg,
             "effect": {"summary": summarize(eff), "records": eff}}
 
@@ -327,25 +346,30 @@ def calibration_study(n_clean: int = 16, n_effect: int = 18, seed: int = CALIBRA
 HDRG_OFF = ("turn_on", "electronics", "damping_asym")      # the clean world of tests/test_diagnose.py
 
 
-def hdrg_clean_study(bases=range(100, 150, 10), progress=None) -> list:
+def hdrg_clean_row(item) -> dict:
+    """One row of :func:`hdrg_clean_study`: ``item`` = (scenario, cycles, base)."""
+    from host_tools.simulation import sim
+    scen, n_cyc, base = item
+    prof = sim.cycle_profile(2.0, hold_s=1200, n_cycles=n_cyc)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        logs = [sim.simulate(scen, seed=base + k, off=list(HDRG_OFF), profile=prof) for k in (1, 3, 2)]
+        rep, _ = diagnose(logs[:2], logs[2:], plots=False)
+    return {"scenario": scen, "cycles": n_cyc, "seed": base, "verdict": rep["verdict"],
+            "steps": [(i["effect"], i["confirmed"]) for i in rep["iterations"]]}
+
+
+def hdrg_clean_study(bases=range(100, 150, 10), progress=None, workers: int = 1, scheduler=None) -> list:
     """False discovery on clean runs of host_tools.simulation.sim: FTR and MR (paper-ftr-cycle-4dpm,
     paper-mr-cycle-4dpm), short (one 2-degC/min cycle, 4800 s) and long (two, 9600 s), one seed
-    triple per base b (seeds b+1, b+3 train, b+2 held out; default b = 100, 110, .., 140)."""
-    from host_tools.simulation import sim
-    rows = []
-    for scen in ("paper-ftr-cycle-4dpm", "paper-mr-cycle-4dpm"):
-        for n_cyc in (1, 2):
-            prof = sim.cycle_profile(2.0, hold_s=1200, n_cycles=n_cyc)
-            for base in bases:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    logs = [sim.simulate(scen, seed=base + k, off=list(HDRG_OFF), profile=prof) for k in (1, 3, 2)]
-                    rep, _ = diagnose(logs[:2], logs[2:], plots=False)
-                rows.append({"scenario": scen, "cycles": n_cyc, "seed": base, "verdict": rep["verdict"],
-                             "steps": [(i["effect"], i["confirmed"]) for i in rep["iterations"]]})
-                if progress:
-                    progress(str(rows[-1]))
-    return rows
+    triple per base b (seeds b+1, b+3 train, b+2 held out; default b = 100, 110, .., 140).
+    ``workers``/``scheduler``: the engine (:func:`run_benchmark`); the rows in this order."""
+    from host_tools.lot.parallel import map_ordered
+
+    items = [(scen, n_cyc, base) for scen in ("paper-ftr-cycle-4dpm", "paper-mr-cycle-4dpm") for n_cyc in (1, 2)
+             for base in bases]
+    return map_ordered(hdrg_clean_row, items, workers, scheduler,
+                       on_result=None if progress is None else lambda k, row, n: progress(str(row)))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -13,7 +13,8 @@ import importlib.util
 
 BENCHMARKS = {"accuracy": ("host_tools.cli.bench_accuracy", "host_tools.bench.accuracy"),
               "measured": ("host_tools.cli.bench_measured", "host_tools.bench.measured"),
-              "loop": ("host_tools.cli.bench_loop", "host_tools.bench.loop")}
+              "loop": ("host_tools.cli.bench_loop", "host_tools.bench.loop"),
+              "startup": ("host_tools.cli.bench_startup", "host_tools.bench.startup")}
 
 
 def available() -> dict:
@@ -32,7 +33,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK")
     sub.required = True
     parser.epilog = ("examples:\n  hdrg bench accuracy --devices 10 -o accuracy.json\n"
-                     "  hdrg bench measured --only tofupilot -o measured.json\n  hdrg bench loop --runs 12 -o loop.json")
+                     "  hdrg bench measured --only tofupilot -o measured.json\n  hdrg bench loop --runs 12 -o loop.json\n"
+                     "  hdrg bench startup --devices 20 -o startup.json")
     for name, (command, stage) in available().items():
         doc = (importlib.import_module(stage).__doc__ or name).strip().split("\n\n")[0]
         p = sub.add_parser(name, help=doc.split("\n")[0], description=doc)

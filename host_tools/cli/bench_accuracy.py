@@ -12,7 +12,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--devices", type=int, default=50, help="number of random devices (default 50)")
     parser.add_argument("--seed", type=int, default=0, help="device set: seeds S*100000 + i (default 0)")
     parser.add_argument("--start", type=int, default=0, metavar="I",
-                        help="first device index (devices I .. I+N-1; default 0), to split a run")
+                        help="first device index (devices I .. I+N-1; default 0), to split a run over machines "
+                             "without Dask (then --merge)")
+    engine = parser.add_mutually_exclusive_group()
+    engine.add_argument("--workers", type=int, default=None, metavar="N",
+                        help="local worker processes, one thread each (default: all cores; 1: in this "
+                             "process); the records are the serial run's, in device order")
+    engine.add_argument("--scheduler", metavar="ADDRESS",
+                        help="run on a Dask distributed cluster (e.g. tcp://host:8786; workers started with "
+                             "--nthreads 1) instead of local processes")
     parser.add_argument("--merge", nargs="+", metavar="JSON", default=None,
                         help="instead: merge --json files of split runs (same options, disjoint devices) and "
                              "print their tables (with --json: write the merged result)")
@@ -54,9 +62,11 @@ def run(args) -> int:
                 parts.append(json.load(fh))
         res = merge(parts)
     else:
+        from host_tools.lot.parallel import check_workers
+
         res = run_benchmark(args.devices, args.seed, args.pipelines, args.train_rate, args.holdout_rate,
                             args.duration, progress=lambda msg: print(f"hdrg bench accuracy: {msg}", file=sys.stderr),
-                            start=args.start)
+                            start=args.start, workers=check_workers(args.workers), scheduler=args.scheduler)
     cfg = res["config"]
     print(f"held-out std at 1 s / noise floor; {cfg['devices']} foreign devices (set {cfg['seed']}, from index "
           f"{cfg['start']}), train {cfg['train']['rate_c_per_min']:g} degC/min power-on 0, hold out "

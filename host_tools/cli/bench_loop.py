@@ -13,7 +13,15 @@ from host_tools.errors import UserError
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--runs", type=int, default=120, help="runs (a third clean; default 120)")
     parser.add_argument("--seed", type=int, default=0, help="benchmark seed (devices S*100000 + i)")
-    parser.add_argument("--shard", default="0/1", metavar="K/M", help="only runs i with i %% M == K (parallel parts)")
+    engine = parser.add_mutually_exclusive_group()
+    engine.add_argument("--workers", type=int, default=None, metavar="N",
+                        help="local worker processes, one thread each (default: all cores; 1: in this "
+                             "process); the records are the serial run's, in run order")
+    engine.add_argument("--scheduler", metavar="ADDRESS",
+                        help="run on a Dask distributed cluster (e.g. tcp://host:8786; workers started with "
+                             "--nthreads 1) instead of local processes")
+    parser.add_argument("--shard", default="0/1", metavar="K/M",
+                        help="only runs i with i %% M == K (one part per machine, without Dask; then --merge)")
     parser.add_argument("--merge", nargs="+", default=None, metavar="JSON",
                         help="instead: summarize the records of these --json files together")
     parser.add_argument("--duration", type=float, default=None, help="cut every run to this many seconds")
@@ -35,9 +43,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     from host_tools.bench.loop import calibration_study, hdrg_clean_study, measured_study, run_benchmark, summarize
     from host_tools.fitting.diagnose_confirm import EFFECT_MIN_DROP
+    from host_tools.lot.parallel import check_workers
 
+    engine = {"workers": check_workers(args.workers), "scheduler": args.scheduler}
     if args.calibrate:
-        res = calibration_study(progress=lambda m: print(m, file=sys.stderr, flush=True))
+        res = calibration_study(progress=lambda m: print(m, file=sys.stderr, flush=True), **engine)
         for part in ("clean", "effect"):
             print(f"{part}: " + json.dumps({k: v for k, v in res[part].items() if k != "records"}, default=float))
         hd = res["hdrg_clean"]
@@ -47,7 +57,7 @@ def run(args) -> int:
                 json.dump(res, fh, indent=1, default=float)
         return 0
     if args.hdrg_clean:
-        rows = hdrg_clean_study(progress=lambda m: print(m, file=sys.stderr, flush=True))
+        rows = hdrg_clean_study(progress=lambda m: print(m, file=sys.stderr, flush=True), **engine)
         fd = sum(r["verdict"] == "effect found" for r in rows)
         st = sum(r["verdict"] == "model structure improved" for r in rows)
         print(f"hdrg-sim clean runs: {len(rows)}, 'effect found' {fd} ({100 * fd / len(rows):.1f} %), "
@@ -72,7 +82,12 @@ def run(args) -> int:
         for path in args.merge:
             with open(path, encoding="utf-8") as fh:
                 records += json.load(fh)["records"]
-        res = {"summary": summarize(sorted(records, key=lambda r: r["i"])), "records": records}
+        devices = [r["device"] for r in records]
+        if len(set(devices)) != len(devices):
+            raise UserError("--merge: the files share a run (the same device in two of them): merge the shards of "
+                            "one benchmark, each once")
+        records.sort(key=lambda r: (r["i"], r["device"]))      # the serial run's order
+        res = {"summary": summarize(records), "records": records}
     else:
         if args.runs < 1:
             raise UserError("--runs must be >= 1")
@@ -82,7 +97,8 @@ def run(args) -> int:
         if args.second_train is not None and not args.second_train > 0:
             raise UserError(f"--second-train must be a chamber rate > 0 degC/min, not {args.second_train}")
         res = run_benchmark(args.runs, args.seed, args.duration, shard=(k, m), json_path=args.json,
-                            second_train=args.second_train, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+                            second_train=args.second_train, progress=lambda msg: print(msg, file=sys.stderr, flush=True),
+                            **engine)
     s = res["summary"]
     print(f"hdrg bench loop: {s['runs']} foreign runs (seed {args.seed}), {s['effect_runs']} with an undeclared effect")
     print("  detection counts effect runs with effect_ratio >= 2 whose confirmed steps name the injected family: "

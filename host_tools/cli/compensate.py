@@ -20,7 +20,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              ".memh) instead of quantizing the model on the fly")
     parser.add_argument("--strict", action="store_true",
                         help="refuse (exit 2, nothing written) when the model is extrapolated (> 1 %% of the "
-                             "samples proxy/rate clamped) or any sample saturates, instead of warning")
+                             "samples proxy/rate clamped), any sample saturates, any input is outside what the "
+                             "sensor can report (the count and first row are named; full scale: run-log metadata "
+                             "rate_full_scale_dph, freq_range_hz, temp_range_c, docs/RUN_LOG.md) or a proxy is "
+                             "stuck, instead of warning")
     example(parser, "hdrg compensate held_out.csv --model model.json -o compensated.csv",
             "hdrg compensate held_out.csv --model model.json --impl fixed --table table.json -o fixed.csv")
 

@@ -71,14 +71,8 @@ def run(args) -> int:
         print(f"  {k}. {it['effect']} ({params}): {fmt_value(it['after']['std_dph'])} / {fmt_value(it['after']['std100_dph'])}"
               f"  [CV gain {it['cv_gain']:.3f} >= {it['threshold']:.3f}; {it['status']}]")
     print(f"  {report['verdict_detail']}")
-    if (report.get("generalization") or {}).get("warning"):
-        print(f"  warning: {report['generalization']['warning']}")
-    for m in report.get("holdout_in_training") or []:
-        print(f"  warning: {m}")
     for m in report.get("not_scanned") or []:
         print(f"  note: not scanned: {m}")
-    for m in report.get("extrapolation") or []:
-        print(f"  warning: extrapolation on the held-out run (final model): {m}")
     if report.get("several_runs"):
         print(f"  note: {report['several_runs']}")
     for a in (report.get("artifacts") or {}).get("lines", []):
@@ -88,4 +82,19 @@ def run(args) -> int:
         if report["stopped"].get("not_offered"):
             print(f"  firmware capacity: {report['stopped']['not_offered']}")
     print(f"written: {os.path.join(args.out, 'diagnose.md')}, diagnose.json, model.json")
+    sys.stdout.flush()      # the warnings (stderr) after the summary above
+    for m in summary_warnings(report):
+        print(f"hdrg diagnose: warning: {m}", file=sys.stderr)
     return 0
+
+
+def summary_warnings(report: dict) -> list:
+    """The warnings of a diagnose report (host_tools.fitting.diagnose_report), one sentence each, for
+    stderr: a held-out error far above the training error, held-out runs also in training, and the
+    final model extrapolating on a held-out run.  The report files carry the same texts."""
+    out = []
+    if (report.get("generalization") or {}).get("warning"):
+        out.append(report["generalization"]["warning"])
+    out.extend(report.get("holdout_in_training") or [])
+    out.extend(f"extrapolation on the held-out run (final model): {m}" for m in report.get("extrapolation") or [])
+    return out

@@ -74,6 +74,9 @@ def run(args) -> int:
     elif lag:
         why = lag.get("error") or f"no candidate lowered the cross-validated rms by {100 * lag['margin']:.0f} %"
         print(f"lag-state block (u: proxy, T: sensor): not kept ({why})")
+    turn = model.fit.get("turn_on")
+    if turn:
+        print(f"power-on transient (time since power-on, k7): {turn['chosen'] or 'not learned'} ({turn.get('why', '')})")
     print(f"{args.output}: {len(res.terms)} terms {['k%d' % k for k in res.terms]}, n={res.n}, "
           f"rms={res.rms:.4g} deg/h, cond={res.cond:.3g}")
     rev = model.config.reversal

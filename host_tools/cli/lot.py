@@ -13,7 +13,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--spec", metavar="JSON", help="pass/fail spec (default: --print-spec)")
     engine = parser.add_mutually_exclusive_group()
     engine.add_argument("--workers", type=int, default=None, metavar="N",
-                        help="local worker processes (default: all cores; 1: in this process)")
+                        help="local worker processes, one thread each (default: all cores; 1: in this process)")
     engine.add_argument("--scheduler", metavar="ADDRESS",
                         help="Dask distributed scheduler (e.g. tcp://host:8786) instead of local processes")
     parser.add_argument("--worst", type=int, default=10, metavar="K", help="rows of the worst-devices table (default 10)")

@@ -185,11 +185,12 @@ def base_model(train, opts, terms=None):
     that start, and from the preferred start the loop bench's MR control got an "effect found"
     (seed 2, run 33: periodic 1153 s; docs/LOOP.md "Rate preference").  The structure phase still
     offers the rate estimator, iir 9 included, under CV and held-out confirmation.  No per-run offsets
-    (fit_default run_offsets="off"): the thresholds were calibrated without them."""
+    (fit_default run_offsets="off"): the thresholds were calibrated without them; no power-on
+    transient term (turn_on="off"): the loop offers its own turn_on family under its own tests."""
     if all(opts.get(k) is None for k in ("rate_estimator", "n", "shift")):
         kw = {k: v for k, v in opts.items() if k not in ("rate_estimator", "n", "shift")}
         model = fit_default(train, terms, drop_unidentifiable=True, lag_block="off", rate_prefer=None, run_offsets="off",
-                            **kw)[0]
+                            turn_on="off", **kw)[0]
         return model, model.config
     cfg = loop_config(train, opts)
     return fit_logs(train, cfg, terms, drop_unidentifiable=True)[0], cfg

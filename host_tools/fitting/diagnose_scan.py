@@ -216,17 +216,17 @@ def _banked(pr, A):
     return np.column_stack([A * (pr.mode == 1)[:, None], A * (pr.mode == 2)[:, None]])
 
 
-def _fit_mask(pr):
+def fit_mask(pr):
     """The samples a fit uses: the combined valid samples, or the per-mode used samples of regress_first."""
     return pr.used if getattr(pr, "order", None) == "regress_first" else pr.valid
 
 
-def _design(pr, poly, gen_cols):
+def design_matrix(pr, poly, gen_cols):
     X = regressor_matrix(pr.u, pr.v)[:, list(poly)]
     return _banked(pr, np.column_stack([X] + list(gen_cols)) if gen_cols else X)
 
 
-def _explicit_weights(train, cfg, poly, gen_terms) -> list:
+def explicit_weights(train, cfg, poly, gen_terms) -> list:
     """Refit poly terms + every generator as its own column (training valid samples, lstsq);
     return the generator terms with weights c_j / sum |c_j| (|z| <= 1)."""
     fs = cfg.rate.fs
@@ -234,9 +234,9 @@ def _explicit_weights(train, cfg, poly, gen_terms) -> list:
     for log in train:
         pr = prepare(log, replace(cfg, aux=AuxConfig()))
         cols = [generator_values(log, t, fs) for t in gen_terms]
-        X = _design(pr, poly, cols)
-        Xs.append(X[_fit_mask(pr)])
-        ys.append(pr.y[_fit_mask(pr)])
+        X = design_matrix(pr, poly, cols)
+        Xs.append(X[fit_mask(pr)])
+        ys.append(pr.y[fit_mask(pr)])
     X = np.concatenate(Xs)
     y = np.concatenate(ys)
     norms = np.sqrt(np.einsum("ij,ij->j", X, X))
@@ -253,10 +253,10 @@ def _explicit_weights(train, cfg, poly, gen_terms) -> list:
 
 def refit_with(train, cfg, poly, gen_terms):
     """The model of ``poly`` terms plus the generators ``gen_terms`` (none: the poly terms alone)
-    fitted on ``train`` as the loop keeps it: generator weights from :func:`_explicit_weights`
+    fitted on ``train`` as the loop keeps it: generator weights from :func:`explicit_weights`
     baked into ``AuxConfig('sum')`` as k7.  Returns (model, config)."""
     if gen_terms:
-        cfg = replace(cfg, aux=AuxConfig.from_terms(_explicit_weights(train, cfg, poly, gen_terms), cfg.rate.fs))
+        cfg = replace(cfg, aux=AuxConfig.from_terms(explicit_weights(train, cfg, poly, gen_terms), cfg.rate.fs))
         return fit_logs(train, cfg, tuple(poly) + (K_AUX,), drop_unidentifiable=True)[0], cfg
     return fit_logs(train, cfg, tuple(poly), drop_unidentifiable=True)[0], cfg
 
@@ -353,8 +353,8 @@ def scan_candidates(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_bl
     fs = cfg.rate.fs
     preps = [prepare(log, replace(cfg, aux=AuxConfig())) for log in train]
     gen_cols = [[generator_values(log, t, fs) for t in gen_terms] for log in train]
-    X_logs = [_design(pr, poly, gc) for pr, gc in zip(preps, gen_cols)]
-    valid = [_fit_mask(pr) for pr in preps]
+    X_logs = [design_matrix(pr, poly, gc) for pr, gc in zip(preps, gen_cols)]
+    valid = [fit_mask(pr) for pr in preps]
     # base fit on all training data: residual per log
     Xv = np.concatenate([X[v] for X, v in zip(X_logs, valid)])
     yv = np.concatenate([pr.y[v] for pr, v in zip(preps, valid)])
@@ -456,9 +456,9 @@ def scan_candidates(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_bl
             except ValueError:
                 continue
             apreps = [prepare(log, replace(acfg, aux=AuxConfig())) for log in train]
-            AX = [_design(pr, poly, gc) for pr, gc in zip(apreps, gen_cols)]
+            AX = [design_matrix(pr, poly, gc) for pr, gc in zip(apreps, gen_cols)]
             # a longer warm-up changes the valid set: both bases are scored on the common samples
-            cb = [_Binner(log, v & _fit_mask(a), fs) for log, v, a in zip(train, valid, apreps)]
+            cb = [_Binner(log, v & fit_mask(a), fs) for log, v, a in zip(train, valid, apreps)]
             cgroups = cv_groups([np.ones(b.n, bool) for b in cb], cv_blocks, cv_folds)
             Yc = [b.mean(Y) for b, Y in zip(cb, Y_logs)]
             g_base = _Scanner([b.mean(X) for b, X in zip(cb, X_logs)], Yc, cgroups).e0

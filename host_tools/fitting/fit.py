@@ -35,7 +35,10 @@ Design (what the CLI and other stages rely on):
    cross-validated held-out squared error over groups (runs, or contiguous time blocks of one
    run: never random samples, the data are autocorrelated); the smallest model whose CV error is
    within max(min_gain x, significance standard errors of) the best CV error is kept (see
-   :func:`select_terms`).
+   :func:`select_terms`).  Every fold is its training factor R (of the accumulated Gram matrix
+   minus the fold's) and the fold's own 17 x 17 system, built once; a candidate term set's fold
+   solve is the QR of the columns of R A_S (rank x |S|), all candidates of a step scored in one
+   compiled call (host_tools.fitting.solve_kernel): time and memory do not grow with n.
 
 Residual RMS is from the normal equations (sum w y^2 - fitted part): its absolute accuracy is
 about 1e-8 x rms(y), ample unless the model is nearly exact.
@@ -48,6 +51,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from host_tools.fitting.solve_kernel import heldout_sse_sets, pivoted_cholesky
 from host_tools.fitting.fit_kernel import TERM_BASIS, term_label, predict_kernel, Accumulator, accumulate_groups  # noqa: F401
 from host_tools.golden.model import jsonable
 from firmware_ref.terms import K_AUX, N_TERMS, PAPER_TERMS, TERM_NAMES, TERM_POWERS, parse_terms
@@ -93,19 +97,7 @@ class _Factor:
         m = len(live)
         perm = np.arange(m)
         L = np.zeros((m, m))
-        r = 0
-        while r < m:
-            p = r + int(np.argmax(np.diag(work)[r:]))
-            if work[p, p] <= _BASIS_TOL:
-                break
-            work[[r, p], :] = work[[p, r], :]
-            work[:, [r, p]] = work[:, [p, r]]
-            L[[r, p], :] = L[[p, r], :]
-            perm[[r, p]] = perm[[p, r]]
-            L[r, r] = math.sqrt(work[r, r])
-            L[r + 1:, r] = work[r + 1:, r] / L[r, r]
-            work[r + 1:, r + 1:] -= np.outer(L[r + 1:, r], L[r + 1:, r])
-            r += 1
+        r = pivoted_cholesky(work, _BASIS_TOL, L, perm)
         cols = live[perm]
         self.R = np.zeros((r, N_TERMS))
         self.R[:, cols] = L[:, :r].T * d[cols]
@@ -320,7 +312,10 @@ def _banks_of(group) -> tuple:
 class _CV:
     """Held-out errors per group.  A group is an Accumulator, or a tuple of per-bank Accumulators
     (regress_first: (mode-1 samples, mode-2 samples)); every bank is fitted with the same terms
-    on the other groups' samples of that bank, and a group's error is the sum over its banks."""
+    on the other groups' samples of that bank, and a group's error is the sum over its banks.
+    The per-fold training factors and held-out systems are built once (17 x 17 each, whatever the
+    number of samples); :meth:`sse_many` scores many term sets in one compiled call
+    (host_tools.fitting.solve_kernel), the fold solve of :func:`_solve_terms`."""
 
     def __init__(self, accs, rcond):
         self.accs = [_banks_of(a) for a in accs]
@@ -331,22 +326,37 @@ class _CV:
             raise ValueError("cross-validation groups differ in their number of banks")
         totals = [sum(g[b] for g in self.accs) for b in range(nb)]
         self.total = sum(totals)
-        self.tests = [[g[b].system() for b in range(nb)] for g in self.accs]
-        self.trains = [[_factor(totals[b] - g[b]) if totals[b].n - g[b].n > 0 else None for b in range(nb)]
-                       for g in self.accs]
+        nf = len(self.accs)
+        self.W = np.zeros((nf, nb, N_TERMS, N_TERMS))
+        self.t = np.zeros((nf, nb, N_TERMS))
+        self.rank = np.zeros((nf, nb), np.int64)
+        self.G = np.zeros((nf, nb, N_TERMS, N_TERMS))
+        self.b = np.zeros((nf, nb, N_TERMS))
+        self.yy = np.zeros((nf, nb))
+        for f, g in enumerate(self.accs):
+            for k in range(nb):
+                self.G[f, k], self.b[f, k], self.yy[f, k] = g[k].system()
+                if totals[k].n - g[k].n > 0:
+                    fac = _factor(totals[k] - g[k])
+                    r = fac.R.shape[0]
+                    self.W[f, k, :r] = fac.R @ TERM_BASIS
+                    self.t[f, k, :r] = fac.t
+                    self.rank[f, k] = r
         self.sum_w = self.total.sum_w
         self.rcond = rcond
         self.cache = {}
 
+    def sse_many(self, term_sets) -> list:
+        """Per-group held-out errors (arrays of length groups) of each term set, in order."""
+        keys = [tuple(sorted(terms)) for terms in term_sets]
+        todo = list(dict.fromkeys(k for k in keys if k not in self.cache))
+        if todo:
+            out = heldout_sse_sets(self.W, self.t, self.rank, self.G, self.b, self.yy, TERM_BASIS, todo, self.rcond)
+            self.cache.update(zip(todo, out))
+        return [self.cache[k] for k in keys]
+
     def sse(self, terms):
-        key = tuple(sorted(terms))
-        if key not in self.cache:
-            out = np.zeros(len(self.accs))
-            for f, (facs, tests) in enumerate(zip(self.trains, self.tests)):
-                for fac, test in zip(facs, tests):
-                    out[f] += _fold_sse(fac, test, key, self.rcond)
-            self.cache[key] = out
-        return self.cache[key]
+        return self.sse_many([terms])[0]
 
     def rms(self, terms):
         return math.sqrt(float(self.sse(terms).sum()) / self.sum_w)
@@ -392,7 +402,7 @@ def select_terms(accs, candidates=None, *, start=(0,), significance=1.0, min_gai
         rest = [k for k in cand if k not in chosen]
         if not rest:
             break
-        trials = {k: cv.sse(chosen + (k,)) for k in rest}
+        trials = dict(zip(rest, cv.sse_many([chosen + (k,) for k in rest])))
         best = min(rest, key=lambda k: trials[k].sum())
         chosen = tuple(sorted(chosen + (best,)))
         errs.append(trials[best])
@@ -412,7 +422,8 @@ def select_terms(accs, candidates=None, *, start=(0,), significance=1.0, min_gai
             selected = j
     terms = tuple(path[selected]["terms"])
     while True:  # backward pruning
-        trials = {k: cv.sse(tuple(x for x in terms if x != k)) for k in terms if k not in fixed}
+        drop = [k for k in terms if k not in fixed]
+        trials = dict(zip(drop, cv.sse_many([tuple(x for x in terms if x != k) for k in drop])))
         ok = [k for k, e in trials.items() if excess(e) <= 1.0]
         if not ok:
             break

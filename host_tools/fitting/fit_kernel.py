@@ -58,6 +58,9 @@ def _tables():
 
 _C, _LIN, TERM_BASIS = _tables()
 _POLY_TERMS = tuple(k for k in range(N_TERMS) if k != K_AUX)
+_PT = np.array(_POLY_TERMS)                              # the polynomial terms k and their powers
+_PI = np.array([TERM_POWERS[k][0] for k in _POLY_TERMS])  # (i, j) of u^i v^j
+_PJ = np.array([TERM_POWERS[k][1] for k in _POLY_TERMS])
 
 
 def term_label(k):
@@ -345,13 +348,9 @@ class Accumulator:
         gp = np.einsum("acx,bdy,xy->abcd", _LIN, _LIN, self.M)
         G = np.zeros((N_TERMS, N_TERMS))
         b = np.zeros(N_TERMS)
-        for k in _POLY_TERMS:
-            i, j = TERM_POWERS[k]
-            b[k] = self.Y[i, j]
-            G[K_AUX, k] = G[k, K_AUX] = self.Z[i, j]
-            for k2 in _POLY_TERMS:
-                i2, j2 = TERM_POWERS[k2]
-                G[k, k2] = gp[i, j, i2, j2]
+        b[_PT] = self.Y[_PI, _PJ]
+        G[K_AUX, _PT] = G[_PT, K_AUX] = self.Z[_PI, _PJ]
+        G[_PT[:, None], _PT[None, :]] = gp[_PI[:, None], _PJ[:, None], _PI[None, :], _PJ[None, :]]
         G[K_AUX, K_AUX] = self.S[_ZZ]
         b[K_AUX] = self.S[_ZY]
         return G, b, float(self.S[_YY])

@@ -19,7 +19,9 @@ Choice (:func:`add_lag_block`), on the training runs only:
    least-squares fit of the base model's polynomial terms + the candidate's lag columns, per
    coefficient bank (regress_first: mode 1 / mode 2), over the same groups as
    host_tools.fitting.fit.fit_logs (time blocks of one run, or runs).  All candidates share one
-   pass of Gram matrices per (bank, group).
+   pass of Gram matrices per (bank, group) (X'X of [poly | every lag power | y]), accumulated
+   over blocks of at most SCREEN_CHUNK samples: memory flat in the number of samples; a
+   candidate's fold solve is on the sub-Gram of its columns (training = total - fold).
 2. **Pack** each of the LAG_REFIT_TOP candidates of least screen rms into ONE k7 sum: per bank b
    the lag coefficients a_b (deg/h) of the full training fit; FTR: ``z = sum_k a_k g_k / T``;
    regress_first: ``z = sum_k (P_k g_k + Q_k s g_k) / T`` with P = (a_1 + a_2) / 2, Q = (a_1 -
@@ -42,13 +44,15 @@ for mode reversal (3 powers x (P, Q)) and at most two taus of order 3 for FTR.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
+import numba as nb
 import numpy as np
 
 from firmware_ref.formats import AUX_MAX_TERMS
 from firmware_ref.terms import K_AUX
-from host_tools.golden.regressors import AuxConfig, generator_values, regressor_matrix
+from host_tools.golden.regressors import AuxConfig, normalize_term, normalized_input, regressor_matrix
 
 LAG_TAUS_S = (60.0, 120.0, 240.0, 480.0, 960.0, 1920.0)   # screened time constants [s]
 LAG_ORDERS = (2, 3)           # polynomial orders of a single-tau block
@@ -65,6 +69,7 @@ SENSOR_TAUS_S = (0.0,) + LAG_TAUS_S   # sensor time constants [s] (0: the sensor
 SENSOR_COLUMN = "temp_c"
 SENSOR_MARGIN = 0.1           # sensor normalization: training range widened by this x its width on each side
 _RIDGE = 1e-10                # relative diagonal load of the scaled screen solves (collinear lags)
+SCREEN_CHUNK = 1 << 16        # samples per block of the screen's Gram accumulation (memory ~ this x 60 x 8 B)
 
 
 def lag_term(config, tau_s: float, power: int, weight: float = 1.0, sign: bool = False, sensor=None) -> dict:
@@ -127,52 +132,96 @@ def _groups(pr, n_logs, cv_blocks, log_index):
     return np.full(len(pr.y), log_index, np.int64)
 
 
-def _screen_grams(logs, config, poly, keys, cv_blocks, sensor=None):
+@nb.njit(cache=True, nogil=True)
+def _lag_powers(q, seg, b, state, out):
+    """The first-order lag y of the normalized input q (host_tools.golden.regressors.lowpass, the
+    same operations: y = q at segment starts (``seg`` True), else y += b (q - y), b = 1 - a; b < 0:
+    no filter, y = q) and its powers: out[i] = (y, y^2, y^3).  ``state``: y before q[0] (the
+    filter carried over from the previous block of samples).  Returns y at the last sample."""
+    for i in range(q.shape[0]):
+        if b < 0.0 or seg[i]:
+            state = q[i]
+        else:
+            state = state + b * (q[i] - state)
+        y2 = state * state
+        out[i, 0] = state
+        out[i, 1] = y2
+        out[i, 2] = y2 * state
+    return state
+
+
+def _screen_grams(logs, config, poly, keys, cv_blocks, sensor=None, chunk=SCREEN_CHUNK):
     """Per bank: {group: Gram of [poly columns | lag(x, tau)^1..3 for (source, tau) in keys | y]}
-    over the samples the fit uses (x: the proxy, or for source 'sensor' the ``sensor`` column)."""
+    over the samples the fit uses (x: the proxy, or for source 'sensor' the ``sensor`` column).
+    Accumulated over blocks of at most ``chunk`` samples of one group (a group of fewer samples
+    is one block), each block's rows built and multiplied out at once: memory ~ chunk x columns
+    x 8 bytes, flat in the number of samples (the lag filters carry their state across blocks)."""
     from host_tools.golden.compensate import prepare
     two = config.reversal is not None and config.reversal.order == "regress_first"
-    fs = config.rate.fs
+    fs = float(config.rate.fs)
     banks = ({}, {}) if two else ({},)
+    npoly = len(poly)
+    width = npoly + 3 * len(keys) + 1
     for i, log in enumerate(logs):
         pr = prepare(log, config)
-        cols = [regressor_matrix(pr.u, pr.v)[:, list(poly)]]
+        n = len(pr.y)
+        lags = []                   # per key: (input column, ref, span, b (-1: no filter))
         for src, t in keys:
-            y1 = generator_values(log, lag_term(config, t, 1, sensor=sensor if src else None), fs)
-            cols.append(np.column_stack([y1, y1 * y1, y1 * y1 * y1]))
-        A = np.column_stack(cols + [pr.y])
+            term = normalize_term(lag_term(config, t, 1, sensor=sensor if src else None))
+            if term["column"] not in log:
+                raise ValueError(f"{log.source}: the lag block needs column '{term['column']}', which the log lacks")
+            b = 1.0 - math.exp(-1.0 / (fs * term["tau_s"])) if term["tau_s"] != 0 else -1.0
+            lags.append((np.asarray(log[term["column"]], np.float64), term["ref"], term["span"], b))
+        seg = np.zeros(n, np.bool_)
+        if n:
+            seg[0] = True
+            seg[np.asarray(log.segments, np.int64)] = True
+        state = [0.0] * len(keys)
         g = _groups(pr, len(logs), cv_blocks, i)
         masks = [pr.used & (pr.mode == 1), pr.used & (pr.mode == 2)] if two else [pr.used]
-        for bank, m in zip(banks, masks):
-            for key in np.unique(g[m]):
-                sel = m & (g == key)
-                Am = A[sel]
-                bank[(i, int(key))] = bank.get((i, int(key)), 0) + Am.T @ Am
+        bounds = np.concatenate([[0], np.flatnonzero(np.diff(g)) + 1, [n]]) if n else np.zeros(1, np.int64)
+        for s0, e0 in zip(bounds[:-1], bounds[1:]):      # the contiguous runs of one group
+            key = (i, int(g[s0]))
+            for s in range(s0, e0, chunk):
+                e = min(e0, s + chunk)
+                A = np.empty((e - s, width))
+                A[:, :npoly] = regressor_matrix(pr.u[s:e], pr.v[s:e])[:, list(poly)]
+                for j, (x, ref, span, b) in enumerate(lags):
+                    c = npoly + 3 * j
+                    state[j] = _lag_powers(normalized_input(x[s:e], ref, span), seg[s:e], b, state[j], A[:, c:c + 3])
+                A[:, -1] = pr.y[s:e]
+                for bank, m in zip(banks, masks):
+                    sel = m[s:e]
+                    if sel.any():
+                        Am = A[sel]
+                        bank[key] = bank.get(key, 0) + Am.T @ Am
     return banks
 
 
 def _solve(G, idx):
     """Least-squares coefficients of the columns ``idx`` from Gram G (last column = y), scaled,
-    with a tiny ridge against exact collinearity."""
-    Gs = G[np.ix_(idx, idx)]
-    b = G[idx, -1]
-    d = np.sqrt(np.maximum(np.diag(Gs), 1e-300))
-    S = Gs / np.outer(d, d)
-    S[np.diag_indices_from(S)] += _RIDGE
-    return np.linalg.solve(S, b / d) / d
+    with a tiny ridge against exact collinearity.  G: one Gram matrix (p x p), or a stack of them
+    (F x p x p: one solve each, coefficients F x len(idx))."""
+    idx = np.asarray(idx)
+    Gs = G[..., idx[:, None], idx[None, :]]
+    b = G[..., idx, -1]
+    d = np.sqrt(np.maximum(np.diagonal(Gs, axis1=-2, axis2=-1), 1e-300))
+    S = Gs / (d[..., :, None] * d[..., None, :])
+    S[..., np.arange(len(idx)), np.arange(len(idx))] += _RIDGE
+    return np.linalg.solve(S, (b / d)[..., None])[..., 0] / d
 
 
 def _sse(G, idx, c):
     return float(G[-1, -1] - 2.0 * c @ G[idx, -1] + c @ G[np.ix_(idx, idx)] @ c)
 
 
-def _cv_sse(banks, idx) -> float:
-    """Held-out squared error summed over the groups (each fitted on the other groups) and banks."""
+def _cv_sse(banks, idx, trains) -> float:
+    """Held-out squared error summed over the groups (each fitted on the other groups) and banks;
+    ``trains``: per bank, the stack of the groups' training Gram matrices (total - group)."""
     sse = 0.0
-    for bank in banks:
-        total = sum(bank.values())
-        for Gf in bank.values():
-            sse += max(_sse(Gf, idx, _solve(total - Gf, idx)), 0.0)
+    for bank, train in zip(banks, trains):
+        for Gf, c in zip(bank.values(), _solve(train, idx)):
+            sse += max(_sse(Gf, idx, c), 0.0)
     return sse
 
 
@@ -201,11 +250,13 @@ def screen(logs, model, *, cv_blocks=8, taus=LAG_TAUS_S, orders=LAG_ORDERS, sens
             idx += list(range(j, j + e[1]))
         return idx
 
+    totals = [sum(bank.values()) for bank in banks]
+    trains = [np.stack([total - Gf for Gf in bank.values()]) for bank, total in zip(banks, totals)]
     nsamp = sum(G[0, 0] for bank in banks for G in bank.values())   # column 0 is k0 = 1: the sample count
-    rms = lambda idx: float(np.sqrt(_cv_sse(banks, idx) / nsamp))   # noqa: E731
+    rms = lambda idx: float(np.sqrt(_cv_sse(banks, idx, trains) / nsamp))   # noqa: E731
     rows = [{"block": _label(c), "screen_cv_rms": rms(idx_of(c)), "cand": c} for c in cands]
     return {"base": rms(list(range(npoly))), "rows": rows, "sensor": sensor,
-            "coefs": lambda c: [_solve(sum(bank.values()), idx_of(c))[npoly:] for bank in banks]}
+            "coefs": lambda c: [_solve(total, idx_of(c))[npoly:] for total in totals]}
 
 
 def lag_config(config, cand, coefs, sensor=None):

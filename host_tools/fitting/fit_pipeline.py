@@ -23,9 +23,12 @@ from host_tools.fitting import fit_rate as _fit_rate
 from host_tools.fitting.fit import check_cv_blocks, fit_logs
 from host_tools.fitting.fit_rate import fit_auto_rate
 from host_tools.fitting.fit_lag import add_lag_block
+from host_tools.fitting import turn_on as _turn_on
+from host_tools.fitting.turn_on import add_turn_on
 
 RUN_OFFSET_PASSES = 2   # backfitting passes of the per-run offsets (docs/ACCURACY.md "Several training runs")
 DEFAULT_CV_BLOCKS = 8   # time blocks of the cross-validation on a single run
+DEFAULT_TURN_ON = "auto"   # the power-on transient term (host_tools.fitting.turn_on); "off"
 
 
 @dataclass(frozen=True)
@@ -43,6 +46,9 @@ class FitPolicy:
     * ``guard_margin`` / ``guard_margin_extrapolated``: the 17-term model must beat the best cubic's
       leave-one-leg-out rms by this fraction (the second with one leg of each sign of dT/dt);
     * ``cv_blocks``: time blocks of the cross-validation on one run;
+    * ``turn_on``: 'auto' (the power-on transient as a k7 term when leave-one-power-on-out
+      lowers the start-up error by ``turn_on_margin`` on every held-out power-on,
+      host_tools.fitting.turn_on) or 'off';
     * ``order``, ``combiner``, ``settle_s`` [s], ``max_stale_s`` [s]: the mode-reversal settings;
     * ``run_offset_passes``, ``min_offset_overlap``: the per-run offsets of several runs;
     * ``min_samples_per_term``: fewer valid samples per coefficient are refused unless forced."""
@@ -59,6 +65,8 @@ class FitPolicy:
     guard_margin: float
     guard_margin_extrapolated: float
     cv_blocks: int
+    turn_on: str
+    turn_on_margin: float
     order: str
     combiner: str
     settle_s: float
@@ -83,6 +91,7 @@ def fit_policy() -> FitPolicy:
         significance=compensate.DEFAULT_SIGNIFICANCE, lag_block=compensate.DEFAULT_LAG_BLOCK,
         lag_margin=tuple(sorted(_fit_lag.LAG_MARGIN.items())), guard_margin=GUARD_MARGIN,
         guard_margin_extrapolated=GUARD_MARGIN_EXTRAPOLATED, cv_blocks=DEFAULT_CV_BLOCKS,
+        turn_on=DEFAULT_TURN_ON, turn_on_margin=_turn_on.MARGIN,
         order=_reversal.DEFAULT_ORDER, combiner=_reversal.DEFAULT_COMBINER, settle_s=_reversal.DEFAULT_SETTLE_S,
         max_stale_s=_reversal.DEFAULT_MAX_STALE_S, run_offset_passes=RUN_OFFSET_PASSES,
         min_offset_overlap=MIN_OFFSET_OVERLAP, min_samples_per_term=_fit.MIN_SAMPLES_PER_TERM)
@@ -117,7 +126,7 @@ def check_fit_result(res, force: bool = False) -> None:
 
 
 def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, cv_blocks=DEFAULT_CV_BLOCKS,
-                rate_prefer="default", run_offsets="auto", guard="auto", **config_kw):
+                rate_prefer="default", run_offsets="auto", guard="auto", turn_on=None, **config_kw):
     """What `hdrg fit RUN` does without rate flags: :func:`fit_model` (the 17-term pipeline) on
     what the training runs identify, then the guard against the flight stack's cubic.
 
@@ -137,14 +146,22 @@ def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, c
        each sign (every fold then scores the rate terms on a sign they were not fitted on; on
        the measured consumer-IMU legs such wins did not hold out: 1.74x and 1.28x the cubic).  'off': step 3 skipped.
        model.fit["guard"]: the candidates' cross-validated rms and the choice.
+    4. ``turn_on`` 'auto', ``terms`` None / 'auto' and no aux given: the power-on transient
+       (host_tools.fitting.turn_on.add_turn_on: a ``decay_on`` term in k7 when
+       leave-one-power-on-out supports it; two or more runs).  'off': skipped.
     Returns (model, FitResult of the model kept)."""
     from host_tools.fitting.legs import PROXY_TERMS, identifiability
 
     if guard not in ("auto", "off"):
         raise ValueError(f"guard must be 'auto' or 'off', not {guard!r}")
+    turn_on = DEFAULT_TURN_ON if turn_on is None else turn_on
+    if turn_on not in ("auto", "off"):
+        raise ValueError(f"turn_on must be 'auto' or 'off', not {turn_on!r}")
     check_cv_blocks(cv_blocks)
     _check_options(lag_block, run_offsets)
     logs = list(logs)
+    from host_tools.golden.input_check import warn_inputs
+    warn_inputs(logs)   # per log: samples left out of the fit (count, column, first row), a stuck proxy
     # the range the model will meet: the training runs' (no margin) or the given one
     calibrated = compensate.fit_config_from_logs(
         logs, **{**{k: v for k, v in config_kw.items() if k != "aux"}, "proxy_margin": 0.0})
@@ -156,15 +173,23 @@ def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, c
         model.fit["identifiability"] = ident
         model.fit["guard"] = {"chosen": GUARD_CANDIDATES[1], "why": "the rate terms are not identified: the cubic in "
                               "the proxy, clamped to the calibrated range"}
-        return model, res
-    model, res = fit_model(logs, terms, drop_unidentifiable=drop_unidentifiable, lag_block=lag_block, cv_blocks=cv_blocks,
-                           rate_prefer=rate_prefer, run_offsets=run_offsets, **config_kw)
-    ident["restricted_to"] = None
-    model.fit["identifiability"] = ident
-    if guard == "auto" and auto_terms:
-        margin = GUARD_MARGIN_EXTRAPOLATED if ident.get("rate_cv_extrapolated") else GUARD_MARGIN
-        model, res = _guard(logs, model, res, config_kw, margin)
+    else:
+        model, res = fit_model(logs, terms, drop_unidentifiable=drop_unidentifiable, lag_block=lag_block,
+                               cv_blocks=cv_blocks, rate_prefer=rate_prefer, run_offsets=run_offsets, **config_kw)
+        ident["restricted_to"] = None
+        model.fit["identifiability"] = ident
+        if guard == "auto" and auto_terms:
+            margin = GUARD_MARGIN_EXTRAPOLATED if ident.get("rate_cv_extrapolated") else GUARD_MARGIN
+            model, res = _guard(logs, model, res, config_kw, margin)
+    if turn_on == "auto" and auto_terms and config_kw.get("aux") is None:
+        model, res = add_turn_on(logs, model, res, lambda lg, cfg, t: _fixed_terms_fit(lg, cfg, t, run_offsets))
     return model, res
+
+
+def _fixed_terms_fit(logs, config, terms, run_offsets):
+    """``terms`` fitted with ``config`` (each run's offset removed as in :func:`fit_model`)."""
+    fit = lambda lg: fit_logs(lg, config, terms, drop_unidentifiable=True)   # noqa: E731
+    return fit_without_run_offsets(list(logs), fit) if run_offsets == "auto" else fit(list(logs))
 
 
 GUARD_MARGIN = 0.05   # the 17-term model must beat the best cubic's leave-one-leg-out rms by this fraction
@@ -312,7 +337,9 @@ def offsets_identifiable(logs, proxy_kind) -> str | None:
     """None when every run's proxy range overlaps the union of the other runs' ranges by at
     least MIN_OFFSET_OVERLAP of its own width (an offset per run can be told from the proxy
     terms); else why not (which run, how much overlap)."""
-    rng = [(float(np.min(p)), float(np.max(p))) for p in (log.proxy(proxy_kind)[1] for log in logs)]
+    from host_tools.golden.input_check import fit_mask
+    rng = [(float(np.min(p[k])), float(np.max(p[k]))) for p, k in
+           ((log.proxy(proxy_kind)[1], fit_mask(log)) for log in logs)]
     for i, (lo, hi) in enumerate(rng):
         olo = min(r[0] for j, r in enumerate(rng) if j != i)
         ohi = max(r[1] for j, r in enumerate(rng) if j != i)

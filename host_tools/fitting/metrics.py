@@ -4,14 +4,18 @@ All rates are in deg/h, times in s, ARW in deg/sqrt(h).
 
 **Which output is measured** (:func:`output_of`):
 
-* FTR log (every sample mode 0): ``rate_dph``, every sample valid.
+* FTR log (every sample mode 0): ``rate_dph``, every sample valid but the input-invalid ones;
 * raw mode-reversal log (modes 1/2/3): the combined output of
-  ``host_tools.golden.reversal.combine(log, combiner)`` (``out_dph`` where ``valid``);
+  ``host_tools.golden.reversal.combine(log, combiner, bad=...)`` (``out_dph`` where ``valid``);
+  the input-invalid samples (``bad``) are never used and a window holding one is not paired;
 * compensated log (metadata ``compensated: yes``, written by ``hdrg compensate``): ``rate_dph``
   where the column ``valid`` is 1.
 
 Exchange samples (mode 3) and invalid samples never enter any statistic (a mode-3 sample is
-excluded even when a compensated log marks it valid).
+excluded even when a compensated log marks it valid).  A raw log's **input-invalid samples** are
+those of ``host_tools.golden.input_check.input_flags`` on ``rate_dph`` (the column measured: a
+sample at or beyond the declared rate full scale, by default the rate word's rail 2^21 deg/h),
+named in a note; the proxy columns are not read here.
 
 **Tau-averages.** For each averaging time tau the valid samples are cut into non-overlapping
 *time* bins of tau seconds (not blocks of a sample count, so bursty and gapped logs work).  The
@@ -320,12 +324,19 @@ def output_of(log: RunLog, combiner: str | None = None, max_stale_s: float | Non
             notes.append(f"flags: {format_counts(counts(log['flags']))}")
             notes.extend(problems(log))
         return "compensated", log.rate_dph.copy(), (vcol == 1) & not_exchange, notes
+    from host_tools.golden.input_check import input_flags
+
+    bad, rep = input_flags(log, ("rate_dph",))
+    if rep.flagged:
+        notes.append(f"input: {rep.flagged} of {rep.n} samples outside what the sensor can report "
+                     f"({rep.invalid_text().split('; ', 1)[1]}): not valid"
+                     + ("; a mode-reversal window holding one is not paired" if log.reversal else ""))
     if not log.reversal:
-        return "ftr", log.rate_dph.copy(), np.ones(len(log), bool), notes
+        return "ftr", log.rate_dph.copy(), ~bad, notes
     from host_tools.golden import reversal
 
     combiner = reversal.DEFAULT_COMBINER if combiner is None else combiner
-    comb = reversal.combine(log, combiner=combiner, max_stale_s=max_stale_s, settle_s=settle_s)
+    comb = reversal.combine(log, combiner=combiner, max_stale_s=max_stale_s, settle_s=settle_s, bad=bad)
     notes.append(f"mode-reversal log: output = reversal.combine(combiner={combiner!r}); its Allan "
                  f"figures are those of the combined output (within a window out = (c + W_other)/2, "
                  f"so its short-tau noise is about half the raw loop's), not the raw sensor's")

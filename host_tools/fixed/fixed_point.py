@@ -6,7 +6,9 @@ input of the |fixed - golden| bound).
 
 These need both the golden model (run logs, models, the quantizer) and the bit-accurate reference,
 so they live here: firmware_ref depends on nothing in host_tools (docs/ARCHITECTURE.md).
-Bit 64 of the flags (an input value saturated when converted to a word) is added here.
+The input stage: the per-sample input-invalid bit (the pipeline's input; host_tools.golden.
+input_check.input_flags on ``rate_dph`` and the proxy column, with the F word's range) is made
+here; bit 64 of a saturated aux channel word (which does not set the bit) is added here too.
 """
 from __future__ import annotations
 
@@ -20,27 +22,31 @@ from host_tools.golden import runlog as rl
 from host_tools.golden.checks import check_sample_rate
 from host_tools.fixed.quantize import quantize
 from host_tools.fixed.quantize_parts import aux_channel_fracs
+from host_tools.golden.input_check import FREQ_RAIL, RANGE_KEYS, input_flags
 from host_tools.golden.regressors import power_on_counter
 
 
 def log_words(log, config) -> dict:
     """Input words of a run log under a ModelConfig: ``p`` (proxy), ``r`` (rate), ``mode``,
-    ``restart``, ``z`` (0: the external Z word is not used by the host), ``input_sat`` (bool[n]:
-    some input value the pipeline reads was saturated), and for an aux 'sum' generator the channel
+    ``restart``, ``z`` (0: the external Z word is not used by the host), ``invalid`` (uint8[n]: the
+    input-invalid bit, host_tools.golden.input_check.input_flags with ``word_range``: the rate or
+    proxy word outside what the sensor can report or its word can hold), ``input_sat`` (bool[n]:
+    an aux channel word the pipeline reads was saturated), and for an aux 'sum' generator the channel
     words it reads: ``f`` (F), ``t`` (T), ``aux`` (int64[n, n_chan]: the aux_* columns of
     firmware_ref.aux.aux_columns as A_c words with the quantizer's AF_c) and ``k`` (the counter
     K = rint(t_s fs), fs of the aux params, as the golden); else those are None."""
-    _, pcol = log.proxy(config.proxy.kind)
-    p, psat = inputs.proxy_words(pcol, config.proxy.kind)
-    r, rsat = inputs.rate_words(log.rate_dph)
+    pname, pcol = log.proxy(config.proxy.kind)
+    p, _ = inputs.proxy_words(pcol, config.proxy.kind)
+    r, _ = inputs.rate_words(log.rate_dph)
+    bad, _ = input_flags(log, ("rate_dph", pname), word_range=True)
     n = len(log)
     restart = np.zeros(n, np.uint8)
     restart[np.asarray(log.segments, np.int64)] = 1
     if n:
         restart[0] = 1
     out = {"p": p, "r": r, "mode": np.asarray(log.mode, np.int64), "restart": restart, "z": np.zeros(n, np.int64),
-           "f": None, "t": None, "aux": None, "k": None}
-    sat = psat | rsat
+           "f": None, "t": None, "aux": None, "k": None, "invalid": bad.astype(np.uint8)}
+    sat = np.zeros(n, bool)
     if config.aux.generator != "none":
         where = f"{log.source}: the aux generator"
         used = {tm["column"] for tm in config.aux.terms if tm["gen"] == "input"}
@@ -50,10 +56,10 @@ def log_words(log, config) -> dict:
                                  f"(columns: {', '.join(log.columns)})")
         if "freq_hz" in log:
             out["f"], fsat = inputs.freq_words(log["freq_hz"])
-            sat |= fsat if "freq_hz" in used else False
+            sat |= fsat if "freq_hz" in used and pname != "freq_hz" else False
         if "temp_c" in log:
             out["t"], tsat = inputs.temp_words(log["temp_c"])
-            sat |= tsat if "temp_c" in used else False
+            sat |= tsat if "temp_c" in used and pname != "temp_c" else False
         cols = aux_columns(config.aux)
         fracs = aux_channel_fracs(config.aux)
         a = np.zeros((n, len(cols)), np.int64)
@@ -113,7 +119,7 @@ def compensate_log(log, model, table=None, impl: str = "numba", return_flags: bo
     else:
         check_table_matches(table, model)
     w = log_words(log, cfg)
-    chans = {name: w[name] for name in ("f", "t", "aux", "k")}
+    chans = {name: w[name] for name in ("f", "t", "aux", "k", "invalid")}
     if impl == "numba":
         from firmware_ref.kernel import run_words
         res = run_words(table, w["p"], w["r"], w["mode"], w["restart"], w["z"], **chans)
@@ -146,6 +152,10 @@ def dequantized_log(log, model):
     word, so that input quantization, accounted for separately (FORMATS.md), is not counted."""
     cfg = model.config
     w = log_words(log, cfg)
+    out = log.with_columns()
+    if cfg.proxy.column == "freq_hz" and not str(out.metadata.get(RANGE_KEYS["freq_hz"], "")).strip():
+        # the F word's range: the golden flags its rail exactly where the fixed path (word_range) does
+        out.metadata[RANGE_KEYS["freq_hz"]] = f"0..{FREQ_RAIL * 2.0 ** -F.FREQ_FRAC!r}"
     cols = {cfg.proxy.column: inputs.from_words(w["p"], inputs.proxy_frac(cfg.proxy.kind)),
             "rate_dph": inputs.from_words(w["r"], F.RATE_FRAC)}
     if w["f"] is not None:
@@ -154,4 +164,4 @@ def dequantized_log(log, model):
         cols["temp_c"] = inputs.from_words(w["t"], F.TEMP_FRAC)
     for c, (col, fr) in enumerate(zip(aux_columns(cfg.aux), aux_channel_fracs(cfg.aux))):
         cols[col] = inputs.from_words(w["aux"][:, c], fr)
-    return log.with_columns(**cols)
+    return out.with_columns(**cols)

@@ -28,12 +28,22 @@ Exact semantics (the fixed-point reference copies them):
 * **u** from the proxy column of the model's kind (host_tools.golden.proxy); **v** from the same column
   by the model's rate estimator, restarted at every ``RunLog.segments`` start
   (host_tools.golden.rate); **z** from the aux generator (0 for 'none').
-* **valid[i]** = ``combined_valid[i] and not warmup[i] and mode[i] != 3``.  Clamping of u or v
-  does not invalidate a sample (it is flagged only).
+* **Input-invalid samples** ``bad[i]`` (host_tools.golden.input_check.input_flags on ``rate_dph``
+  and the model's proxy column: outside what the sensor can report): the rate estimator restarts
+  at a bad sample and at the one after it (host_tools.golden.input_check.rate_restarts: the bad
+  word never enters its memory; the estimator re-warms as after a gap, flag 4); the combiner never
+  uses a bad sample and does not commit a window that held one (host_tools.golden.reversal), so
+  every pairing that would use it is not valid (flag 16) until a clean window of that mode
+  replaces it.  The aux generators (host_tools.golden.regressors) never take a bad sample's input
+  into their memory: an input filter holds its state, an aux rate term re-warms with the model's.
+* **valid[i]** = ``combined_valid[i] and not warmup[i] and mode[i] != 3 and not bad[i]``.
+  Clamping of u or v does not invalidate a sample (it is flagged only).
 * **flags[i]** (uint8 bit field): ``FLAG_PROXY_CLAMPED`` 1 (u was clamped), ``FLAG_RATE_CLAMPED``
   2 (v was clamped), ``FLAG_WARMUP`` 4 (rate estimator in warm-up), ``FLAG_EXCHANGE`` 8 (mode 3),
   ``FLAG_STALE`` 16 (mode-reversal output not valid at a mode 1/2 sample: settling, no
-  complete window of the other mode yet, or that window older than max_stale_s).
+  complete window of the other mode yet, or that window older than max_stale_s, or only a tainted
+  one), ``FLAG_INPUT_SAT`` 64 (the sample is input-invalid: the same bit as the fixed point's,
+  whose host also sets it for a saturated aux word).
 * **B[i]** = ``model.evaluate(u[i], v[i], z[i], mode[i])`` at every sample (Horner form,
   host_tools.golden.regressors; bank by mode for regress_first), deg/h.
 * **Output** (:func:`compensate`): where valid, ``rate_dph = y - B`` (regress_first: the
@@ -67,8 +77,9 @@ from host_tools.golden import reversal as _reversal
 from host_tools.golden.reversal import (ReversalConfig, check_modes, combine, combine_values, max_stale_for,
                                         sign_of, window_ages)
 
-from firmware_ref.vocabulary import (FLAG_EXCHANGE, FLAG_PROXY_CLAMPED, FLAG_RATE_CLAMPED, FLAG_STALE,  # noqa: F401
-                                     FLAG_WARMUP, GOLDEN_FLAG_NAMES as FLAG_NAMES)
+from host_tools.golden.input_check import INPUT_KEY, STUCK_KEY, input_flags, rate_restarts
+from firmware_ref.vocabulary import (FLAG_EXCHANGE, FLAG_INPUT_SAT, FLAG_PROXY_CLAMPED, FLAG_RATE_CLAMPED,  # noqa: F401
+                                     FLAG_STALE, FLAG_WARMUP, GOLDEN_FLAG_NAMES as FLAG_NAMES)
 # Defaults of a new model, the one place: fit_config_from_logs (and fit_logs for the terms) fill
 # what is not given, so hdrg fit / diagnose / demo and everything reading their model files follow.
 # Chosen on held-out runs at another temperature rate (docs/REGRESS_THEN_REVERSE.md "Defaults").
@@ -130,17 +141,18 @@ def prepare(log, config) -> Prepared:
     BiasModel); see the module doc for the exact semantics."""
     cfg = _config_of(config)
     check_sample_rate(log, cfg.rate.fs)
-    _, p = log.proxy(cfg.proxy.kind)
+    pcol, p = log.proxy(cfg.proxy.kind)
+    bad, _ = input_flags(log, ("rate_dph", pcol))
     u, u_clamped = cfg.proxy.normalize(p)
-    v, v_clamped, warm = cfg.rate.normalize(p, log.segments)
-    z = aux_regressor(log, cfg.aux)
+    v, v_clamped, warm = cfg.rate.normalize(p, rate_restarts(log.segments, bad))
+    z = aux_regressor(log, cfg.aux, bad)
     mode = np.asarray(log.mode)
     if cfg.reversal is None:
         if log.reversal:
             raise ValueError(f"{log.source}: the model is for force-to-rebalance (no mode reversal) "
                              f"but the log uses mode reversal (modes 1/2/3)")
         y = np.array(log.rate_dph, np.float64)
-        combined_valid = np.ones(len(y), bool)
+        combined_valid = ~bad
     else:
         if not log.reversal:
             raise ValueError(f"{log.source}: the model is for mode reversal "
@@ -148,16 +160,17 @@ def prepare(log, config) -> Prepared:
         if cfg.reversal.order == "regress_first":
             check_modes(log)
             y = sign_of(mode) * np.asarray(log.rate_dph, np.float64)
-            _, combined_valid, used = combine_values(mode, y, ~warm, log.segments, cfg.reversal, cfg.rate.fs)
+            _, combined_valid, used = combine_values(mode, y, ~warm, log.segments, cfg.reversal, cfg.rate.fs, bad)
         else:
             comb = combine(log, combiner=cfg.reversal.combiner, max_stale_s=cfg.reversal.max_stale_s,
-                           settle_s=cfg.reversal.settle_s, fs_hz=cfg.rate.fs)
+                           settle_s=cfg.reversal.settle_s, fs_hz=cfg.rate.fs, bad=bad)
             y = np.asarray(comb.out_dph, np.float64)
             combined_valid = np.asarray(comb.valid, bool)
     exchange = mode == rl.MODE_EXCHANGE
-    valid = combined_valid & ~warm & ~exchange
+    valid = combined_valid & ~warm & ~exchange & ~bad
     flags = (u_clamped * FLAG_PROXY_CLAMPED + v_clamped * FLAG_RATE_CLAMPED + warm * FLAG_WARMUP
-             + exchange * FLAG_EXCHANGE + (~combined_valid & ~exchange) * FLAG_STALE).astype(np.uint8)
+             + exchange * FLAG_EXCHANGE + (~combined_valid & ~exchange) * FLAG_STALE
+             + bad * FLAG_INPUT_SAT).astype(np.uint8)
     order = None if cfg.reversal is None else cfg.reversal.order
     return Prepared(np.asarray(p, np.float64), u, v, z, y, valid, flags, log.source, np.asarray(mode, np.int64),
                     np.asarray(log.segments, np.int64), used if order == "regress_first" else valid, order)
@@ -174,7 +187,8 @@ def residual(pr: Prepared, model: BiasModel):
     if pr.order != "regress_first":
         raise ValueError(f"{pr.source}: prepared for order {pr.order!r}, the model is regress_first")
     warm = (pr.flags & FLAG_WARMUP) != 0
-    out, _, _ = combine_values(pr.mode, pr.y - bias, ~warm, pr.segments, rev, model.config.rate.fs)
+    bad = (pr.flags & FLAG_INPUT_SAT) != 0
+    out, _, _ = combine_values(pr.mode, pr.y - bias, ~warm, pr.segments, rev, model.config.rate.fs, bad)
     return out, bias
 
 
@@ -205,21 +219,30 @@ def stale_by_age(log, config, prep: Prepared | None = None) -> tuple:
     if prep is None:
         prep = prepare(log, cfg)
     warm = (prep.flags & FLAG_WARMUP) != 0
+    bad = (prep.flags & FLAG_INPUT_SAT) != 0
     ok = ~warm if cfg.reversal.order == "regress_first" else np.ones(len(warm), bool)
-    ages = window_ages(prep.mode, ok, prep.segments, cfg.reversal, cfg.rate.fs)
-    seen = (ages >= 0) & ~warm & (prep.mode != rl.MODE_EXCHANGE)
+    ages = window_ages(prep.mode, ok, prep.segments, cfg.reversal, cfg.rate.fs, bad)
+    seen = (ages >= 0) & ~warm & ~bad & (prep.mode != rl.MODE_EXCHANGE)
     k = int(np.count_nonzero(seen & (ages > int(round(cfg.reversal.max_stale_s * cfg.rate.fs)))))
     return k, float(ages[seen].max()) / cfg.rate.fs if seen.any() else 0.0
 
 
-def note_host_checks(out, log, model: BiasModel, prep: Prepared | None = None):
+def note_host_checks(out, log, model: BiasModel, prep: Prepared | None = None, word_range: bool = False):
     """The compensated log ``out`` (either impl) with the checks the firmware flags cannot make
     recorded in its metadata, where host_tools.golden.flags.problems and the user find them: aux
-    inputs outside their fitted range (flags.note_aux_inputs) and :func:`stale_by_age` (STALE_KEY:
-    'N samples; ...', only when some sample went stale by age; one copied from the input's metadata
-    is dropped)."""
+    inputs outside their fitted range (flags.note_aux_inputs), :func:`stale_by_age` (STALE_KEY:
+    'N samples; ...', only when some sample went stale by age), the input-invalid samples and the
+    stuck proxy runs (host_tools.golden.input_check: INPUT_KEY 'N samples; column K (first row R:
+    value, limit)', STUCK_KEY 'column rows A..B (N samples)'); ones copied from the input's metadata
+    are dropped; ``word_range``: the fixed-point path's input test, input_check.input_flags)."""
     out = note_aux_inputs(out, aux_inputs_clamped(log, model.config.aux))
-    out.metadata.pop(STALE_KEY, None)
+    for key in (STALE_KEY, INPUT_KEY, STUCK_KEY):
+        out.metadata.pop(key, None)
+    _, rep = input_flags(log, ("rate_dph", log.proxy(model.config.proxy.kind)[0]), word_range)
+    if rep.flagged:
+        out.metadata[INPUT_KEY] = rep.invalid_text()
+    if rep.stuck:
+        out.metadata[STUCK_KEY] = rep.stuck_text()
     k, age = stale_by_age(log, model, prep)
     if k:
         out.metadata[STALE_KEY] = (f"{k} samples; the log's windows reach {age:g} s before the other mode's is "
@@ -238,7 +261,7 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
     if impl == "fixed":
         from host_tools.fixed.fixed_point import compensate_log
         return note_host_checks(blank_invalid(add_flags(*compensate_log(log, model, table=table, return_flags=True))),
-                                log, model)
+                                log, model, word_range=True)
     if table is not None:
         raise ValueError("a coefficient table is only used with --impl fixed")
     if str(log.metadata.get("compensated", "")).strip().lower() == "yes" or "bias_dph" in log:
@@ -268,7 +291,8 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
     * rate estimator: ``rate_estimator``, ``n``, ``shift``; each None -> DEFAULT_RATE;
     * fs [Hz]: ``fs`` or the first log's sample rate; every log must match it within 1 %;
     * proxy range: ``proxy_range`` (LO, HI) in proxy units, else ProxyConfig.from_data over the
-      logs' non-exchange samples widened by ``proxy_margin``;
+      logs' non-exchange samples that are not input-invalid (host_tools.golden.input_check)
+      widened by ``proxy_margin``;
     * rate span: ``rate_range`` [proxy units/s], else RateConfig.from_data (``rate_percentile``
       of |dp/dt| past warm-up on non-exchange samples, times 1 + ``rate_margin``);
     * reversal: None for FTR logs (giving one is an error); for mode-reversal logs ``reversal``
@@ -321,7 +345,9 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
     n = DEFAULT_RATE["n"] if n is None else n
     shift = DEFAULT_RATE["shift"] if shift is None else shift
     aux_cfg = AuxConfig() if aux is None else (aux if isinstance(aux, AuxConfig) else AuxConfig.from_dict(dict(aux)))
-    keep = [np.asarray(log.mode) != rl.MODE_EXCHANGE for log in logs]
+    # input-invalid samples (host_tools.golden.input_check) set neither the proxy range nor the rate span
+    bads = [input_flags(log, ("rate_dph", column))[0] for log in logs]
+    keep = [(np.asarray(log.mode) != rl.MODE_EXCHANGE) & ~bad for log, bad in zip(logs, bads)]
     ps = [log[column] for log in logs]
     if proxy_range is not None:
         lo, hi = parse_range(proxy_range) if isinstance(proxy_range, str) else proxy_range
@@ -332,6 +358,7 @@ def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: st
         span = parse_rate_range(rate_range) if isinstance(rate_range, str) else float(rate_range)
         rate = RateConfig(rate_estimator, n, shift, span, fs)
     else:
-        rate = RateConfig.from_data(ps, fs, rate_estimator, n, shift, restarts=[log.segments for log in logs],
+        rate = RateConfig.from_data(ps, fs, rate_estimator, n, shift,
+                                    restarts=[rate_restarts(log.segments, bad) for log, bad in zip(logs, bads)],
                                     percentile=rate_percentile, margin=rate_margin, masks=keep)
     return ModelConfig(proxy, rate, rev, aux_cfg)

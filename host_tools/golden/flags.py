@@ -1,7 +1,8 @@
 """Status flags of a compensated run log: the ``flags`` column, its counts and the warnings.
 
 The bits are those of the fixed-point pipeline (firmware_ref/formats.py ``FLAGS``; the golden
-model host_tools.golden.compensate sets the same bits 1..16 with the same rules; docs/RUN_LOG.md):
+model host_tools.golden.compensate sets the same bits 1..16 and 64 with the same rules;
+docs/RUN_LOG.md):
 
 ====  ===============  ======================================================================
 bit   name             meaning
@@ -12,7 +13,9 @@ bit   name             meaning
 8     exchange         mode 3 (not valid)
 16    stale            mode-reversal output not valid (settling, no window, too old)
 32    aux_clamped      the k7 regressor z was clamped (fixed point)
-64    input_saturated  an input value beyond its fixed-point word was saturated (fixed point)
+64    input_saturated  input-invalid: an input outside what the sensor can report (both
+                       implementations, host_tools.golden.input_check), or (fixed point) an
+                       aux word saturated
 128   saturated        a saturation inside the fixed-point pipeline (window count, trend, output)
 ====  ===============  ======================================================================
 
@@ -24,7 +27,9 @@ extrapolation like the bits.
 Clamping (1, 2, 32) keeps a sample valid but means the model is *extrapolated*: above
 ``WARN_FRACTION`` of the samples `hdrg compensate` warns (``--strict``: refuses).  A saturated
 sample (64, 128) is never valid: its output is held like any invalid sample, and any saturation
-is warned about (``--strict``: refused).
+is warned about (``--strict``: refused).  Input-invalid samples (metadata ``input_invalid``,
+host_tools.golden.input_check: count, column, first row, limit) and a stuck proxy (metadata
+``input_stuck``: column and rows) are warned about at any count (``--strict``: refused).
 """
 from __future__ import annotations
 
@@ -34,6 +39,7 @@ import warnings
 import numpy as np
 
 from firmware_ref import vocabulary as VOC
+from host_tools.golden.input_check import INPUT_KEY, STUCK_KEY, invalid_message, stuck_message
 
 FLAG_NAMES = {bit: name for bit, (name, _) in VOC.FLAGS.items()}
 SATURATION = VOC.FLAG_SAT | VOC.FLAG_INPUT_SAT
@@ -96,10 +102,12 @@ def _aux_inputs(out) -> dict:
 
 
 def problems(out) -> list:
-    """The warnings a compensated log deserves: extrapolation above WARN_FRACTION (clamp flags, and
-    aux inputs outside the model's range: :func:`note_aux_inputs`), samples lost to a window older
-    than the model's max_stale_s above WARN_FRACTION (STALE_KEY, host_tools.golden.compensate.
-    note_host_checks), any saturation; each a sentence with the count, the share and the source."""
+    """The warnings a compensated log deserves: input-invalid samples (INPUT_KEY, first) and a stuck
+    proxy (STUCK_KEY; host_tools.golden.input_check), extrapolation above WARN_FRACTION (clamp flags,
+    and aux inputs outside the model's range: :func:`note_aux_inputs`), samples lost to a window
+    older than the model's max_stale_s above WARN_FRACTION (STALE_KEY, host_tools.golden.compensate.
+    note_host_checks), any saturation (fixed point: flags 64 or 128; float: flag 128, or flag 64
+    beyond the input-invalid samples); each a sentence with the count, the share and the source."""
     flags = np.asarray(out["flags"], np.int64)
     n = len(flags)
     msgs = []
@@ -124,7 +132,23 @@ def problems(out) -> list:
                     f"mode's window is older than the model's max_stale_s" + (f" ({m.group(2)})" if m.group(2) else "")
                     + ": the log's mode-reversal windows are longer than the training runs'; refit on runs with "
                     "this schedule")
-    k = int(np.count_nonzero(flags & SATURATION))
+    invalid = str(out.metadata.get(INPUT_KEY, "") or "").strip()
+    k_in = 0
+    if invalid:
+        m = re.match(r"(\d+)\s+samples?\s*;\s*\S", invalid)
+        if m is None:
+            msgs.append(f"metadata '{INPUT_KEY}: {invalid}' is not 'N samples; ...': the input-invalid samples are "
+                        f"not known")
+        else:
+            k_in = int(m.group(1))
+            msgs.insert(0, invalid_message(invalid, n))
+    stuck = str(out.metadata.get(STUCK_KEY, "") or "").strip()
+    if stuck:
+        msgs.append(stuck_message(stuck))
+    if str(out.metadata.get("compensation_impl", "")).strip() == "fixed":
+        k = int(np.count_nonzero(flags & SATURATION))    # an input-invalid word is a saturated word there too
+    else:
+        k = int(np.count_nonzero(flags & VOC.FLAG_SAT)) + max(0, int(np.count_nonzero(flags & VOC.FLAG_INPUT_SAT)) - k_in)
     if k:
         msgs.append(f"saturation: {k} of {n} samples saturated in fixed point (flags input_saturated/saturated); "
                     f"they are marked not valid")

@@ -34,6 +34,14 @@ Per-sample signals shared by the terms (n = number of rows of the log, i = 0..n-
 * ``seg_start[i]``: True at row 0 and at every gap-free segment start (``RunLog.segments``); the
   *recursive* generators (``input`` with tau_s > 0, ``decay_on``, ``decay_exchange``, ``rate``)
   restart there exactly as at power-on, like the rate estimator (host_tools.golden.rate).
+* ``bad[i]``: the sample's input-invalid bit (host_tools.golden.input_check; firmware_ref/FORMATS.md
+  "The input-invalid bit"): the generators never take a flagged sample's input into their memory.
+  A filtered ``input`` holds its state over a flagged sample (a restart met on a flagged sample
+  zeroes it and is *pending*: the filter re-initializes at the next clean sample; one bit of
+  state, ``pend``); a
+  ``rate`` term's estimator restarts at a flagged sample and at the one after it, like the model's
+  (input_check.rate_restarts).  ``decay_on``, ``decay_exchange``, ``ramp``, ``osc``, ``one`` and an
+  unfiltered ``input`` read no past input and do not see the bit.
 * ``s[i]``, the mode sign: +1 in modes 0 and 1, -1 in mode 2, 0 in mode 3 (exchange).
 * ``k[i] = rint(t_s[i] * FS)`` (numpy.rint: nearest integer, ties to even), the firmware's sample
   counter since power-on (t_s is the time since power-on, shared/formats/run-log.md).  Only
@@ -59,19 +67,25 @@ is only a guard.  Generators (all arithmetic float64, in the order written):
     ``b = 1.0 - a``.  Per sample::
 
         q = (x[i] - ref) * inv_span;  q = +1 if q > 1;  q = -1 if q < -1      (as host_tools.golden.proxy)
+        rs = seg_start[i] or pend                       (pend: False at power-on, shared by the terms)
         if tau_s == 0:      y = q
-        elif seg_start[i]:  y = q                       (filter state reset to the input)
+        elif bad[i]:        y = 0.0 if rs else y held  (a flagged sample never enters the state)
+        elif rs:            y = q                       (filter state reset to the input)
         else:               y = y + b * (q - y)         (first-order low-pass, y[i-1] -> y[i])
+        pend = bad[i] and rs                            (after every term)
         g = y * y * ... * y   (power factors, multiplied left to right; power 1: g = y)
 
-    The filter equals ``scipy.signal.lfilter([b], [1, -a], q)`` started at y = q[seg start].
+    On a log without
+    flagged samples the filter equals ``scipy.signal.lfilter([b], [1, -a], q)`` started at y =
+    q[seg start].
     Uses: a lagged copy of the proxy (effect thermal_lag), u^4 / u^5 (proxy_high_order: the
     model's own proxy normalization, tau_s = 0), a second temperature sensor (board_temp), an
     ``aux_*`` channel (aux_<name>), the mode sign times u (imperfect_reversal, sign True).
 ``rate`` -- the normalized rate v of a column by the rate estimator of host_tools.golden.rate.
     Parameters: ``column``, ``estimator``, ``n``, ``shift``, ``span`` (as RateConfig, with
-    fs = FS): ``g = RateConfig(estimator, n, shift, span, FS).normalize(x, segments)[0]`` (0 in
-    warm-up, clamped to [-1, 1]).  Use: s * v (imperfect_reversal, sign True).
+    fs = FS): ``g = RateConfig(estimator, n, shift, span, FS).normalize(x, rate_restarts(segments,
+    bad))[0]`` (0 in warm-up, clamped to [-1, 1]; the restarts of the model's estimator, so a
+    flagged sample and the one after it re-warm).  Use: s * v (imperfect_reversal, sign True).
 ``one`` -- g = 1.  Use: s * 1 (imperfect_reversal, sign True).
 ``decay_on`` -- decay since power-on.  Parameter ``tau_s`` > 0; once ``a = exp(-1.0 / (FS *
     tau_s))``.  Per sample: ``g = 1.0`` if seg_start[i], else ``g = a * g``.  On a gap-free log
@@ -100,7 +114,10 @@ is only a guard.  Generators (all arithmetic float64, in the order written):
     ``g = sn`` ("sin") or ``g = c`` ("cos"), i.e. sin / cos(2 pi k / (P FS)) up to the recursion's rounding (|c^2 + sn^2 - 1| grows ~1e-16 per
     step, < 1e-9 after 1e7 samples; no renormalization).  Use: periodic (a sin and a cos term).
 
-:func:`generator_values` evaluates one term (its g, times s if sign; without its weight).
+:func:`generator_values` evaluates one term (its g, times s if sign; without its weight).  Both
+it and :func:`aux_regressor` take ``bad`` (bool[n]); None: ``input_check.input_flags(log)[0]`` (every
+checked column the log has: the fit's mask, input_check.fit_mask); host_tools.golden.compensate
+passes the mask of ``rate_dph`` and the model's proxy column, the firmware's bit.
 """
 from __future__ import annotations
 
@@ -266,13 +283,20 @@ class AuxConfig:
 # -- generator kernels (float64, exactly the recursions of the module doc) -----------------------
 
 @numba.njit(cache=True)
-def _lowpass_kernel(q, seg_start, b):
+def _lowpass_kernel(q, seg_start, b, bad):
     n = q.shape[0]
     y = np.empty(n)
     state = 0.0
+    pend = False
     for i in range(n):
-        if seg_start[i]:
+        rs = seg_start[i] or pend
+        if bad[i]:
+            if rs:
+                state = 0.0            # a restart waits for the next clean sample
+            pend = rs                  # else held
+        elif rs:
             state = q[i]
+            pend = False
         else:
             state = state + b * (q[i] - state)
         y[i] = state
@@ -355,11 +379,15 @@ def normalized_input(x, ref: float, span: float) -> np.ndarray:
     return np.clip((np.asarray(x, np.float64) - float(ref)) * inv_span, -1.0, 1.0)
 
 
-def lowpass(q, seg_start, tau_s: float, fs: float) -> np.ndarray:
+def lowpass(q, seg_start, tau_s: float, fs: float, bad=None) -> np.ndarray:
     """The first-order filter of 'input' (module doc): y = q at segment starts, else
-    y += (1 - a) (q - y), a = exp(-1 / (fs tau_s))."""
+    y += (1 - a) (q - y), a = exp(-1 / (fs tau_s)); held over the input-invalid samples ``bad``
+    (bool[n], None: none), a restart on one of them zeroes y and is deferred to the next clean
+    sample."""
     a = math.exp(-1.0 / (float(fs) * float(tau_s)))
-    return _lowpass_kernel(np.ascontiguousarray(q, np.float64), np.ascontiguousarray(seg_start, np.bool_), 1.0 - a)
+    q = np.ascontiguousarray(q, np.float64)
+    bad = np.zeros(q.shape[0], np.bool_) if bad is None else np.ascontiguousarray(bad, np.bool_)
+    return _lowpass_kernel(q, np.ascontiguousarray(seg_start, np.bool_), 1.0 - a, bad)
 
 
 def _column(log, name, where):
@@ -369,9 +397,21 @@ def _column(log, name, where):
     return np.asarray(log[name], np.float64)
 
 
-def generator_values(log, term: dict, fs: float) -> np.ndarray:
+def _bad_mask(log, bad) -> np.ndarray:
+    """``bad`` as bool[len(log)], or the log's own input-invalid mask when None (module doc)."""
+    if bad is None:
+        from host_tools.golden.input_check import input_flags
+        return input_flags(log)[0]
+    bad = np.asarray(bad, np.bool_)
+    if bad.shape != (len(log),):
+        raise ValueError(f"{log.source}: the input-invalid mask has shape {bad.shape}, expected ({len(log)},)")
+    return bad
+
+
+def generator_values(log, term: dict, fs: float, bad=None) -> np.ndarray:
     """g[i] of one term (times the mode sign s[i] if ``sign``), float64[len(log)], without its
-    weight; see the module doc for the exact per-sample rules."""
+    weight; ``bad`` the input-invalid samples (bool[n]; None: the log's, module doc); see the
+    module doc for the exact per-sample rules."""
     t = normalize_term(term)
     fs = _finite(fs, "aux fs", positive=True)
     gen = t["gen"]
@@ -379,14 +419,15 @@ def generator_values(log, term: dict, fs: float) -> np.ndarray:
     n = len(log)
     if gen == "input":
         q = normalized_input(_column(log, t["column"], where), t["ref"], t["span"])
-        y = q if t["tau_s"] == 0 else lowpass(q, _seg_start(log), t["tau_s"], fs)
+        y = q if t["tau_s"] == 0 else lowpass(q, _seg_start(log), t["tau_s"], fs, _bad_mask(log, bad))
         g = y
         for _ in range(t["power"] - 1):
             g = g * y
     elif gen == "rate":
+        from host_tools.golden.input_check import rate_restarts
         from host_tools.golden.rate import RateConfig
         rc = RateConfig(t["estimator"], t["n"], t["shift"], t["span"], fs)
-        g = rc.normalize(_column(log, t["column"], where), log.segments)[0]
+        g = rc.normalize(_column(log, t["column"], where), rate_restarts(log.segments, _bad_mask(log, bad)))[0]
     elif gen == "one":
         g = np.ones(n)
     elif gen == "decay_on":
@@ -427,16 +468,19 @@ def aux_inputs_clamped(log, aux_config: AuxConfig | None = None) -> dict:
     return out
 
 
-def aux_regressor(log, aux_config: AuxConfig | None = None) -> np.ndarray:
+def aux_regressor(log, aux_config: AuxConfig | None = None, bad=None) -> np.ndarray:
     """z float64[len(log)] from the run log; 'none' (or None) gives zeros; 'sum' as in the module
-    doc."""
+    doc; ``bad`` the input-invalid samples (bool[n]; None: the log's own, module doc)."""
     cfg = AuxConfig() if aux_config is None else aux_config
     if cfg.generator == "none":
         return np.zeros(len(log))
     fs = cfg.params["fs"]
     z = np.zeros(len(log))
+    if bad is None and any(t["gen"] == "rate" or (t["gen"] == "input" and t["tau_s"] > 0)
+                           for t in cfg.params["terms"]):
+        bad = _bad_mask(log, None)                 # once for every term
     for term in cfg.params["terms"]:
-        z = z + term["weight"] * generator_values(log, term, fs)
+        z = z + term["weight"] * generator_values(log, term, fs, bad)
     return np.clip(z, -1.0, 1.0)
 
 

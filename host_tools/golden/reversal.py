@@ -62,8 +62,15 @@ combined (c for combine_first, r for regress_first):
   the other mode's estimate may be at most one reversal period old).  Both are valid from the
   first sample of the first mode-2 window after a complete mode-1 window (180 s after power-on in
   the paper's timing, as the paper says).
-* **Invalid samples** (exchange, settling, not ok, before the first pair, stale) output the last
-  valid output (0.0 before the first one) with ``valid = False``.  They never enter a fit or a
+* **Input-invalid samples** (``bad[i]``, host_tools.golden.input_check: an input outside what the
+  sensor can report).  A bad sample is never used (it enters no window sum and is not valid); a
+  bad sample in a mode-1/2 window *taints* that window (at any position, settling included): a
+  tainted window is not committed when it closes, so no pairing or trend ever uses it and the
+  other mode keeps pairing with the last clean window of this mode (subject to max_stale_n, as
+  ever) until a clean window replaces it.  A bad sample in an exchange taints nothing.  (The rate
+  estimator's side: host_tools.golden.compensate restarts it at a bad sample and the one after.)
+* **Invalid samples** (exchange, settling, not ok, bad, before the first pair, stale) output the
+  last valid output (0.0 before the first one) with ``valid = False``.  They never enter a fit or a
   statistic.
 
 Note: the rate-corrected output also averages the *true rate* of the present sample with that of
@@ -142,8 +149,9 @@ class Combined:
 
 
 @numba.njit(cache=True)
-def _combine_kernel(mode, x, ok, seg_start, settle_n, max_stale_n, kind):
-    """The combiner of the module doc on values x (c or r), kind 0 pair, 1 trend, 2 none.
+def _combine_kernel(mode, x, ok, bad, seg_start, settle_n, max_stale_n, kind):
+    """The combiner of the module doc on values x (c or r), kind 0 pair, 1 trend, 2 none; ``bad``:
+    the input-invalid samples (never used; they taint their window).
     Returns (out, valid, used, age): age[i] = i - end of the other mode's latest committed window
     [samples] at a used sample of pair/trend once that mode has one, else -1."""
     n = mode.shape[0]
@@ -165,6 +173,7 @@ def _combine_kernel(mode, x, ok, seg_start, settle_n, max_stale_n, kind):
     last = 0
     pos = 0
     hold = 0.0
+    taint = False
     for i in range(n):
         m = mode[i]
         if seg_start[i]:
@@ -172,11 +181,12 @@ def _combine_kernel(mode, x, ok, seg_start, settle_n, max_stale_n, kind):
             acc = 0.0
             cnt = 0
             pos = 0
+            taint = False
             for k in range(3):
                 ncommit[k] = 0
                 slope[k] = 0.0
         if m != cur:
-            if cur != 0 and cnt >= 1:
+            if cur != 0 and cnt >= 1 and not taint:
                 mean = acc / cnt
                 c_new = 0.5 * (first + last)
                 if ncommit[cur] >= 1:
@@ -191,8 +201,11 @@ def _combine_kernel(mode, x, ok, seg_start, settle_n, max_stale_n, kind):
             acc = 0.0
             cnt = 0
             pos = 0
+            taint = False
         if cur != 0:
-            if pos >= settle_n and ok[i]:
+            if bad[i]:
+                taint = True
+            if pos >= settle_n and ok[i] and not bad[i]:
                 c = x[i]
                 used[i] = True
                 if cnt == 0:
@@ -235,31 +248,33 @@ def check_modes(log) -> None:
                          f"(a log is either all mode 0 or modes 1/2/3)")
 
 
-def combine_values(mode, x, ok, segments, cfg: ReversalConfig, fs_hz: float):
+def combine_values(mode, x, ok, segments, cfg: ReversalConfig, fs_hz: float, bad=None):
     """The combiner of the module doc on per-sample values ``x`` [deg/h] (c for combine_first, the
     residual r = c - B_mode for regress_first), with ``ok`` bool[n] (regress_first: rate estimator
-    warm), ``segments`` the segment start indices (RunLog.segments).  Returns (out float64[n],
-    valid bool[n], used bool[n])."""
-    return _combine_all(mode, x, ok, segments, cfg, fs_hz)[:3]
+    warm), ``segments`` the segment start indices (RunLog.segments), ``bad`` bool[n] the
+    input-invalid samples (None: none).  Returns (out float64[n], valid bool[n], used bool[n])."""
+    return _combine_all(mode, x, ok, segments, cfg, fs_hz, bad)[:3]
 
 
-def window_ages(mode, ok, segments, cfg: ReversalConfig, fs_hz: float) -> np.ndarray:
+def window_ages(mode, ok, segments, cfg: ReversalConfig, fs_hz: float, bad=None) -> np.ndarray:
     """Per sample, the age [samples] of the other mode's latest committed window where the pair or
     trend combiner of ``cfg`` uses a sample and that mode has a window (-1 elsewhere, and
     everywhere for 'none'): the sample is stale by age exactly where age > round(max_stale_s x
-    fs).  ``ok`` as in :func:`combine_values`."""
-    return _combine_all(mode, np.zeros(len(mode)), ok, segments, cfg, fs_hz)[3]
+    fs).  ``ok``, ``bad`` as in :func:`combine_values`."""
+    return _combine_all(mode, np.zeros(len(mode)), ok, segments, cfg, fs_hz, bad)[3]
 
 
-def _combine_all(mode, x, ok, segments, cfg: ReversalConfig, fs_hz: float):
+def _combine_all(mode, x, ok, segments, cfg: ReversalConfig, fs_hz: float, bad=None):
     mode = np.ascontiguousarray(mode, np.int64)
     x = np.ascontiguousarray(x, np.float64)
     ok = np.ascontiguousarray(ok, np.bool_)
-    if not (len(x) == len(mode) == len(ok)):
-        raise ValueError(f"combine_values: mode, x and ok differ in length ({len(mode)}, {len(x)}, {len(ok)})")
+    bad = np.zeros(len(mode), np.bool_) if bad is None else np.ascontiguousarray(bad, np.bool_)
+    if not (len(x) == len(mode) == len(ok) == len(bad)):
+        raise ValueError(f"combine_values: mode, x, ok and bad differ in length ({len(mode)}, {len(x)}, {len(ok)}, "
+                         f"{len(bad)})")
     seg_start = np.zeros(len(mode), np.bool_)
     seg_start[np.asarray(segments, np.int64)] = True
-    return _combine_kernel(mode, x, ok, seg_start, int(round(cfg.settle_s * fs_hz)),
+    return _combine_kernel(mode, x, ok, bad, seg_start, int(round(cfg.settle_s * fs_hz)),
                            int(round(cfg.max_stale_s * fs_hz)), _KIND[cfg.combiner])
 
 
@@ -301,18 +316,19 @@ def max_stale_for(logs, fs_hz: float) -> float:
 
 
 def combine(log, combiner: str = "pair", max_stale_s: float | None = None, settle_s: float = 0.0,
-            fs_hz: float | None = None) -> Combined:
+            fs_hz: float | None = None, bad=None) -> Combined:
     """Combine a run log's raw output into the bias-cancelled output, combine_first (legacy) order:
     x = c (see the module doc).  ``log`` is a :class:`host_tools.golden.runlog.RunLog`.  ``fs_hz``
-    defaults to the log's sample rate."""
+    defaults to the log's sample rate.  ``bad``: the input-invalid samples (bool[n],
+    host_tools.golden.input_check.input_flags; None: none); FTR: they are not valid."""
     cfg = ReversalConfig(combiner, DEFAULT_MAX_STALE_S if max_stale_s is None else max_stale_s, settle_s,
                          order="combine_first")
     mode = np.asarray(log.mode, np.int64)
     rate = np.asarray(log.rate_dph, np.float64)
     sign = sign_of(mode)
     if not log.reversal:
-        return Combined(rate.copy(), np.ones(len(rate), bool), sign, "ftr")
+        return Combined(rate.copy(), np.ones(len(rate), bool) if bad is None else ~np.asarray(bad, bool), sign, "ftr")
     check_modes(log)
     fs = log.sample_rate_hz if fs_hz is None else fs_hz
-    out, valid, _ = combine_values(mode, sign * rate, np.ones(len(mode), np.bool_), log.segments, cfg, fs)
+    out, valid, _ = combine_values(mode, sign * rate, np.ones(len(mode), np.bool_), log.segments, cfg, fs, bad)
     return Combined(out, valid, sign, cfg.combiner)

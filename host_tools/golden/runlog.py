@@ -27,9 +27,9 @@ Bad input (each case is tested in tests/test_runlog.py):
 * warnings (:class:`RunLogWarning`, and the same text in ``RunLog.notes``) with a documented
   repair:
 
-  - **truncated last line** (fewer cells than the header, or a cell that does not parse, on the
-    final line of a file that does not end with a newline): the partial line is discarded; the
-    warning names its line number and text.
+  - **truncated last line** (a last line without its line end, which may be cut inside its last
+    number, or with fewer cells than the header): the partial line is discarded, never read as a
+    shorter number; the warning names its line number and text and the count of rows kept.
   - **gaps in time** (a step longer than 1.5x the nominal step, the median step): every sample is
     kept; the log is split into contiguous *segments* at the gaps (``RunLog.segments``, start
     indices), so that causal estimators restart at each segment instead of differencing across a
@@ -37,8 +37,11 @@ Bad input (each case is tested in tests/test_runlog.py):
   - **unfinished capture** (metadata ``capture: in progress``, written by `hdrg capture` until it
     closes the file): the rows are kept; the warning says the capture was interrupted.
 
-Writers (:func:`write`, CSV and NPZ) are atomic (host_tools.atomic): the file appears complete
-or not at all.  The format, with the project's extensions (compensated columns ``bias_dph``,
+Only regular files are read (a FIFO, a device, a directory: RunLogError before opening).  The CSV
+reader streams the file in blocks (host_tools.golden.runlog_csv): its memory is about the final
+arrays, its numbers exact (the double nearest each decimal).  The NPZ reader checks every member,
+field and type before use.  Writers (:func:`write`, CSV and NPZ) are atomic (host_tools.atomic):
+the file appears complete or not at all; the CSV writer escapes control characters in metadata.  The format, with the project's extensions (compensated columns ``bias_dph``,
 ``valid``, ``flags``, the metadata keys hdrg writes), is docs/RUN_LOG.md.
 """
 from __future__ import annotations
@@ -49,40 +52,25 @@ import math
 import os
 import re
 import warnings
+import zipfile
+import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from host_tools.atomic import atomic_open
-from host_tools.errors import HdrgError
+from host_tools.golden.runlog_csv import (BLANK_WHERE_INVALID, FORMAT_COLUMNS, HDRG_COLUMNS, INT_COLUMNS,  # noqa: F401
+                                          RunLogError, RunLogWarning, is_compensated_output, meta_line,
+                                          open_regular, read_table)
 
 FORMAT_VERSION = 1
 MODES = (0, 1, 2, 3)
 MODE_FTR, MODE_1, MODE_2, MODE_EXCHANGE = MODES
 GAP_FACTOR = 1.5
 PROXY_COLUMNS = {"freq": "freq_hz", "temp": "temp_c"}
-INT_COLUMNS = ("mode", "flags", "valid")   # integer columns (flags, valid: compensated logs, docs/RUN_LOG.md)
-# a compensated log (it has the columns 'valid' and 'bias_dph') carries no number in these columns
-# where valid is 0: NaN in memory and NPZ, an empty cell in CSV (docs/RUN_LOG.md)
-BLANK_WHERE_INVALID = ("rate_dph", "bias_dph")
 FS_META_TOLERANCE = 0.02          # metadata sample_rate_hz vs 1 / median t_s step
-FORMAT_COLUMNS = ("t_s", "rate_dph", "rate_dps", "mode", "freq_hz", "temp_c")   # shared/formats/run-log.md
-# columns hdrg itself writes (docs/RUN_LOG.md): a compensated log, and hdrg capture's device outputs
-HDRG_COLUMNS = ("bias_dph", "valid", "flags", "comp_rate_dph", "comp_bias_dph", "comp_valid", "status", "state", "seq")
 CAPTURE_KEY, CAPTURE_OPEN, CAPTURE_DONE = "capture", "in progress", "complete"
-
-
-class RunLogError(HdrgError, ValueError):
-    """A run log that cannot be read: names the file, the line (1-based, physical) and the problem."""
-
-    def __init__(self, source: str, line: int | None, problem: str):
-        self.source, self.line, self.problem = source, line, problem
-        where = f"{source}:{line}" if line is not None else source
-        super().__init__(f"{where}: {problem}")
-
-
-class RunLogWarning(UserWarning):
-    """A repair the reader made (truncated last line dropped, gaps found); the text says which."""
+WRITE_ROWS = 1 << 16              # rows formatted at a time by write_csv (bounds its memory)
 
 
 @dataclass
@@ -207,10 +195,7 @@ class RunLog:
 
 # -- validation shared by the readers and the in-memory constructor ------------------------------
 
-def _is_compensated_output(columns) -> bool:
-    """The columns are `hdrg compensate`'s output (``valid`` and ``bias_dph``): BLANK_WHERE_INVALID
-    may be NaN (CSV: empty) where valid is 0."""
-    return "valid" in columns and "bias_dph" in columns
+_is_compensated_output = is_compensated_output
 
 
 def _validate(log: RunLog) -> None:
@@ -332,239 +317,182 @@ def _find_segments(log: RunLog, report: bool) -> np.ndarray:
 
 # -- CSV -----------------------------------------------------------------------------------------
 
-def _parse_metadata_line(text: str, index: int, metadata: dict) -> None:
-    body = text[1:].strip()
-    if ":" in body:
-        key, value = body.split(":", 1)
-        metadata[key.strip()] = value.strip()
-    elif body:
-        metadata[f"#{index}"] = body
-
-
 def read_csv(path) -> RunLog:
-    """Read a CSV run log.  Raises :class:`RunLogError`; warns :class:`RunLogWarning` on repairs."""
+    """Read a CSV run log (docs/RUN_LOG.md).  Raises :class:`RunLogError`; warns
+    :class:`RunLogWarning` on repairs.  Only a regular file is read (a FIFO, a device, a directory
+    is refused before it is opened for reading); the memory used is the final arrays (8 bytes per
+    cell) plus one block of ``runlog_csv.CHUNK_BYTES`` (host_tools.golden.runlog_csv)."""
     source = os.fspath(path)
-    try:
-        with open(source, "r", encoding="utf-8-sig", newline="") as fh:   # -sig: a leading BOM (Excel) is not data
-            text = fh.read()
-    except UnicodeDecodeError as exc:
-        raise RunLogError(source, None, f"not a text file (UTF-8 decoding failed at byte {exc.start})") from None
-    return parse_csv_text(text, source)
-
-
-def _squash(name: str) -> str:
-    return re.sub(r"[\s_\-]", "", name.lower())
-
-
-def _unknown_columns(names) -> list:
-    """The header columns that are neither in the format, nor ``aux_*``, nor one hdrg writes."""
-    return [c for c in names if c not in FORMAT_COLUMNS and c not in HDRG_COLUMNS and not c.startswith("aux_")]
-
-
-def _check_near_miss_columns(names, source: str, header_line: int) -> None:
-    """Refuse a header column that is not a format column but equals one the header lacks once case,
-    spaces, '_' and '-' are ignored (``Mode`` or ``MODE`` for ``mode``, ``Freq Hz`` for ``freq_hz``):
-    names are matched exactly, so the log would be read without it (a mode-reversal log as FTR, a
-    frequency proxy replaced by temp_c).  ``rate_dph`` and ``rate_dps`` stand for each other."""
-    present = {_squash(c) for c in names if c in FORMAT_COLUMNS}
-    if "ratedph" in present or "ratedps" in present:
-        present |= {"ratedph", "ratedps"}
-    for c in _unknown_columns(names):
-        near = next((k for k in FORMAT_COLUMNS if _squash(k) == _squash(c) and _squash(k) not in present), None)
-        if near is not None:
-            raise RunLogError(source, header_line, f"column '{c}' is not '{near}' (column names are matched "
-                                                   f"exactly, shared/formats/run-log.md): as it stands the log would "
-                                                   f"be read without '{near}'; rename the column")
-
-
-def _warn_unknown_columns(names, source: str, header_line: int, notes: list) -> None:
-    """Warn about (and note) every header column that is neither in the format, nor ``aux_*``, nor one
-    hdrg writes: it is kept in the log and used by no tool."""
-    unknown = _unknown_columns(names)
-    if unknown:
-        names_text = ", ".join(f"'{c}'" for c in unknown)
-        msg = (f"{source}:{header_line}: column(s) {names_text} not in the run-log format (t_s, rate_dph or "
-               f"rate_dps, mode, freq_hz, temp_c, aux_*): kept in the log but used by no tool; rename a logged "
-               f"channel to aux_<name> to offer it to the fit and the loop")
-        notes.append(msg)
-        warnings.warn(msg, RunLogWarning, stacklevel=5)
+    with open_regular(source) as fh:
+        table = read_table(fh, os.fstat(fh.fileno()).st_size, source)
+    return _from_table(table, source)
 
 
 def parse_csv_text(text: str, source: str = "<text>") -> RunLog:
     """Parse run-log CSV text (see :func:`read_csv`)."""
-    if not text.strip():
-        raise RunLogError(source, 1, "empty file (no header, no data)")
-    ends_with_newline = text.endswith("\n") or text.endswith("\r")
-    lines = text.splitlines()
-    metadata, notes = {}, []
-    i = 0
-    while i < len(lines) and (lines[i].startswith("#") or not lines[i].strip()):
-        if lines[i].startswith("#"):
-            _parse_metadata_line(lines[i], i + 1, metadata)
-        i += 1
-    if i >= len(lines):
-        raise RunLogError(source, len(lines), "no header row (only metadata lines)")
-    header_line = i + 1
-    names = [c.strip() for c in lines[i].split(",")]
-    if any(not c for c in names):
-        raise RunLogError(source, header_line, f"empty column name in header {lines[i]!r}")
-    seen = set()
-    for c in names:
-        if c in seen:
-            raise RunLogError(source, header_line, f"column '{c}' appears twice in the header")
-        seen.add(c)
-    _check_near_miss_columns(names, source, header_line)
-    for req, alt in (("t_s", None), ("rate_dph", "rate_dps")):
-        if req not in names and (alt is None or alt not in names):
-            need = f"'{req}'" + (f" (or '{alt}')" if alt else "")
-            raise RunLogError(source, header_line, f"missing required column {need}; header has {names}")
-    if "freq_hz" not in names and "temp_c" not in names:
-        raise RunLogError(source, header_line,
-                          f"missing temperature proxy: one of the columns 'freq_hz', 'temp_c' is required; header has {names}")
-    _warn_unknown_columns(names, source, header_line, notes)
-    data = lines[i + 1:]
-    while data and not data[-1].strip():  # trailing blank lines are harmless
-        data.pop()
-    first_data_line = header_line + 1
-    if not data:
-        raise RunLogError(source, first_data_line, "no data rows after the header")
+    data = text.encode("utf-8", "surrogateescape")
+    return _from_table(read_table(io.BytesIO(data), len(data), source), source)
 
-    ncol = len(names)
-    # the compensated output's rate_dph / bias_dph: an empty cell (a sample with valid 0) is NaN
-    blank_cols = [k for k, name in enumerate(names) if name in BLANK_WHERE_INVALID] if _is_compensated_output(names) else []
 
-    def check_last():
-        # a truncated final line: fewer cells, or a cell that does not parse, and no final newline
-        last = data[-1]
-        cells = last.split(",")
-        broken = len(cells) < ncol
-        if not broken and len(cells) == ncol:
-            try:
-                [_float_or_blank(c) if k in blank_cols else float(c) for k, c in enumerate(cells)]
-            except ValueError:
-                broken = not ends_with_newline
-        if broken and (not ends_with_newline or len(cells) < ncol):
-            line = first_data_line + len(data) - 1
-            msg = (f"{source}:{line}: truncated last line {last!r} ({len(cells)} of {ncol} cells); "
-                   f"repair: the partial line is discarded, the {len(data) - 1} complete rows are kept")
-            notes.append(msg)
-            warnings.warn(msg, RunLogWarning, stacklevel=4)
-            data.pop()
-
-    check_last()
-    if not data:
-        raise RunLogError(source, first_data_line, "no complete data rows after the header")
-    blank = next((r for r, line in enumerate(data) if not line.strip()), None)
-    if blank is not None:  # np.loadtxt would skip it silently
-        raise RunLogError(source, first_data_line + blank, "blank line inside the data")
-    try:
-        table = np.loadtxt(io.StringIO("\n".join(data)), delimiter=",", dtype=np.float64, ndmin=2,
-                           comments=None, converters={k: _float_or_blank for k in blank_cols} or None)
-        if table.shape[1] != ncol:
-            raise ValueError("column count")
-    except ValueError:
-        _locate_bad_row(data, names, source, first_data_line, blank_cols)
-        raise  # _locate_bad_row always raises; kept for safety
-    columns = {}
-    for k, name in enumerate(names):
-        col = table[:, k]
-        if name in INT_COLUMNS:
-            bad = (col != np.round(col)) | ~np.isfinite(col)
-            if bad.any():
-                row = int(np.argmax(bad))
-                raise RunLogError(source, first_data_line + row, f"{name} {data[row].split(',')[k]!r} is not an integer")
-            col = col.astype(np.int64)
-        columns[name] = col
+def _from_table(table, source: str) -> RunLog:
+    """The RunLog of what runlog_csv.read_table read: ``rate_dps`` converted, ``mode`` defaulted,
+    validated (:func:`_validate`, :func:`check_metadata`), segmented at gaps."""
+    columns, notes = table.columns, table.notes
     if "rate_dps" in columns and "rate_dph" not in columns:
         columns["rate_dph"] = columns.pop("rate_dps") * 3600.0
         notes.append(f"{source}: 'rate_dps' converted to 'rate_dph' (x 3600)")
     log = RunLog.__new__(RunLog)
-    log.columns = {k: v for k, v in columns.items()}
-    if "mode" not in log.columns:
-        log.columns["mode"] = np.zeros(len(table), np.int64)
+    log.columns = columns
+    if "mode" not in columns:
+        columns["mode"] = np.zeros(len(columns["t_s"]), np.int64)
         log._mode_given = False
-    log.metadata, log.source, log.notes, log.first_data_line = metadata, source, notes, first_data_line
+    log.metadata, log.source, log.notes, log.first_data_line = table.metadata, source, notes, table.first_data_line
     _validate(log)
-    check_metadata(log, header_line)
+    check_metadata(log, table.header_line)
     log.segments = _find_segments(log, report=True)
     return log
 
 
-def _float_or_blank(cell: str) -> float:
-    """A cell of a BLANK_WHERE_INVALID column of a compensated log: empty -> NaN."""
-    return float(cell) if cell.strip() else math.nan
-
-
-def _locate_bad_row(data, names, source, first_data_line, blank=()):
-    ncol = len(names)
-    for r, line in enumerate(data):
-        lineno = first_data_line + r
-        if not line.strip():
-            raise RunLogError(source, lineno, "blank line inside the data")
-        if line.startswith("#"):
-            raise RunLogError(source, lineno, "metadata/comment line inside the data")
-        cells = line.split(",")
-        if len(cells) != ncol:
-            raise RunLogError(source, lineno, f"{len(cells)} cells, the header has {ncol}: {line!r}")
-        for k, cell in enumerate(cells):
-            if not cell.strip():
-                if k in blank:
-                    continue
-                raise RunLogError(source, lineno, f"column '{names[k]}': empty cell (a number is required; only "
-                                                  f"a compensated log's rate_dph / bias_dph may be empty, where "
-                                                  f"valid is 0)")
-            try:
-                float(cell)
-            except ValueError:
-                raise RunLogError(source, lineno, f"column '{names[k]}': {cell.strip()!r} is not a number") from None
-    raise RunLogError(source, None, "could not parse the data rows")
-
-
 def _fmt_column(name: str, arr: np.ndarray) -> list:
+    """The cells of one column: an integer in decimal, a float in its shortest round-trip form
+    (``repr``), NaN (only where a compensated log is not valid) as an empty cell."""
     if arr.dtype.kind in "iu":
-        return [str(int(x)) for x in arr.tolist()]
-    # shortest repr that round-trips exactly; NaN (only where a compensated log is not valid) is empty
-    return [repr(x) if x == x else "" for x in arr.tolist()]
+        return list(map(str, arr.tolist()))
+    if np.isnan(arr).any():
+        return [repr(x) if x == x else "" for x in arr.tolist()]
+    return list(map(repr, arr.tolist()))
+
+
+_BAD_NAME = re.compile(r"[,\x00-\x1f\x7f-\x9f\u2028\u2029]|^#|^\s|\s$|^$")
 
 
 def write_csv(log: RunLog, path, extra_metadata: dict | None = None) -> None:
-    """Write ``log`` as CSV run log (values in shortest round-trip form, so CSV -> CSV is lossless).
-    ``extra_metadata`` lines are added after the log's own."""
+    """Write ``log`` as a CSV run log: the metadata lines (``extra_metadata`` after the log's own;
+    control characters in a key or value escaped, ``:`` in a key written ``_``:
+    runlog_csv.meta_line), the header, one row per sample, values in shortest round-trip form (CSV
+    -> CSV is lossless).  ``WRITE_ROWS`` rows are formatted at a time, so the memory used is bounded.
+    A column name the header cannot hold (a comma, a control character) is refused."""
     meta = dict(log.metadata)
     meta.update(extra_metadata or {})
     names = list(log.columns)
-    formatted = [_fmt_column(n, log.columns[n]) for n in names]
+    bad = next((n for n in names if not isinstance(n, str) or _BAD_NAME.search(n)), None)
+    if bad is not None:
+        raise RunLogError(os.fspath(path), None, f"column name {bad!r} cannot be written to a CSV header")
+    arrays = [log.columns[n] for n in names]
     with atomic_open(path, "w", encoding="utf-8", newline="\n") as fh:
-        for key, value in meta.items():
-            fh.write(f"# {value}\n" if key.startswith("#") else f"# {key}: {value}\n")
-        fh.write(",".join(names) + "\n")
-        fh.writelines(",".join(row) + "\n" for row in zip(*formatted))
+        fh.write("".join(meta_line(k, v) for k, v in meta.items()) + ",".join(names) + "\n")
+        for lo in range(0, len(log), WRITE_ROWS):
+            cells = [_fmt_column(n, a[lo:lo + WRITE_ROWS]) for n, a in zip(names, arrays)]
+            fh.write("\n".join(map(",".join, zip(*cells))) + "\n")
 
 
 # -- NPZ (lossless binary) ---------------------------------------------------------------------
 
 def write_npz(log: RunLog, path) -> None:
-    """Lossless binary form: every column bit-exact, metadata and notes as JSON."""
+    """Lossless binary form (numpy ``.npz``, members stored): ``header``, a JSON text (``format``
+    ``hdrg-runlog``, ``version``, ``columns``: the names in order, ``metadata``: key -> text,
+    ``notes``: texts), and ``col_<i>``, column i bit-exact (float64; int64 for INT_COLUMNS)."""
     header = json.dumps({"format": "hdrg-runlog", "version": FORMAT_VERSION, "columns": list(log.columns),
-                         "metadata": log.metadata, "notes": log.notes})
+                         "metadata": {str(k): str(v) for k, v in log.metadata.items()},
+                         "notes": [str(n) for n in log.notes]})
     arrays = {f"col_{i}": v for i, v in enumerate(log.columns.values())}
     with atomic_open(path, "wb") as fh:
         np.savez(fh, header=np.array(header), **arrays)
 
 
+# what a hostile .npz can raise inside zipfile / numpy.lib.format (each becomes a RunLogError)
+_NPZ_ERRORS = (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, OSError, EOFError, ValueError, KeyError,
+               NotImplementedError, RuntimeError, OverflowError, TypeError, SyntaxError)
+
+
+def _npz_member(zf, info, source: str) -> np.ndarray:
+    """The array of one .npy member, after its header (version, dtype, shape) is checked against
+    the member's size: a declared shape never allocates more than the member holds."""
+    with zf.open(info) as f:
+        version = np.lib.format.read_magic(f)
+        if version not in ((1, 0), (2, 0)):
+            raise RunLogError(source, None, f"member {info.filename!r}: .npy version {version} (hdrg writes 1.0)")
+        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, _, dtype = read_header(f)
+        if dtype.hasobject or dtype.kind not in "biufU" or dtype.fields is not None:
+            raise RunLogError(source, None, f"member {info.filename!r}: dtype {dtype} is not numbers or text")
+        if math.prod(shape) * dtype.itemsize > info.file_size or min(shape, default=0) < 0:
+            raise RunLogError(source, None, f"member {info.filename!r}: shape {shape} does not fit its "
+                                            f"{info.file_size} bytes")
+    with zf.open(info) as f:
+        return np.lib.format.read_array(f, allow_pickle=False)
+
+
+def _npz_header(doc, source: str) -> tuple[list, dict, list]:
+    """(columns, metadata, notes) of an NPZ header, every field's type checked."""
+    def bad(problem):
+        return RunLogError(source, None, problem)
+    if not isinstance(doc, dict) or doc.get("format") != "hdrg-runlog":
+        raise bad("not an hdrg run-log NPZ (header 'format' missing)")
+    version = doc.get("version")
+    if type(version) is not int or not 1 <= version <= FORMAT_VERSION:
+        raise bad(f"header field 'version': {version!r} is not a run-log version this hdrg reads "
+                  f"(1..{FORMAT_VERSION})")
+    names = doc.get("columns")
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+        raise bad(f"header field 'columns': must be a non-empty list of column names, not {type(names).__name__}")
+    named = next((n for n in names if _BAD_NAME.search(n)), None)
+    if named is not None:
+        raise bad(f"header field 'columns': {named!r} is not a column name (empty, a comma or a control character)")
+    if len(set(names)) != len(names):
+        raise bad(f"header field 'columns': a name appears twice in {names}")
+    metadata, notes = doc.get("metadata", {}), doc.get("notes", [])
+    if not isinstance(metadata, dict) or not all(isinstance(v, str) for v in metadata.values()):
+        raise bad("header field 'metadata': must be an object of key: text")
+    if not isinstance(notes, list) or not all(isinstance(n, str) for n in notes):
+        raise bad("header field 'notes': must be a list of texts")
+    return names, metadata, notes
+
+
 def read_npz(path) -> RunLog:
+    """Read an NPZ run log (:func:`write_npz`).  Every structure and type is checked before use:
+    a regular file, a zip whose members are .npy arrays (stored or deflated) of sizes they can hold,
+    ``header`` one JSON text (bounded, no repeated key) with the fields of :func:`write_npz`,
+    ``col_<i>`` 1-D numbers, an integer column (``mode``, ``flags``, ``valid``) integers; then the
+    checks of the CSV reader (NaN/inf, t_s, modes, metadata).  Raises :class:`RunLogError`."""
+    from host_tools.jsonread import InputFileError, parse_json
     source = os.fspath(path)
+    fh = open_regular(source)             # a missing file: the OSError of open(), as for a CSV
     try:
-        with np.load(source, allow_pickle=False) as z:
-            header = json.loads(str(z["header"]))
-            if header.get("format") != "hdrg-runlog":
-                raise RunLogError(source, None, "not an hdrg run-log NPZ (header 'format' missing)")
-            cols = {name: z[f"col_{i}"] for i, name in enumerate(header["columns"])}
-    except (OSError, ValueError, KeyError) as exc:
-        if isinstance(exc, RunLogError):
-            raise
+        with fh, zipfile.ZipFile(fh) as zf:
+            infos = {info.filename: info for info in zf.infolist()}
+            for info in infos.values():
+                if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED) or (
+                        info.compress_type == zipfile.ZIP_DEFLATED and info.file_size > 1100 * info.compress_size):
+                    raise RunLogError(source, None, f"member {info.filename!r}: compression {info.compress_type} "
+                                                    f"or size {info.file_size} not of an hdrg NPZ")
+            if "header.npy" not in infos:
+                raise RunLogError(source, None, "not an hdrg run-log NPZ (no 'header' member)")
+            text = _npz_member(zf, infos["header.npy"], source)
+            if text.dtype.kind != "U" or text.shape != ():
+                raise RunLogError(source, None, f"member 'header': must be one JSON text, not {text.dtype} {text.shape}")
+            try:
+                names, metadata, notes = _npz_header(parse_json(str(text), source, "NPZ header"), source)
+            except InputFileError as exc:
+                raise RunLogError(source, None, str(exc).removeprefix(f"{source}: ")) from None
+            cols = {}
+            for i, name in enumerate(names):
+                if f"col_{i}.npy" not in infos:
+                    raise RunLogError(source, None, f"column '{name}': member 'col_{i}' missing")
+                arr = _npz_member(zf, infos[f"col_{i}.npy"], source)
+                if arr.ndim != 1 or arr.dtype.kind not in "biuf":
+                    raise RunLogError(source, None, f"column '{name}': must be 1-D numbers, not {arr.dtype} {arr.shape}")
+                if name in INT_COLUMNS and arr.dtype.kind in "uf":
+                    bad = ~(np.abs(arr) < 2.0 ** 63) | (arr != np.round(arr))
+                    if bad.any():
+                        row = int(np.argmax(bad))
+                        raise RunLogError(source, None, f"row {row}: {name} {arr[row].item()!r} is not an integer")
+                cols[name] = arr
+    except RunLogError:
+        raise
+    except _NPZ_ERRORS as exc:
         raise RunLogError(source, None, f"unreadable NPZ run log: {exc}") from None
-    log = RunLog(cols, header.get("metadata", {}), source, header.get("notes", []))
+    log = RunLog(cols, metadata, source, notes)
     check_metadata(log)
     return log
 

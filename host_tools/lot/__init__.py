@@ -69,9 +69,12 @@ changed is redone.  The lot files (lot.*) describe a complete run only: a run wi
 calibrate removes them first and writes them at its end.  One ``hdrg lot`` at a time per OUT (a
 lock file).
 
-**Engines**: ``--workers N`` local processes (default: all cores; 1 runs in the command's own
-process); ``--scheduler ADDRESS`` a Dask distributed cluster (``dask scheduler``; start workers
-with ``dask worker ADDRESS --nthreads 1``: a worker process calibrates one device at a time).
+**Engines** (host_tools.lot.parallel, which ``hdrg bench loop`` and ``hdrg bench accuracy`` use
+too): ``--workers N`` local processes (default: all cores; 1 runs in the command's own process);
+``--scheduler ADDRESS`` a Dask distributed cluster (``dask scheduler``; start workers with ``dask
+worker ADDRESS --nthreads 1``: a worker process calibrates one device at a time).  Every device
+is calibrated with one BLAS/OpenMP thread (a device is many small solves: a multi-threaded BLAS
+only oversubscribes the cores), so N workers use N cores.
 The workers read the run logs at the manifest's paths (a shared file system) and return the
 outputs, which this command writes.  A worker process that dies (killed, out of memory) fails
 only the device it was calibrating, without a done-marker (the next run tries it again): local

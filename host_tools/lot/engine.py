@@ -1,9 +1,9 @@
 """Running a lot: resume, the engines, the device folders (host_tools.lot, module doc).
 
 :func:`run_lot` reads the manifest and the spec, reuses every device whose done-marker matches
-its input hash, hands the others to an engine (in this process for one worker; a
-``concurrent.futures.ProcessPoolExecutor`` for several; a Dask distributed cluster with
-``scheduler``), writes each device's outputs as its result arrives (atomically, the done-marker
+its input hash, hands the others to an engine (host_tools.lot.parallel: in this process for one
+worker; a ``concurrent.futures.ProcessPoolExecutor`` for several; a Dask distributed cluster with
+``scheduler``; one BLAS thread per worker), writes each device's outputs as its result arrives (atomically, the done-marker
 last) and finally the lot report (host_tools.lot.report), built from the devices' result.json files
 in device-id order, so that it does not depend on the engine, the worker count or the order in
 which devices finished.  Only this process writes; workers compute and return bytes.
@@ -15,10 +15,12 @@ import hashlib
 import json
 import os
 import sys
+import time
 
 from host_tools.atomic import atomic_open
 from host_tools.lot.device import OUTPUTS, calibrate
 from host_tools.lot.inputs import LOT_FORMAT, LOT_VERSION, input_hash, load_spec, read_manifest
+from host_tools.lot.parallel import check_workers, run_jobs
 
 MARKER = "done.json"
 DEVICES_DIR = "devices"
@@ -34,14 +36,6 @@ def _version() -> str:
         return version("hdrg")
     except PackageNotFoundError:  # pragma: no cover - a source tree without install
         return "unknown"
-
-
-def default_workers() -> int:
-    """All the cores this process may use."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        return os.cpu_count() or 1
 
 
 def _sha256(data: bytes) -> str:
@@ -130,91 +124,6 @@ def _crashed(job: dict, exc: BaseException) -> dict:
     return {"result": result, "files": {"result.json": (json.dumps(result, indent=2) + "\n").encode("utf-8")}}
 
 
-def _worker_init() -> None:
-    """In each pool process: die with the command.  A killed command (SIGKILL) would otherwise
-    leave its workers blocked on the task queue for ever (Linux: PR_SET_PDEATHSIG)."""
-    import ctypes
-    import signal
-
-    with contextlib.suppress(Exception):
-        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))     # 1 = PR_SET_PDEATHSIG
-    # Ctrl-C goes to the whole process group: the command stops the pool, the workers do not raise
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-def _run_local(jobs, workers: int):
-    """(job, payload) pairs as they finish: in this process for one worker, else a
-    ``ProcessPoolExecutor`` of ``workers`` processes with at most 2 x ``workers`` devices submitted
-    at a time.  A worker process that dies (killed, out of memory) breaks the pool: a new pool
-    takes over, and the devices that were submitted to the broken one run again, each alone, so
-    that the one that kills its process fails alone (no done-marker) and the others go on."""
-    if workers <= 1:
-        for job in jobs:
-            yield job, calibrate(job)
-        return
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    from concurrent.futures.process import BrokenProcessPool
-
-    queue, alone = list(reversed(jobs)), []
-    while queue or alone:
-        ex = ProcessPoolExecutor(max_workers=workers, initializer=_worker_init)
-        running, lost = {}, []
-        try:
-            while queue or alone or running:
-                if alone and not running:
-                    job = alone.pop()
-                    running[ex.submit(calibrate, job)] = (job, True)
-                while queue and not alone and len(running) < 2 * workers:
-                    job = queue.pop()
-                    running[ex.submit(calibrate, job)] = (job, False)
-                done, _ = wait(running, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    job, solo = running.pop(fut)
-                    try:
-                        payload = fut.result()
-                    except BrokenProcessPool as exc:
-                        lost.append((job, solo, exc))
-                        continue
-                    except Exception as exc:    # pragma: no cover - calibrate returns its failures
-                        payload = _crashed(job, exc)
-                    yield job, payload
-                if lost:
-                    for fut, (job, solo) in running.items():
-                        lost.append((job, solo, BrokenProcessPool("the pool broke")))
-                    running.clear()
-                    break
-        finally:
-            ex.shutdown(wait=True, cancel_futures=True)
-        for job, solo, exc in lost:
-            if solo:
-                yield job, _crashed(job, exc)
-            else:
-                alone.append(job)
-
-
-def _run_dask(jobs, scheduler: str):
-    """(job, payload) pairs as they finish on the Dask distributed cluster at ``scheduler``."""
-    try:
-        from distributed import Client, as_completed
-    except ImportError:     # pragma: no cover - a dependency of hdrg
-        raise ValueError("--scheduler needs Dask distributed (pip install 'dask[distributed]')") from None
-    client = Client(scheduler)
-    futures = []
-    try:
-        futures = client.map(calibrate, jobs, pure=False)
-        owner = {f.key: job for f, job in zip(futures, jobs)}
-        for fut in as_completed(futures):
-            try:
-                payload = fut.result()
-            except Exception as exc:    # a worker died (KilledWorker) or the task failed
-                payload = _crashed(owner[fut.key], exc)
-            yield owner[fut.key], payload
-    finally:
-        with contextlib.suppress(Exception):
-            client.cancel(futures)
-        client.close()
-
-
 @contextlib.contextmanager
 def _locked(out: str):
     """One lot at a time per output directory (an advisory lock on OUT/.lot.lock; released when
@@ -242,16 +151,16 @@ def run_lot(manifest, out, spec=None, workers: int | None = None, scheduler: str
     all cores); ``scheduler``: a Dask distributed scheduler address (instead of local processes);
     ``worst``: rows of the worst-devices table; ``stop_after``: raise :class:`LotStopped` after
     writing that many devices (a test hook).  Returns {"devices", "computed", "reused", "passed",
-    "failed", "stale", "report", "fail_by_stage"}: the ids computed and reused, the counts, the
-    device folders in ``out`` that the manifest does not name, the report's paths, and the failed
-    devices per stage."""
+    "failed", "stale", "report", "fail_by_stage", "seconds"}: the ids computed and reused, the
+    counts, the device folders in ``out`` that the manifest does not name, the report's paths, the
+    failed devices per stage, and the wall-clock seconds of the three phases ("inputs": manifest,
+    spec, input hashes and done-markers; "devices": the engine; "report"; written nowhere)."""
     from host_tools.lot.report import FILES as REPORT_FILES, summary as report_summary, write_report
 
+    t0 = time.perf_counter()
     devices = read_manifest(manifest)
     spec_d = load_spec(spec)
-    workers = default_workers() if workers is None else int(workers)
-    if workers < 1:
-        raise ValueError(f"--workers must be >= 1, not {workers}")
+    workers = check_workers(workers)
     out = os.fspath(out)
     if os.path.exists(out) and not os.path.isdir(out):
         raise NotADirectoryError(f"{out}: exists and is not a directory (-o names the lot's output directory)")
@@ -272,7 +181,8 @@ def run_lot(manifest, out, spec=None, workers: int | None = None, scheduler: str
                     os.unlink(os.path.join(out, name))
         bar = Progress(len(devices), len(reused), stream, progress)
         computed = []
-        run = _run_dask(jobs, scheduler) if scheduler else _run_local(jobs, workers)
+        t1 = time.perf_counter()
+        run = run_jobs(calibrate, jobs, workers, scheduler, crashed=_crashed)
         try:
             for job, payload in run:
                 write_device(os.path.join(root, job["device"].id), payload)
@@ -282,6 +192,7 @@ def run_lot(manifest, out, spec=None, workers: int | None = None, scheduler: str
                     raise LotStopped(f"stopped after {len(computed)} devices (stop_after)")
         finally:
             run.close()
+        t2 = time.perf_counter()
         results = []
         for dev in devices:
             with open(os.path.join(root, dev.id, "result.json"), "r", encoding="utf-8") as fh:
@@ -292,4 +203,5 @@ def run_lot(manifest, out, spec=None, workers: int | None = None, scheduler: str
     return {"devices": len(devices), "computed": sorted(computed), "reused": sorted(reused),
             "passed": sum(r["status"] == "pass" for r in results),
             "failed": sum(r["status"] != "pass" for r in results), "stale": stale, "report": paths,
-            "fail_by_stage": report_summary(results)["fail_by_stage"]}
+            "fail_by_stage": report_summary(results)["fail_by_stage"],
+            "seconds": {"inputs": t1 - t0, "devices": t2 - t1, "report": time.perf_counter() - t2}}

@@ -107,6 +107,7 @@ T_SCALE_C = 20.0
 F_REF_C = 25.0          # reference temperature of the drive-frequency polynomial
 G0 = 9.80665
 MAX_SAMPLES = 10_000_000
+STARTUP_S = 2700.0       # a start-up at constant ambient: 45 min (the paper's Table 4)
 
 
 @dataclass(frozen=True)
@@ -252,19 +253,21 @@ def foreign_device(seed: int) -> ForeignDevice:
 
 # -- building blocks ------------------------------------------------------------------------------
 
-def chamber_profile(dev: ForeignDevice, rate_c_per_min: float) -> np.ndarray:
-    """Breakpoints (t_s, temp_c) of the device's trapezoid cycles at ``rate_c_per_min`` [degC/min]."""
+def chamber_profile(dev: ForeignDevice, rate_c_per_min: float, start_low: bool = False) -> np.ndarray:
+    """Breakpoints (t_s, temp_c) of the device's trapezoid cycles at ``rate_c_per_min`` [degC/min],
+    starting soaked at ``high_c`` (``start_low``: at ``low_c``, the cycles mirrored)."""
     if not (isinstance(rate_c_per_min, (int, float)) and math.isfinite(rate_c_per_min) and rate_c_per_min > 0):
         raise ValueError(f"chamber rate must be a positive number of degC/min, not {rate_c_per_min!r}")
     c = dev.chamber
+    first, second = (c["low_c"], c["high_c"]) if start_low else (c["high_c"], c["low_c"])
     ramp = 60.0 * (c["high_c"] - c["low_c"]) / rate_c_per_min
-    pts, t = [(0.0, c["high_c"])], 0.0
+    pts, t = [(0.0, first)], 0.0
     for _ in range(c["n_cycles"]):
-        for temp in (c["high_c"], c["low_c"], c["low_c"], c["high_c"]):
+        for temp in (first, second, second, first):
             t += c["hold_s"] if temp == pts[-1][1] else ramp
             pts.append((t, temp))
     t += c["hold_s"]
-    pts.append((t, c["high_c"]))
+    pts.append((t, first))
     return np.array(pts)
 
 
@@ -356,12 +359,16 @@ def _parse_effects(effect) -> tuple:
 
 def simulate_foreign(device, rate_c_per_min: float, reversal: bool, power_on: int = 0, noise_seed: int = 0,
                      duration_s: float | None = None, thermal: bool = True, effect=None,
-                     strength: float = 1.0) -> RunLog:
+                     strength: float = 1.0, ambient_c: float | None = None, start_low: bool = False) -> RunLog:
     """One run of ``device`` (a ForeignDevice or a seed) at chamber rate ``rate_c_per_min``
     [degC/min], mode reversal on/off, power-on index ``power_on`` (selects the damping change),
     ``noise_seed``; ``duration_s`` None = the whole chamber profile; ``thermal=False`` zeroes every
     bias term (module doc); ``effect`` one name of EFFECT_KINDS or a sequence of them (undeclared),
-    each at ``strength`` (>= 0, dimensionless).  An MR-only effect on an FTR run is an error."""
+    each at ``strength`` (>= 0, dimensionless).  An MR-only effect on an FTR run is an error.
+    ``ambient_c`` [degC]: a power-on at constant ambient instead of the chamber profile (the
+    chamber air held at ``ambient_c``, every node soaked at it; ``rate_c_per_min`` then only names
+    the run; ``duration_s`` None = STARTUP_S): the start-up of the paper's Table 4.  ``start_low``:
+    the chamber cycles start soaked at the low end (the power-on at the cold end of the range)."""
     dev = device if isinstance(device, ForeignDevice) else foreign_device(device)
     power_on = _check_int(power_on, "power_on")
     noise_seed = _check_int(noise_seed, "noise_seed")
@@ -371,7 +378,11 @@ def simulate_foreign(device, rate_c_per_min: float, reversal: bool, power_on: in
     for name in effects:
         if EFFECTS[name].runs == "mr" and not reversal:
             raise ValueError(f"effect {name!r} acts on mode-reversal runs only (reversal is off)")
-    prof = chamber_profile(dev, rate_c_per_min)
+    prof = chamber_profile(dev, rate_c_per_min, bool(start_low))
+    if ambient_c is not None:
+        if not (isinstance(ambient_c, (int, float)) and math.isfinite(ambient_c) and -60.0 <= ambient_c <= 100.0):
+            raise ValueError(f"ambient_c must be a temperature in -60..100 degC, not {ambient_c!r}")
+        prof = np.array([(0.0, float(ambient_c)), (float(STARTUP_S), float(ambient_c))])
     if duration_s is None:
         duration_s = float(prof[-1, 0])
     if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s) and duration_s >= 2):
@@ -447,9 +458,12 @@ def simulate_foreign(device, rate_c_per_min: float, reversal: bool, power_on: in
     if reversal:
         meta.update({"exchange_s": f"{EXCHANGE_S:g}", "dwell_s": f"{DWELL_S:g}"})
     meta.update({"family": "random", "foreign_version": str(FOREIGN_VERSION), "seed": str(dev.seed),
-                 "profile": f"trapezoid {rate_c_per_min:g} degC/min", "power_on": str(power_on),
+                 "profile": (f"trapezoid {rate_c_per_min:g} degC/min" + (", cold start" if start_low else "")
+                             if ambient_c is None
+                             else f"constant {ambient_c:g} degC from power-on"), "power_on": str(power_on),
                  "noise_seed": str(noise_seed), "thermal": "on" if thermal else "off"})
-    src = (f"<foreign {dev.seed} {rate_c_per_min:g}cpm {'MR' if reversal else 'FTR'} p{power_on} "
+    where = (f"{rate_c_per_min:g}cpm" + (" cold" if start_low else "")) if ambient_c is None else f"ambient {ambient_c:g}C"
+    src = (f"<foreign {dev.seed} {where} {'MR' if reversal else 'FTR'} p{power_on} "
            f"n{noise_seed}{'' if thermal else ' floor'}>")
     return RunLog.from_arrays(metadata=meta, source=src, t_s=t, freq_hz=freq, rate_dph=rate, mode=mode,
                               temp_c=temp_c, aux_vdd=vdd, aux_acc_x=acc[0], aux_acc_y=acc[1], aux_acc_z=acc[2])

@@ -18,6 +18,7 @@ from host_tools.vectors.pipeline import compute_pipeline
 from host_tools.vectors.sequencer import sequencer_set
 from host_tools.vectors.e2e import e2e_set
 from host_tools.vectors.aux import aux_set
+from host_tools.vectors.validity import validity_set
 
 
 # -- generate -----------------------------------------------------------------------------------------
@@ -43,10 +44,12 @@ def build_sets(names=SETS) -> tuple:
             vs, cfg = e2e_set()
             config["e2e"] = cfg
             out.append(vs)
-        else:
+        elif name == "aux":
             vs = aux_set(rng)
             config["aux"] = vs.config
             out.append(vs)
+        else:
+            out.append(validity_set(rng))
     return out, config
 
 

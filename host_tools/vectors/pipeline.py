@@ -36,10 +36,13 @@ def compute_pipeline(vs: VectorSet, rows: bool) -> None:
         if timed != bool(np.all(mode == -1)) or not np.all((mode >= -1) & (mode <= 3)):
             raise VectorsError(f"{vs.name} case {case['name']}: MODE must be all -1 (self-timed) or all 0..3")
         p = (c["F"] if t.proxy_kind == 0 else c["T"])[lo:hi]
-        r, rs, z = c["R"][lo:hi], c["RESTART"][lo:hi], c["Z"][lo:hi]
-        kw = {}
+        r, ctl, z = c["R"][lo:hi], c["RESTART"][lo:hi], c["Z"][lo:hi]
+        if not np.all((ctl >= 0) & (ctl <= 3)):
+            raise VectorsError(f"{vs.name} case {case['name']}: RESTART must be 0..3 (bit 0 restart, bit 1 invalid)")
+        rs, bad = ctl & 1, (ctl >> 1) & 1                # RESTART: bit 0 restart, bit 1 the input-invalid bit
+        kw = {"invalid": bad}
         if has_aux:
-            kw = {"f": c["F"][lo:hi], "t": c["T"][lo:hi], "k": c["K"][lo:hi],
+            kw = {"invalid": bad, "f": c["F"][lo:hi], "t": c["T"][lo:hi], "k": c["K"][lo:hi],
                   "aux": np.stack([c[f"A{j}"][lo:hi] for j in range(F.AUX_MAX_CHANNELS)], axis=1)}
         k = run_words(t, p, r, None if timed else mode, rs, z, self_timed=timed, detail=True, **kw)
         state = k["state"]
@@ -90,7 +93,7 @@ class Cases:
             a = np.asarray(s["aux"], np.int64).reshape(n, -1)
             for j in range(F.AUX_MAX_CHANNELS):
                 rec[f"A{j}"] = a[:, j] if j < a.shape[1] else np.zeros(n, np.int64)
-        rec["RESTART"][0] = 1
+        rec["RESTART"][0] |= 1                         # bit 1 (the input-invalid bit) kept
         try:
             ti = next(i for i, t in enumerate(self.tables) if t == table)
         except StopIteration:

@@ -6,18 +6,21 @@ from __future__ import annotations
 from pathlib import Path
 
 
-FORMAT_VERSION = 3          # file layout (columns, record layout, manifest keys); 2: the aux set (K, A0..A3);
-                            # 3: table layout v2 (73+ words), the evaluator's bank column
-GENERATOR_VERSION = 4       # the cases and their values; bump when a vector changes; 2: RHUW, SIN, aux;
+FORMAT_VERSION = 4          # file layout (columns, record layout, manifest keys); 2: the aux set (K, A0..A3);
+                            # 3: table layout v2 (73+ words), the evaluator's bank column;
+                            # 4: RESTART bit 1 = the input-invalid bit, the validity set (the aux set's columns)
+GENERATOR_VERSION = 5       # the cases and their values; bump when a vector changes; 2: RHUW, SIN, aux;
                             # 3: regress_first (two banks, residual combiner pair/trend/none)
                             # 4: table layout v3 (the iir's start-up gear, warm-up 1), the iir_gear_log case
+                            # 5: the input-invalid bit (the validity set; its aux_gen 1 cases)
 STALE_MESSAGE = ("vectors are stale: regenerate with `hdrg vectors generate -o vectors/` and bump "
                  "GENERATOR_VERSION/FORMAT_VERSION")
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_DIR = ROOT / "vectors"
 SOURCE_GLOBS = ("firmware_ref/*.py", "firmware_ref/c/*.c", "firmware_ref/c/*.h",
-                "host_tools/fixed/fixed_point.py", "host_tools/vectors/builders.py")   # what the vectors compute with
-SETS = ("primitives", "evaluator", "sequencer", "e2e", "aux")
+                "host_tools/fixed/fixed_point.py", "host_tools/vectors/builders.py",
+                "host_tools/golden/input_check.py")   # what the vectors compute with
+SETS = ("primitives", "evaluator", "sequencer", "e2e", "aux", "validity")
 PY_CHECK = 300              # the manifest's py_check_samples_per_case: at least this many samples per case are
                             # checked against the Python reference (since the package split: every sample)
 SEED = 20240611             # the one seed; every set derives its generators from it

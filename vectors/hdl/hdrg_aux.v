@@ -22,6 +22,11 @@
 //   k              K, the sample counter since power-on (int64, |K| <= 2^62)
 //   mode           the sample's mode m (0..3) as the sequencer decided it (logged or the timer's)
 //   restart        the sample's restart (OR-ed with power-on inside)
+//   inv            the sample's input-invalid bit (FORMATS.md "The input-invalid bit"): a filtered
+//                  input term holds its state Y_j (y = RHU(Y_j, 30), op YH); a restart met on an
+//                  invalid sample zeroes Y_j and is pending (pend): the input filters re-initialize
+//                  at the next valid sample; decays, ramp, osc, one, rate (whose S / warm the top's
+//                  estimator restarts) do not read it
 //   s              the rate stage's sum S before its clamp (int64, |S| < 2^57; firmware_ref.rate)
 //   warm           the rate stage's warm-up flag of this sample
 //   z_in           the external Z word (int32), used when aux_gen = 0: z = clamp(Z, +-2^30)
@@ -59,8 +64,9 @@
 // k0 w0 + 2^31 (k0 w1 + k1 w0) + 2^62 ((k0 w2 + k1 w1 + k2 w0 + part) mod 4) in 31-bit digits.
 //
 // Operations per term (restart: the state is set, not updated):
-//   input    DX dX = clamp(X - REF) | Q q = clamp(RHU(dX G + OFF, SH)) | no filter: -, restart:
-//            YSET Y = q 2^30, else D d' = Y - q 2^30, P1, P2 (RHUW), YA Y += , YR y = RHU(Y, 30)
+//   input    DX dX = clamp(X - REF) | Q q = clamp(RHU(dX G + OFF, SH)) | no filter: -; inv: YH
+//            y = RHU(Y, 30) (held), or at a restart or pend ZSET Y = 0, YR; restart or pend: YSET
+//            Y = q 2^30; else D d' = Y - q 2^30, P1, P2 (RHUW), YA Y += , YR y = RHU(Y, 30)
 //            | PW g = RHU(g y, 30) power - 1 times | WT acc += w' g          2 .. 12 operations
 //   rate     warm: WT (w' = 0); else R1, R2 (S against +-(2^SB - 1)), R3 sc, RP1 (G_V (sc >> 31)),
 //            RP2 g = clamp(RHU(G_V sc, SH_V)) | WT                             1 or 6
@@ -98,6 +104,7 @@ module hdrg_aux #(
     input  wire signed [63:0] k,
     input  wire [1:0]         mode,
     input  wire               restart,
+    input  wire               inv,
     input  wire signed [63:0] s,
     input  wire               warm,
     input  wire signed [31:0] z_in,
@@ -116,7 +123,7 @@ module hdrg_aux #(
                      OP_YA = 5'd6, OP_YR = 5'd7, OP_PW = 5'd8, OP_WT = 5'd9, OP_DSET = 5'd10, OP_ZSET = 5'd11,
                      OP_ONE = 5'd12, OP_R1 = 5'd13, OP_R2 = 5'd14, OP_R3 = 5'd15, OP_RP1 = 5'd16, OP_RP2 = 5'd17,
                      OP_RM = 5'd18, OP_O1 = 5'd19, OP_O2 = 5'd20, OP_O3 = 5'd21, OP_O4 = 5'd22, OP_O5 = 5'd23,
-                     OP_O6 = 5'd24, OP_H = 5'd25, OP_O12 = 5'd26, OP_FIN = 5'd27;
+                     OP_O6 = 5'd24, OP_H = 5'd25, OP_O12 = 5'd26, OP_FIN = 5'd27, OP_YH = 5'd28;
     localparam [2:0] K_INPUT = 3'd0, K_RATE = 3'd1, K_ONE = 3'd2, K_DON = 3'd3, K_DEX = 3'd4, K_RAMP = 3'd5,
                      K_OSC = 3'd6;
 
@@ -194,6 +201,8 @@ module hdrg_aux #(
     reg [62:0]        kk;               // max(K, 0)
     reg [1:0]         mq;
     reg               rs, warmq, fresh;
+    reg               irs, invq, pend;  // the input filters' restart (rs or pend), inv, a pending restart
+    wire              irs_in = restart | fresh | we | pend;
     reg signed [63:0] sq;
 
     // ---- sequencer: op and term of the operation in flight, the next ones ----
@@ -300,6 +309,7 @@ module hdrg_aux #(
             OP_P2: begin a_op = ra; nega = 1'b1; w_op = cap; csel = C_X; sh = cur_fb - 6'd31; end
             OP_YA: begin csel = C_X; dsel = D_Y; end
             OP_YR: begin csel = C_X; dsel = D_RND; rk = 6'd30; sh = 6'd30; end
+            OP_YH: begin csel = C_RND; dsel = D_Y; rk = 6'd30; sh = 6'd30; end     // the held state: RHU(Y, 30)
             OP_PW: begin a_op = g; w_op = yv; dsel = D_RND; rk = 6'd30; sh = 6'd30; end
             OP_WT: begin
                 a_op = ra; w_op = g; csel = C_ACC;
@@ -358,7 +368,7 @@ module hdrg_aux #(
             OP_Q, OP_RP2, OP_RM: rk_n = cur_fa;
             OP_P1: rk_n = cur_fb;
             OP_R1, OP_R2, OP_R3: rk_n = cur_fb + 6'd1;
-            OP_YR, OP_PW, OP_O6, OP_H, OP_O12: rk_n = 6'd30;
+            OP_YR, OP_YH, OP_PW, OP_O6, OP_H, OP_O12: rk_n = 6'd30;
             OP_O4: rk_n = 6'd32;
             OP_FIN: rk_n = aux_gen ? 6'd30 : 6'd0;
             default: rk_n = 6'd0;
@@ -423,7 +433,8 @@ module hdrg_aux #(
     always @* begin
         case (op)
             OP_DX: next_op = OP_Q;
-            OP_Q: next_op = (cur_fb == 6'd0) ? pw_or_wt : (rs ? OP_YSET : OP_D);
+            OP_Q: next_op = (cur_fb == 6'd0) ? pw_or_wt : (invq ? (irs ? OP_ZSET : OP_YH) : (irs ? OP_YSET : OP_D));
+            OP_YH: next_op = pw_or_wt;
             OP_YSET: next_op = pw_or_wt;
             OP_D: next_op = OP_P1;
             OP_P1: next_op = OP_P2;
@@ -465,6 +476,7 @@ module hdrg_aux #(
         if (rst) begin
             busy <= 1'b0;
             fresh <= 1'b1;
+            pend <= 1'b0;
             z <= 32'sd0;
             z_clamped <= 1'b0;
             ph <= 2'd0;
@@ -473,7 +485,7 @@ module hdrg_aux #(
             nop <= OP_FIN;
             nj <= 3'd0;
         end else if (!busy) begin
-            if (we) fresh <= 1'b1;
+            if (we) begin fresh <= 1'b1; pend <= 1'b0; end
             if (start) begin
                 busy <= 1'b1;
                 prime <= 1'b1;
@@ -481,6 +493,9 @@ module hdrg_aux #(
                 kk <= k[63] ? 63'd0 : k[62:0];
                 mq <= mode;
                 rs <= restart | fresh | we;
+                irs <= irs_in;
+                invq <= inv;
+                pend <= inv & irs_in;
                 fresh <= 1'b0;
                 warmq <= warm;
                 sq <= s;
@@ -524,7 +539,7 @@ module hdrg_aux #(
                 OP_DX: dxr <= r32;
                 OP_Q: begin dxr <= r32; yv <= r32; g <= r32; end
                 OP_D, OP_P1, OP_P2, OP_YA, OP_DSET, OP_ZSET, OP_R3, OP_RP1, OP_O1, OP_O2, OP_O3: x <= shr;
-                OP_YR: begin yv <= shr[31:0]; g <= shr[31:0]; end
+                OP_YR, OP_YH: begin yv <= shr[31:0]; g <= shr[31:0]; end
                 OP_PW: begin g <= shr[31:0]; cnt <= cnt + 3'd1; end
                 OP_WT: acc <= shr;
                 OP_ONE, OP_RP2, OP_O12: g <= r32;

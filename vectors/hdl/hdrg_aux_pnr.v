@@ -2,8 +2,8 @@
 // has too few pins for the aux generators' ~480 ports, so the inputs arrive through a 400-bit serial
 // shift register (sdi, shift) and z leaves through a 32-bit one (sdo).  Not part of a real design
 // (the shift registers add ~430 FFs); every bit stays observable so that synthesis keeps the whole
-// module.  sr (MSB first): f 32, t 32, a0..a3 4 x 32, k 64, s 64, z_in 32, mode 2, restart, warm
-// (bits 387..32); the table port reads bits 39..0 (waddr, wdata), shared with the last inputs.
+// module.  sr (MSB first): inv (bit 388), f 32, t 32, a0..a3 4 x 32, k 64, s 64, z_in 32, mode 2,
+// restart, warm (bits 387..32); the table port reads bits 39..0 (waddr, wdata), shared with the last inputs.
 `timescale 1ns / 1ns
 module hdrg_aux_pnr #(
     parameter OP_CYCLES = 2
@@ -33,5 +33,5 @@ module hdrg_aux_pnr #(
     hdrg_aux #(.OP_CYCLES(OP_CYCLES)) aux (.clk(clk), .rst(rst), .we(we), .waddr(sr[39:32]), .wdata(sr[31:0]), .start(start),
                   .f_word(sr[387:356]), .t_word(sr[355:324]), .a0(sr[323:292]), .a1(sr[291:260]), .a2(sr[259:228]),
                   .a3(sr[227:196]), .k(sr[195:132]), .s(sr[131:68]), .z_in(sr[67:36]), .mode(sr[35:34]),
-                  .restart(sr[33]), .warm(sr[32]), .z(z), .z_clamped(zc), .busy(busy), .done(done));
+                  .restart(sr[33]), .inv(sr[388]), .warm(sr[32]), .z(z), .z_clamped(zc), .busy(busy), .done(done));
 endmodule

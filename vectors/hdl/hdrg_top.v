@@ -11,8 +11,11 @@
 // order, 48 n_banks.  The header checks and the CRC are the loader's job (host side): not here.
 //
 // Per sample: inputs on `start` (one-cycle pulse; do not pulse while busy): f (F word), t (T word),
-// r (rate word), mode (0..3, ignored when self_timed), self_timed, restart, zin (the Z word; aux_gen
-// 0).  Outputs valid with `done` (held until the next sample).  `eval_start` evaluates
+// r (rate word), mode (0..3, ignored when self_timed), self_timed, restart, invalid (the
+// input-invalid bit, FORMATS.md "The input-invalid bit": the sample is not valid, flag 64; the rate
+// estimator restarts at it and at the next sample (prev_inv); it taints its mode-1/2 window, which
+// is then not committed (taint); the aux input filters hold their state over it), zin (the Z
+// word; aux_gen 0).  Outputs valid with `done` (held until the next sample).  `eval_start` evaluates
 // (eval_u, eval_v, zin, eval_bank) alone (the evaluator vectors): b, z_clamped with `done`.
 //
 // Schedule (clock cycles from `start`; one 32 x 32 multiplier in the evaluator, shared with the
@@ -54,6 +57,7 @@ module hdrg_top #(
     input  wire [1:0]         mode,
     input  wire               self_timed,
     input  wire               restart,
+    input  wire               invalid,     // the input-invalid bit of the sample
     input  wire signed [31:0] zin,
     input  wire signed [31:0] a0,          // aux words A_0..A_3 (aux_gen 1)
     input  wire signed [31:0] a1,
@@ -206,7 +210,9 @@ module hdrg_top #(
     reg signed [63:0] k_q, kc;
     wire signed [63:0] k_in = k_given ? kin : kc;
     reg [1:0] mode_q;
-    reg self_q, restart_q;
+    reg self_q, restart_q, inv_q;
+    reg prev_inv;                      // the previous sample was input-invalid (power-on: 0; not reset at restarts)
+    wire rr = restart_q || inv_q || prev_inv;   // the rate estimator's restart
     wire [2:0] ts_in = (tpass == 2'd0) ? (restart_q ? 3'd0 : tstate) : tsr;
     wire [31:0] tc_in = (tpass == 2'd0) ? (restart_q ? 32'd0 : tcnt) : tcr;
     wire t_adv = ts_in != 3'd5 && tc_in >= slen(ts_in);
@@ -243,7 +249,7 @@ module hdrg_top #(
     reg [12:0] fill_p;
     reg [31:0] k_p;
     reg warm_q;
-    wire [AW-1:0] head_n = restart_q ? {AW{1'b0}} : ((head == n) ? {AW{1'b0}} : head + 1'b1);
+    wire [AW-1:0] head_n = rr ? {AW{1'b0}} : ((head == n) ? {AW{1'b0}} : head + 1'b1);
     wire [AW-1:0] rd_addr = (head_n == n) ? {AW{1'b0}} : head_n + 1'b1;     // the word n back
     wire signed [63:0] pv = pval(kind ? t_q : f_q, kind);
     wire signed [63:0] xo = pval(rd_w, kind);
@@ -277,7 +283,7 @@ module hdrg_top #(
     wire aux_busy;                      // the top's own busy covers it
     /* verilator lint_on UNUSEDSIGNAL */
     hdrg_aux aux (.clk(clk), .rst(rst), .we(we), .waddr(waddr), .wdata(wdata), .start(aux_go), .f_word(f_q), .t_word(t_q),
-                  .a0(a0_q), .a1(a1_q), .a2(a2_q), .a3(a3_q), .k(k_q), .mode(mode_o), .restart(restart_q), .s(s_w),
+                  .a0(a0_q), .a1(a1_q), .a2(a2_q), .a3(a3_q), .k(k_q), .mode(mode_o), .restart(restart_q), .inv(inv_q), .s(s_w),
                   .warm(warm_q), .z_in(z_q), .z(aux_z), .z_clamped(aux_zc), .busy(aux_busy), .done(aux_done));
 
     hdrg_eval_tm #(.Z_LATE(1)) ev (.clk(clk), .rst(rst), .we(we && waddr < 8'd72), .waddr(waddr[6:0]), .wdata(wdata), .start(ev_go),
@@ -295,6 +301,7 @@ module hdrg_top #(
     reg signed [48:0] other, y_r;
     assign y_hold = {{15{y_r[48]}}, y_r};
     reg use_q, sat_c, have_other;
+    reg taint;                         // the open window held an input-invalid sample: not committed
     reg div_go;
     reg signed [63:0] div_a;
     reg [35:0] div_b;
@@ -360,7 +367,7 @@ module hdrg_top #(
             busy <= 1'b0;
             cph <= C_IDLE;
             tstate <= 3'd0; tcnt <= 32'd0;
-            kc <= 64'sd0; evo <= 1'b0;
+            kc <= 64'sd0; evo <= 1'b0; prev_inv <= 1'b0; taint <= 1'b0;
             head <= {AW{1'b0}}; fill <= 13'd0; k <= 32'd0; iy <= 64'sd0; la <= 64'sd0; lq <= 64'sd0;
             cur <= 2'd0; acc <= 64'sd0; cnt <= 31'd0; pos <= 31'd0; nc1 <= 2'd0; nc2 <= 2'd0;
             w1 <= 45'sd0; w2 <= 45'sd0; slope1 <= 42'sd0; slope2 <= 42'sd0;
@@ -436,6 +443,7 @@ module hdrg_top #(
                         kc <= (!k_in[63] && k_in[62]) ? K_LIMIT : k_in + 64'sd1;      // k_in >= 2^62
                         evo <= 1'b0;
                         restart_q <= restart;
+                        inv_q <= invalid;
                         busy <= 1'b1;
                         tpass <= 2'd0;
                         ph <= S_TM;
@@ -473,16 +481,18 @@ module hdrg_top #(
                         tstate <= ts3;
                         tcnt <= (ts3 != 3'd5) ? tc3 + 32'd1 : tc3;
                     end
-                    // rate: ring write, read of the word n back, counters (restart: a new segment)
+                    // rate: ring write, read of the word n back, counters (rr: a new segment; a
+                    // restart, an invalid sample or the one after it)
                     ring[head_n] <= kind ? t_q : f_q;
                     rd_w <= ring[rd_addr];
                     head <= head_n;
-                    fill_p <= restart_q ? 13'd0 : fill;
-                    fill <= restart_q ? ((n == 13'd0) ? 13'd0 : 13'd1) : ((fill >= n) ? n : fill + 13'd1);
-                    k_p <= restart_q ? 32'd0 : k;
-                    warm_q <= (restart_q ? 32'd0 : k) < warmup;
-                    k <= ((restart_q ? 32'd0 : k) < ksat) ? (restart_q ? 32'd0 : k) + 32'd1 : (restart_q ? 32'd0 : k);
-                    if (restart_q) begin iy <= 64'sd0; la <= 64'sd0; lq <= 64'sd0; end
+                    fill_p <= rr ? 13'd0 : fill;
+                    fill <= rr ? ((n == 13'd0) ? 13'd0 : 13'd1) : ((fill >= n) ? n : fill + 13'd1);
+                    k_p <= rr ? 32'd0 : k;
+                    warm_q <= (rr ? 32'd0 : k) < warmup;
+                    k <= ((rr ? 32'd0 : k) < ksat) ? (rr ? 32'd0 : k) + 32'd1 : (rr ? 32'd0 : k);
+                    if (rr) begin iy <= 64'sd0; la <= 64'sd0; lq <= 64'sd0; end
+                    prev_inv <= inv_q;
                     // combiner: restart, ages, window switch (the closing window's commit starts here)
                     sat_c <= 1'b0;
                     use_q <= 1'b0;
@@ -495,7 +505,7 @@ module hdrg_top #(
                             nc1 <= 2'd0; nc2 <= 2'd0; slope1 <= 42'sd0; slope2 <= 42'sd0;
                         end
                         if (m_now != (restart_q ? 2'd0 : cur)) begin
-                            if (!restart_q && cur != 2'd0 && cnt != 31'd0) begin
+                            if (!restart_q && cur != 2'd0 && cnt != 31'd0 && !taint) begin
                                 ccur <= cur;
                                 sp_q <= cnt - 31'd1;
                                 div_a <= acc;
@@ -508,16 +518,18 @@ module hdrg_top #(
                             cur <= (m_now == 2'd1 || m_now == 2'd2) ? m_now : 2'd0;
                             if (m_now == 2'd1 || m_now == 2'd2) last_window <= m_now;
                             acc <= 64'sd0; cnt <= 31'd0; pos <= 31'd0;
+                            taint <= (m_now == 2'd1 || m_now == 2'd2) && inv_q;
                             if ((m_now == 2'd1 || m_now == 2'd2) && settle_n == 32'd0)
-                                use_q <= 1'b1;
+                                use_q <= !inv_q;
                             else if (m_now == 2'd1 || m_now == 2'd2)
                                 pos <= 31'd1;
                         end else begin
                             cph <= C_OTHER;
                             if (restart_q) begin cur <= 2'd0; acc <= 64'sd0; cnt <= 31'd0; end
+                            taint <= (!restart_q && taint) || ((m_now == 2'd1 || m_now == 2'd2) && inv_q);
                             if (m_now == 2'd1 || m_now == 2'd2) begin
                                 if ({1'b0, (restart_q ? 31'd0 : pos)} >= settle_n)
-                                    use_q <= 1'b1;
+                                    use_q <= !inv_q;
                                 else
                                     pos <= (restart_q ? 31'd0 : pos) + 31'd1;
                             end else if (restart_q)
@@ -622,13 +634,13 @@ module hdrg_top #(
                     ph <= S_T2;
                 end
                 default: begin                  // S_T2: outputs, flags (valid holds cvalid here)
-                    flags <= {(sat_c || (valid && !warm_q && mode_o != 2'd3 && (sat32(yo) || sat32(bo)))),
-                              1'b0, aux_zc, !valid && mode_o != 2'd3, mode_o == 2'd3, warm_q, vc_q && !warm_q, uc_q};
-                    if (valid && !warm_q && mode_o != 2'd3) begin
+                    flags <= {(sat_c || (valid && !warm_q && mode_o != 2'd3 && !inv_q && (sat32(yo) || sat32(bo)))),
+                              inv_q, aux_zc, !valid && mode_o != 2'd3, mode_o == 2'd3, warm_q, vc_q && !warm_q, uc_q};
+                    if (valid && !warm_q && mode_o != 2'd3 && !inv_q) begin
                         out_hold <= yo_s;
                         bias_hold <= bo_s;
                     end
-                    valid <= valid && !warm_q && mode_o != 2'd3;
+                    valid <= valid && !warm_q && mode_o != 2'd3 && !inv_q;
                     busy <= 1'b0;
                     done <= 1'b1;
                     ph <= S_IDLE;

@@ -32,7 +32,7 @@ module hdrg_top_pnr #(
     hdrg_top #(.N_HIST(N_HIST)) top (
         .clk(clk), .rst(rst), .we(we), .waddr(sr[39:32]), .wdata(sr[31:0]), .load(load), .start(start),
         .eval_start(eval_start), .f(sr[31:0]), .t(sr[63:32]), .r(sr[95:64]), .mode(sr[33:32]), .self_timed(sr[34]),
-        .restart(sr[35]), .zin(sr[127:96]), .a0(sr[159:128]), .a1(sr[191:160]), .a2(sr[95:64]), .a3(sr[63:32]),
+        .restart(sr[35]), .invalid(sr[38]), .zin(sr[127:96]), .a0(sr[159:128]), .a1(sr[191:160]), .a2(sr[95:64]), .a3(sr[63:32]),
         .kin(sr[191:128]), .k_given(sr[37]), .eval_u(sr[159:128]), .eval_v(sr[191:160]), .eval_bank(sr[36]),
         .state(state), .vs(vs), .mode_o(mode_o), .sign(sign), .u(u), .v(v), .z(z), .s(s), .acc(acc), .cnt(cnt),
         .y_hold(y), .b(b), .out_hold(out), .bias_hold(bias), .valid(valid), .flags(flags), .z_clamped(zc),

@@ -40,7 +40,7 @@ module tb_aux;
     wire zc, busy, done;
 
     hdrg_aux #(.OP_CYCLES(OP_CYCLES)) dut (.clk(clk), .rst(rst), .we(we), .waddr(waddr), .wdata(wdata), .start(start), .f_word(f_word),
-                  .t_word(t_word), .a0(a0), .a1(a1), .a2(a2), .a3(a3), .k(k_in), .mode(mode), .restart(restart),
+                  .t_word(t_word), .a0(a0), .a1(a1), .a2(a2), .a3(a3), .k(k_in), .mode(mode), .restart(restart), .inv(1'b0),
                   .s(s), .warm(warm), .z_in(z_in), .z(z), .z_clamped(zc), .busy(busy), .done(done));
 
     always #5 clk = ~clk;

@@ -5,7 +5,8 @@
 // run the vector sets on the RTL.  Requests (one per line on stdin):
 //   TABLE <hex word> ...      write every word through the table port, pulse load; "T <n> <last word>"
 //                             (the last word is the CRC word: the RTL does not check it, the host does)
-//   S F T R MODE RESTART Z [K A0..A3]   one sample (MODE -1: self-timed); "O <16 fields>"
+//   S F T R MODE RESTART Z [K A0..A3]   one sample (MODE -1: self-timed; RESTART bit 0 restart, bit 1
+//                             the input-invalid bit); "O <16 fields>"
 //   EVAL U V Z [BANK]         the evaluator alone; "E <B> <zclamped>"
 //   QUIT                      end
 // anything else: "ERR UNSUPPORTED <request>".  +cycles=FILE writes "samples N max M sum S" (clock
@@ -22,7 +23,7 @@ module tb_top;
     reg signed [63:0] kin = 0;
     reg k_given = 1'b0;
     reg [1:0] mode = 2'd0;
-    reg self_timed = 1'b0, restart = 1'b0, ebank = 1'b0;
+    reg self_timed = 1'b0, restart = 1'b0, invalid = 1'b0, ebank = 1'b0;
     wire [2:0] state;
     wire [7:0] vs, flags;
     wire [1:0] mode_o;
@@ -34,7 +35,7 @@ module tb_top;
 
     hdrg_top #(.N_HIST(N_HIST)) dut (
         .clk(clk), .rst(rst), .we(we), .waddr(waddr), .wdata(wdata), .load(load), .start(start),
-        .eval_start(eval_start), .f(f), .t(t), .r(r), .mode(mode), .self_timed(self_timed), .restart(restart),
+        .eval_start(eval_start), .f(f), .t(t), .r(r), .mode(mode), .self_timed(self_timed), .restart(restart), .invalid(invalid),
         .zin(zin), .a0(a0), .a1(a1), .a2(a2), .a3(a3), .kin(kin), .k_given(k_given), .eval_u(eu), .eval_v(ev), .eval_bank(ebank), .state(state), .vs(vs), .mode_o(mode_o),
         .sign(sign), .u(u), .v(v), .z(z), .s(s), .acc(acc), .cnt(cnt), .y_hold(y), .b(b), .out_hold(out),
         .bias_hold(bias), .valid(valid), .flags(flags), .z_clamped(zc), .busy(busy), .done(done));
@@ -150,6 +151,7 @@ module tb_top;
                     self_timed = (a[3] < 0);
                     mode = a[3][1:0];
                     restart = a[4][0];
+                    invalid = a[4][1];                // RESTART bit 1: the input-invalid bit
                     zin = a[5][31:0];
                     kin = a[6];
                     k_given = (ntok > 6);

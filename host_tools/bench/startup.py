@@ -1,0 +1,216 @@
+"""`hdrg bench startup`: the output from power-on at constant ambient (the paper's Table 4) on
+random FOREIGN devices (host_tools.simulation.sim_foreign), calibrated as a lab would.
+
+Per device (seed ``S * 100000 + i``; every device has the foreign family's turn-on, ``turn_on``:
+parasitic-charge settling that no thermometer sees, beside its self-heating):
+
+* **calibrate** with ``hdrg fit``'s defaults (host_tools.fitting.fit_pipeline.fit_default) on
+  :func:`calibration_runs`, each from its own power-on: two mode-reversal chamber runs (TRAIN_RUNS:
+  one soaked at the warm end of the range, one at the cold end) and one 45-min start-up at constant
+  ambient (a lab's room, TRAIN_STARTUP_OFFSET_C above the middle of the range): the protocol that
+  lets the fit tell a turn-on from the self-heating's temperature-dependent bias
+  (host_tools.fitting.turn_on);
+* **start-ups**: STARTUPS power-ons (indices 2, 3, ...) at constant ambient, each STARTUP_S (45
+  min) long, the ambient drawn inside the calibrated range (:func:`ambient_of`);
+* **pipelines**: mode reversal alone (the default combiner on the raw output, no model), the
+  calibrated model (float golden model), and the noise floor (the same start-up with
+  ``thermal=False``, mode reversal alone);
+* **figures** (:func:`startup_figures`, the paper's Table 4 columns): from power-on + 180 s (the
+  first mode-reversal output) to the end, the output less its mean over LATE_S (40..45 min):
+  stability = std (1 sigma) of the 100-s means, variation = their peak-to-peak, mean = the mean
+  over the served samples; **turn-on** = the mean over the served part of the first 5 min
+  (180..300 s); repeatability = the rms of the turn-on over the device's start-ups (how far
+  the first minutes sit from the settled bias, power-on after power-on); valid share = valid
+  outputs / servable samples (host_tools.bench.accuracy.servable).
+
+Summary: per pipeline the median over devices of the per-device median stability (and variation,
+|mean|, the paper's third column), the median of
+the per-device ratio model / mode reversal alone, the median repeatability, the lowest valid
+share, and how many devices' models learned the turn-on (model.fit["turn_on"]).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from host_tools.bench.accuracy import SEED_STRIDE, servable
+from host_tools.fitting.fit_pipeline import fit_default
+from host_tools.golden.compensate import compensate
+from host_tools.golden.reversal import DEFAULT_COMBINER, combine
+from host_tools.simulation.sim_foreign import STARTUP_S, foreign_device, simulate_foreign
+
+# the calibration runs: (chamber rate [degC/min], power-on index, power-on at the cold end): one
+# power-on at each end of the range, so that a turn-on that depends on the temperature is told
+# from one that does not (host_tools.fitting.turn_on: MIN_START_SPREAD)
+TRAIN_RUNS = ((4.0, 0, False), (2.0, 1, True))
+TRAIN_STARTUP_OFFSET_C = 8.0   # plus one 45-min power-on at constant ambient, this far above the range's middle [degC]
+TRAIN_STARTUP_POWER_ON = 99    # ... its power-on index (the evaluated start-ups are 2, 3, ...)
+STARTUPS = 4                        # start-ups per device (the paper's four data sets)
+FIRST_OUTPUT_S = 180.0              # the first mode-reversal output after power-on [s]
+TURN_ON_S = 300.0                   # the turn-on window ends 5 min after power-on [s]
+LATE_S = (2400.0, 2700.0)           # the offset baseline: the mean over 40..45 min [s]
+BIN_S = 100.0                       # averaging of the stability [s]
+EFFECT = "turn_on"
+PIPELINES = ("mode reversal alone", "hdrg fit defaults", "noise floor")
+LOOP = "hdrg diagnose defaults"      # the closed loop's final model (optional: about 10 s per device)
+
+
+def ambient_of(dev, power_on: int) -> float:
+    """The ambient [degC] of start-up ``power_on``: uniform within 5 degC of the middle of the
+    device's chamber range (inside what its calibration runs cover)."""
+    mid = 0.5 * (dev.chamber["high_c"] + dev.chamber["low_c"])
+    return float(mid + np.random.default_rng([dev.seed, 5, power_on]).uniform(-5.0, 5.0))
+
+
+def calibration_runs(dev, effect: str | None = EFFECT) -> list:
+    """The calibration runs of ``dev`` (a ForeignDevice): TRAIN_RUNS, then one start-up of
+    STARTUP_S at constant ambient TRAIN_STARTUP_OFFSET_C above the middle of the range (power-on
+    index TRAIN_STARTUP_POWER_ON); every one from its own power-on."""
+    runs = [simulate_foreign(dev, rate, True, p, p, effect=effect, start_low=cold) for rate, p, cold in TRAIN_RUNS]
+    mid = 0.5 * (dev.chamber["high_c"] + dev.chamber["low_c"])
+    runs.append(simulate_foreign(dev, 1.0, True, TRAIN_STARTUP_POWER_ON, TRAIN_STARTUP_POWER_ON, effect=effect,
+                                 ambient_c=mid + TRAIN_STARTUP_OFFSET_C))
+    return runs
+
+
+def startup_figures(t_s, out, valid) -> dict:
+    """Table 4 figures [deg/h] of one start-up's output ``out`` at its ``valid`` samples (module doc)."""
+    t = np.asarray(t_s, np.float64) - float(t_s[0])
+    ok = np.asarray(valid, bool) & np.isfinite(out) & (t >= FIRST_OUTPUT_S)
+    late = ok & (t >= LATE_S[0]) & (t < LATE_S[1])
+    if late.sum() < 2:
+        return {"stability": float("nan"), "variation": float("nan"), "mean": float("nan"), "turn_on": float("nan")}
+    y = np.asarray(out, np.float64) - float(np.mean(np.asarray(out)[late]))
+    bins = (t[ok] // BIN_S).astype(np.int64)
+    cnt = np.bincount(bins)
+    means = np.bincount(bins, weights=y[ok])[cnt > 0] / cnt[cnt > 0]
+    early = ok & (t < TURN_ON_S)
+    return {"stability": float(np.std(means, ddof=1)) if len(means) > 1 else float("nan"),
+            "variation": float(np.ptp(means)), "mean": float(np.mean(y[ok])),
+            "turn_on": float(np.mean(y[early])) if early.any() else float("nan")}
+
+
+def _mr_alone(log):
+    c = combine(log, DEFAULT_COMBINER)
+    return c.out_dph, np.asarray(c.valid, bool)
+
+
+def evaluate_device(seed: int, startups: int = STARTUPS, effect: str | None = EFFECT, loop: bool = False) -> dict:
+    """One device (module doc): {'seed', 'turn_on' (the device's), 'model_turn_on' (what the fit
+    learned), 'startups': [{'ambient_c', pipeline: figures + 'valid_share'}], 'error'}.  ``effect``
+    None: the control, a device without a turn-on (what the fit learns there is a false discovery);
+    ``loop``: also the closed loop's model (host_tools.fitting.diagnose.diagnose, defaults, on the
+    calibration runs)."""
+    dev = foreign_device(seed)
+    rec = {"seed": seed, "turn_on": dev.effects.get(EFFECT) if effect else None, "startups": [], "error": ""}
+    train = calibration_runs(dev, effect)
+    try:
+        model, _ = fit_default(train)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        rec["error"] = f"{type(exc).__name__}: {exc}"
+        return rec
+    rec["model_turn_on"] = (model.fit.get("turn_on") or {}).get("chosen")
+    rec["model_turn_on_why"] = (model.fit.get("turn_on") or {}).get("why")
+    rec["model_terms"] = len(model.terms)
+    loop_model = None
+    if loop:
+        from host_tools.fitting.diagnose import diagnose
+        report, loop_model = diagnose(train, plots=False)
+        rec["loop_steps"] = [e["effect"] for e in loop_model.fit.get("diagnose", {}).get("effects", [])]
+        rec["loop_verdict"] = report.get("verdict")
+    for k in range(startups):
+        p = len(TRAIN_RUNS) + k
+        amb = ambient_of(dev, p)
+        log = simulate_foreign(dev, 1.0, True, p, p, effect=effect, ambient_c=amb)
+        floor = simulate_foreign(dev, 1.0, True, p, p, effect=effect, ambient_c=amb, thermal=False)
+        serve = servable(log)
+        row = {"ambient_c": amb}
+        res = compensate(log, model)
+        outs = {PIPELINES[0]: _mr_alone(log), PIPELINES[1]: (res.rate_dph, np.asarray(res["valid"]) > 0),
+                PIPELINES[2]: _mr_alone(floor)}
+        if loop_model is not None:
+            lres = compensate(log, loop_model)
+            outs[LOOP] = (lres.rate_dph, np.asarray(lres["valid"]) > 0)
+        for name, (out, valid) in outs.items():
+            row[name] = {**startup_figures(log.t_s, out, valid & serve),
+                         "valid_share": float((valid & serve).sum() / max(serve.sum(), 1))}
+        rec["startups"].append(row)
+    return rec
+
+
+def _device_stat(rec, name, key, how=np.median):
+    vals = np.array([s[name][key] for s in rec["startups"]], float)
+    return float(how(vals)) if vals.size else float("nan")
+
+
+def _rms(x):
+    return np.sqrt(np.mean(np.square(x)))
+
+
+def summarize(records) -> dict:
+    """Per pipeline: median over devices of the per-device median stability, variation and
+    repeatability (rms of the turn-on over start-ups), the lowest valid share; the median of the
+    per-device ratio of stabilities (model / mode reversal alone); devices whose model learned the
+    turn-on; failed devices."""
+    ok = [r for r in records if not r["error"]]
+    out = {"devices": len(records), "failed": len(records) - len(ok),
+           "learned_turn_on": sum(1 for r in ok if r.get("model_turn_on"))}
+    names = PIPELINES + ((LOOP,) if ok and all(LOOP in s for r in ok for s in r["startups"]) else ())
+    for name in names:
+        stab = np.array([_device_stat(r, name, "stability") for r in ok])
+        out[name] = {"stability_dph": float(np.nanmedian(stab)) if ok else float("nan"),
+                     "variation_dph": float(np.nanmedian([_device_stat(r, name, "variation") for r in ok])) if ok else float("nan"),
+                     "mean_abs_dph": float(np.nanmedian([_device_stat(r, name, "mean", lambda x: np.median(np.abs(x)))
+                                                         for r in ok])) if ok else float("nan"),
+                     "repeatability_dph": float(np.nanmedian([_device_stat(r, name, "turn_on", _rms) for r in ok])) if ok else float("nan"),
+                     "min_valid_share": min((s[name]["valid_share"] for r in ok for s in r["startups"]), default=float("nan"))}
+    ratio = [_device_stat(r, PIPELINES[1], "stability") / _device_stat(r, PIPELINES[0], "stability") for r in ok]
+    out["ratio_model_to_mr_alone"] = float(np.nanmedian(ratio)) if ok else float("nan")
+    if LOOP in names:
+        out["ratio_loop_to_mr_alone"] = float(np.nanmedian(
+            [_device_stat(r, LOOP, "stability") / _device_stat(r, PIPELINES[0], "stability") for r in ok]))
+    return out
+
+
+def run_benchmark(n_devices: int = 20, seed: int = 0, startups: int = STARTUPS, progress=None, start: int = 0,
+                  effect: str | None = EFFECT, loop: bool = False) -> dict:
+    """The benchmark (module doc) on devices ``start`` .. ``start + n_devices - 1`` of set ``seed``;
+    ``effect`` None: the control (no turn-on)."""
+    for what, v, lo in (("--devices", n_devices, 1), ("--seed", seed, 0), ("--startups", startups, 2), ("--start", start, 0)):
+        if not (isinstance(v, int) and not isinstance(v, bool) and v >= lo):
+            raise ValueError(f"{what} must be an integer >= {lo}, not {v!r}")
+    t0 = time.time()
+    records = []
+    for i in range(n_devices):
+        records.append(evaluate_device(seed * SEED_STRIDE + start + i, startups, effect, loop))
+        if progress:
+            progress(f"device {i + 1}/{n_devices} ({time.time() - t0:.0f} s)")
+    config = {"devices": n_devices, "start": start, "seed": seed, "startups": startups, "startup_s": STARTUP_S,
+              "train_runs": [{"rate_c_per_min": r, "power_on": p, "cold_start": c} for r, p, c in TRAIN_RUNS]
+              + [{"ambient_above_middle_c": TRAIN_STARTUP_OFFSET_C, "power_on": TRAIN_STARTUP_POWER_ON}], "effect": effect, "loop": loop,
+              "elapsed_s": round(time.time() - t0, 1)}
+    return {"config": config, "records": records, "summary": summarize(records)}
+
+
+def format_table(result: dict) -> str:
+    """The summary as a text table (deg/h)."""
+    s = result["summary"]
+    c = result["config"]
+    lines = [f"Start-up at constant ambient: {s['devices']} foreign devices (set {c['seed']}, "
+             f"{'with their turn-on' if c['effect'] else 'control: no turn-on'}), {c['startups']} "
+             f"power-ons of {c['startup_s'] / 60:.0f} min each, calibrated on 2 chamber runs and 1 start-up "
+             f"with hdrg fit's defaults; from power-on + {FIRST_OUTPUT_S:g} s, less the {LATE_S[0] / 60:.0f}-"
+             f"{LATE_S[1] / 60:.0f} min mean", "",
+             f"{'pipeline':22s} {'stability':>10s} {'p-p':>8s} {'|mean|':>8s} {'0-5 min rms':>12s} {'min valid':>10s}",
+             f"{'':22s} {'1 sigma':>10s} {'100-s':>8s} {'':>8s} {'repeatab.':>12s} {'share':>10s}"]
+    for name in [n for n in PIPELINES + (LOOP,) if n in s]:
+        r = s[name]
+        lines.append(f"{name:22s} {r['stability_dph']:10.3f} {r['variation_dph']:8.3f} {r['mean_abs_dph']:8.3f} "
+                     f"{r['repeatability_dph']:12.3f} "
+                     f"{100 * r['min_valid_share']:9.1f}%")
+    lines += ["", f"median ratio of stabilities, model / mode reversal alone: {s['ratio_model_to_mr_alone']:.2f}"
+              + (f"; loop / mode reversal alone: {s['ratio_loop_to_mr_alone']:.2f}" if "ratio_loop_to_mr_alone" in s else ""),
+              f"models that learned the turn-on: {s['learned_turn_on']} of {s['devices'] - s['failed']}; "
+              f"failed devices: {s['failed']}"]
+    return "\n".join(lines)

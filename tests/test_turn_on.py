@@ -1,0 +1,130 @@
+"""The power-on transient of the default fit (host_tools.fitting.turn_on), its chip path, and the
+start-up benchmark (host_tools.bench.startup)."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from host_tools.bench import startup as bench
+from host_tools.bench.accuracy import servable
+from host_tools.fitting import turn_on
+from host_tools.fitting.fit_pipeline import fit_default
+from host_tools.golden.compensate import compensate
+from host_tools.simulation.sim_foreign import chamber_profile, foreign_device, simulate_foreign
+
+DEVICE = 0      # a foreign device with a turn-on that the protocol lets the fit learn (f0 13.2 kHz: quantizable)
+
+
+@pytest.fixture(scope="module")
+def device():
+    return foreign_device(DEVICE)
+
+
+@pytest.fixture(scope="module")
+def runs(device):
+    return bench.calibration_runs(device)
+
+
+@pytest.fixture(scope="module")
+def fitted(runs):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return fit_default(runs)
+
+
+def _startup(device, p=2, effect="turn_on"):
+    return simulate_foreign(device, 1.0, True, p, p, effect=effect, ambient_c=bench.ambient_of(device, p))
+
+
+def test_turn_on_learned_and_it_lowers_the_startup_error(device, fitted):
+    model, _ = fitted
+    info = model.fit["turn_on"]
+    assert info["chosen"] and info["chosen"].startswith("decay_on"), info
+    assert any(t["gen"] == "decay_on" for t in model.config.aux.terms) and 7 in model.terms
+    assert all(row["kept"] == (max(row["start_ratio"]) <= 1 - turn_on.MARGIN and
+                               max(row["run_ratio"]) <= turn_on.RUN_TOLERANCE) for row in info["candidates"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        off, _ = fit_default(bench.calibration_runs(device), turn_on="off")
+    assert "turn_on" not in off.fit and 7 not in off.terms or all(t["gen"] != "decay_on" for t in off.config.aux.terms)
+    log = _startup(device)
+    serve = servable(log)
+    stab = {}
+    for name, m in (("with", model), ("without", off)):
+        out = compensate(log, m)
+        stab[name] = bench.startup_figures(log.t_s, out.rate_dph, (np.asarray(out["valid"]) > 0) & serve)["stability"]
+    assert stab["with"] < 0.6 * stab["without"], stab
+
+
+def test_turn_on_model_runs_in_fixed_point_within_the_bound(device, fitted):
+    from host_tools import api
+
+    model, _ = fitted
+    q = api.quantize(model)
+    log = _startup(device)
+    gold = compensate(log, model)
+    fixed = api.compensate(log, model, impl="fixed", table=q.table)
+    vg, vf = np.asarray(gold["valid"]) > 0, np.asarray(fixed["valid"]) > 0
+    assert np.array_equal(vg, vf) and vg.mean() > 0.7
+    assert float(np.max(np.abs(gold.rate_dph[vg] - fixed.rate_dph[vg]))) <= 0.002   # deg/h
+
+
+def test_not_learned_from_one_run_from_legs_or_from_one_temperature(device, runs):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        one, _ = fit_default(runs[:1])
+        assert "power-ons" in one.fit["turn_on"]["why"] and one.fit["turn_on"]["chosen"] is None
+        legs = [runs[0].select(np.arange(3000, 6000)), runs[1].select(np.arange(3000, 6000))]
+        cut, _ = fit_default(legs)
+        assert "does not start at its power-on" in cut.fit["turn_on"]["why"]
+        warm = [runs[0], simulate_foreign(device, 2.0, True, 1, 1, effect="turn_on")]   # both soaked at the warm end
+        same, _ = fit_default(warm)
+        assert "span" in same.fit["turn_on"]["why"] and same.fit["turn_on"]["start_spread"] < turn_on.MIN_START_SPREAD
+
+
+def test_turn_on_option_checked(runs):
+    with pytest.raises(ValueError, match="turn_on must be 'auto' or 'off'"):
+        fit_default(runs[:1], turn_on="yes")
+
+
+def test_starts_at_power_on_and_start_spread(device, runs):
+    assert all(turn_on.starts_at_power_on(r) for r in runs)
+    assert not turn_on.starts_at_power_on(runs[0].select(np.arange(10, 100)))
+    from host_tools.golden.compensate import fit_config_from_logs
+    proxy = fit_config_from_logs(runs).proxy
+    assert turn_on.start_spread(runs, proxy) > turn_on.MIN_START_SPREAD
+    assert turn_on.start_spread([runs[0], runs[0]], proxy) == 0.0
+
+
+def test_foreign_startup_and_cold_start(device):
+    log = _startup(device)
+    assert len(log) == int(bench.STARTUP_S) + 1 and "constant" in log.metadata["profile"]
+    prof = chamber_profile(device, 2.0, start_low=True)
+    assert prof[0, 1] == device.chamber["low_c"] and prof[-1, 1] == device.chamber["low_c"]
+    for bad in (float("nan"), 500.0, "20"):
+        with pytest.raises(ValueError, match="ambient_c"):
+            simulate_foreign(device, 1.0, True, 2, 2, ambient_c=bad)
+
+
+def test_startup_figures_follow_the_paper_table4_definitions():
+    t = np.arange(2701.0)
+    y = 1.0 + np.where(t < 1000, 2.0, 0.0)          # 2 deg/h above the settled bias for 1000 s
+    f = bench.startup_figures(t, y, np.ones(len(t), bool))
+    assert f["turn_on"] == pytest.approx(2.0) and f["variation"] == pytest.approx(2.0)
+    assert f["mean"] == pytest.approx(2.0 * (1000 - 180) / (2701 - 180), rel=1e-6)
+    none = bench.startup_figures(t, y, t < 2000)     # no valid sample in 40..45 min: no baseline
+    assert np.isnan(none["stability"])
+
+
+def test_startup_bench_small_run_and_cli_refusal(capsys):
+    from host_tools.cli import main
+    res = bench.run_benchmark(1, seed=0, startups=2)
+    s = res["summary"]
+    assert s["devices"] == 1 and s["failed"] == 0
+    for name in bench.PIPELINES:
+        assert s[name]["min_valid_share"] >= 0.99 and np.isfinite(s[name]["stability_dph"])
+    assert "mode reversal alone" in bench.format_table(res)
+    assert main(["bench", "startup", "--devices", "0"]) == 2
+    assert "--devices must be an integer >= 1" in capsys.readouterr().err
