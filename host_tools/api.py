@@ -98,7 +98,7 @@ def fit_with_result(runs, output=None, *, terms=None, proxy=None, rate_estimator
     from host_tools.fitting.fit_pipeline import fit_default, fit_without_run_offsets
     from host_tools.fitting.fit_rate import fit_auto_rate
     from host_tools.golden.checks import check_fit_inputs, coverage_warnings
-    from host_tools.golden.compensate import compensate as _compensate
+    from host_tools.golden.compensate import checked as _checked
     from host_tools.golden.compensate import fit_config_from_logs
     from host_tools.golden.flags import problems
 
@@ -137,7 +137,7 @@ def fit_with_result(runs, output=None, *, terms=None, proxy=None, rate_estimator
         said.append(f"{len(logs)} training runs: {SEVERAL_RUNS_NOTE}")
     said.extend(coverage_warnings(logs, proxy))
     for log in logs:   # e.g. proxy_range / rate_range narrower than the data: the fit saw clamped inputs
-        said.extend(f"training run {log.source}: {m}" for m in problems(_compensate(log, model)))
+        said.extend(f"training run {log.source}: {m}" for m in problems(_checked(log, model)))
     if tuple(res.terms) == (0,) and terms in (None, "auto"):
         said.append("term selection kept only the offset k0: no temperature term held out in the "
                     "cross-validation; the model does not compensate temperature (see the warnings above, or fix the "

@@ -325,3 +325,41 @@ def test_aux_input_filter_holds_over_flagged_samples():
     st2 = AuxStage(table)                               # the same stream restarted at sample 6, clean
     z6 = st2.step([chan[0] + 6000, 0], 6, 1, True, 0, False, False)[0]
     assert zs[6] == z6
+
+
+def test_declared_frequency_range_above_the_word_is_compared_in_hz():
+    from host_tools.golden.input_check import input_flags
+    from host_tools.golden.runlog import RunLog
+    t = np.arange(10.0)
+    for md, f, flagged in (({"freq_range_hz": "20000..30000"}, 25000.0, 0), ({"freq_range_hz": "10000..17000"}, 16384.0, 0),
+                           ({}, 25000.0, 0), ({"freq_range_hz": "20000..30000"}, 31000.0, 10)):
+        log = RunLog.from_arrays(metadata=md, t_s=t, rate_dph=np.zeros(10), freq_hz=np.full(10, f))
+        assert int(input_flags(log)[0].sum()) == flagged, (md, f)
+
+
+def test_a_run_with_every_sample_invalid_is_refused_by_name():
+    from host_tools.errors import UserError
+    from host_tools.fitting.fit_pipeline import fit_default
+    from host_tools.golden.runlog import RunLog
+    t = np.arange(600.0)
+    log = RunLog.from_arrays(metadata={"temp_range_c": "200..300"}, source="cold.csv", t_s=t, rate_dph=np.zeros(600),
+                             freq_hz=6000 + t * 1e-3, temp_c=np.full(600, 20.0))
+    with pytest.warns(Warning), pytest.raises(UserError, match=r"cold\.csv: every sample is outside"):
+        fit_default([log])
+
+
+def test_the_fit_s_look_at_its_runs_reports_what_compensate_reports():
+    """api.fit checks its training runs with compensate.checked (no output copy: bounded memory
+    at 100 Hz); it must find what a compensation would."""
+    from host_tools.fitting.fit_pipeline import fit_default
+    from host_tools.golden.compensate import checked, compensate
+    from host_tools.golden.flags import problems
+    log = _mr_log(3000)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model, _ = fit_default([log])
+    r = np.array(log.rate_dph)
+    r[700] = 1e9
+    for lg in (log, log.with_columns(rate_dph=r), log.select(np.arange(100, 2000))):
+        assert problems(checked(lg, model)) == problems(compensate(lg, model))
+    assert problems(checked(log.with_columns(rate_dph=r), model))

@@ -278,3 +278,11 @@ def test_fuzz_npz_reader(tmp_path, data):
     p.write_bytes(bytes(raw))
     with _quiet():
         _check(p)
+
+
+@pytest.mark.parametrize("cell", ["1_000", "1_0.5", "\u0663", "\uff11"])
+def test_numbers_python_takes_but_the_format_does_not_are_named_with_their_line(tmp_path, cell):
+    p = tmp_path / "u.csv"
+    p.write_text(f"t_s,rate_dph,freq_hz\n0,1,6000\n1,{cell},6000\n2,3,6000\n", encoding="utf-8")
+    with pytest.raises(runlog.RunLogError, match=r"u\.csv:3: column 'rate_dph'"):
+        runlog.read_csv(p)

@@ -128,3 +128,26 @@ def test_startup_bench_small_run_and_cli_refusal(capsys):
     assert "mode reversal alone" in bench.format_table(res)
     assert main(["bench", "startup", "--devices", "0"]) == 2
     assert "--devices must be an integer >= 1" in capsys.readouterr().err
+
+
+def test_compensate_warns_when_the_power_on_term_meets_a_late_start_or_a_gap(device, fitted):
+    from host_tools.golden.flags import problems
+    model, _ = fitted
+    log = _startup(device)
+    assert not any("power-on term" in m for m in problems(compensate(log, model)))
+    late = problems(compensate(log.select(np.arange(1000, len(log))), model))
+    assert any("starts at t_s = 1000 s, not at its power-on" in m for m in late)
+    gap = problems(compensate(log.select(np.r_[0:1500, 1504:len(log)]), model))
+    assert any("1 gap(s) restart it (first at row 1500)" in m for m in gap)
+    with pytest.raises(ValueError, match="power-on term"):
+        from host_tools.golden.flags import report
+        report(compensate(log.select(np.arange(1000, len(log))), model), strict=True)
+
+
+def test_unscorable_held_out_power_on_fails_the_candidate():
+    t = np.arange(3000.0)
+    y = np.exp(-t / 240.0)
+    ok = np.ones(len(t), bool)
+    blind = ok & (t > 2000)                          # nothing valid in the start window
+    scores = turn_on._fold_scores([(t, y - y.mean(), ok), (t, y - y.mean(), blind)], [y, y], 720.0)
+    assert np.isinf(scores[1][0]) and scores[0][0] < 0.1

@@ -17,7 +17,8 @@ parasitic-charge settling that no thermometer sees, beside its self-heating):
   ``thermal=False``, mode reversal alone);
 * **figures** (:func:`startup_figures`, the paper's Table 4 columns): from power-on + 180 s (the
   first mode-reversal output) to the end, the output less its mean over LATE_S (40..45 min):
-  stability = std (1 sigma) of the 100-s means, variation = their peak-to-peak, mean = the mean
+  stability = std (1 sigma) of the 100-s means (bins from 180 s on; a bin with valid samples on
+  less than MIN_BIN_SHARE of its span, e.g. the last 20 s, is left out), variation = their peak-to-peak, mean = the mean
   over the served samples; **turn-on** = the mean over the served part of the first 5 min
   (180..300 s); repeatability = the rms of the turn-on over the device's start-ups (how far
   the first minutes sit from the settled bias, power-on after power-on); valid share = valid
@@ -82,13 +83,22 @@ def startup_figures(t_s, out, valid) -> dict:
     if late.sum() < 2:
         return {"stability": float("nan"), "variation": float("nan"), "mean": float("nan"), "turn_on": float("nan")}
     y = np.asarray(out, np.float64) - float(np.mean(np.asarray(out)[late]))
-    bins = (t[ok] // BIN_S).astype(np.int64)
+    bins = ((t[ok] - FIRST_OUTPUT_S) // BIN_S).astype(np.int64)        # from the first output on
     cnt = np.bincount(bins)
-    means = np.bincount(bins, weights=y[ok])[cnt > 0] / cnt[cnt > 0]
+    full = cnt >= MIN_BIN_SHARE * BIN_S * _rate(t)                      # partial bins (the last) left out
+    means = np.bincount(bins, weights=y[ok])[full] / cnt[full]
     early = ok & (t < TURN_ON_S)
     return {"stability": float(np.std(means, ddof=1)) if len(means) > 1 else float("nan"),
             "variation": float(np.ptp(means)), "mean": float(np.mean(y[ok])),
             "turn_on": float(np.mean(y[early])) if early.any() else float("nan")}
+
+
+MIN_BIN_SHARE = 0.5                 # a 100-s mean needs valid samples on at least this share of its span
+
+
+def _rate(t) -> float:
+    """Nominal sample rate [Hz] of the time axis ``t`` [s]."""
+    return 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 1.0
 
 
 def _mr_alone(log):

@@ -15,23 +15,25 @@ Choice (:func:`add_turn_on`), on the training runs only:
   least MIN_START_SPREAD of the calibrated proxy range (:func:`start_spread`), and terms chosen
   by the fit ('auto'): a single power-on cannot tell a repeatable turn-on from that power-on's
   drift, and power-ons at one temperature cannot tell it from the self-heating's bias, which
-  depends on the temperature (on foreign devices without a turn-on, a term learned from two
-  warm starts made 2 of 20 start-ups at another ambient 9x worse than mode reversal alone);
+  depends on the temperature;
 * candidates: ``decay_on`` with tau in TAU_GRID_S up to MAX_TAU_FRACTION x the shortest run (it
   must have decayed within every run);
-* **leave-one-power-on-out**: per held-out run, the model's terms with and without the candidate
-  are fitted on the other runs (the caller's fit with fixed terms, per-run offsets included; the
-  candidate's weight in k7 beside the model's generators by least squares, :func:`decay_weight`)
-  and the held-out run is compensated (float golden model); its output less its mean (a
-  power-on's own offset is not predictable) is averaged over BIN_S and scored by the sum of
-  squares of those means over the first :func:`window_of` seconds after power-on (WINDOW_TAUS x
-  tau, MIN_WINDOW_S .. START_WINDOW_S) and over the whole run;
+* **two-stage score**: stage 1 is the model as fitted on ALL runs (its terms are not refitted
+  per fold); its compensated output of every run (float golden model), less the run's mean (a
+  power-on's own offset is not predictable), is the residual.  Stage 2, leaving one power-on
+  out: the candidate's size is fitted by least squares on the other runs' residuals and
+  subtracted from the held-out run's; scored by the sum of squares of BIN_S means over the first
+  :func:`window_of` seconds after power-on (WINDOW_TAUS x tau, MIN_WINDOW_S .. START_WINDOW_S)
+  and over the whole run, against the residual without it.  A held-out run with fewer than
+  MIN_BINS means to score fails the candidate;
 * **kept** when, on EVERY held-out run, the window's error falls by at least MARGIN and the whole
-  run's rises by at most RUN_TOLERANCE; of several, the one of least error over the first
-  START_WINDOW_S.  The model is refitted on all runs with it.  When the model's generators fill
-  the chip's AUX_MAX_TERMS, the sign-twin terms of a mode-reversal lag block make room (each
-  coefficient bank keeps its own k7; the candidate is scored against the full model).
-  model.fit["turn_on"]: the candidates' scores and the choice (model.json).
+  run's rises by at most RUN_TOLERANCE; of several, the one of least mean window ratio.  The
+  model is then refitted on all runs with the term in k7 (all coefficients together; its weight
+  beside the model's generators by least squares, :func:`decay_weight`): that refit is not
+  itself cross-validated, so the start-up benchmark is the check of what ships.  When the
+  model's generators fill the chip's AUX_MAX_TERMS, the sign-twin terms of a mode-reversal lag
+  block make room (each coefficient bank keeps its own k7).  model.fit["turn_on"]: the
+  candidates' scores and the choice (model.json).
 
 Measured by `hdrg bench startup` (host_tools.bench.startup; docs/ACCURACY.md "Start-up").
 """
@@ -90,9 +92,13 @@ def window_of(tau_s: float) -> float:
 BIN_S = 100.0               # scored: means over this many seconds (the stability metric's averaging)
 
 
+MIN_BINS = 3                # a held-out run is scored only with this many BIN_S means in the window
+
+
 def _binned_sq(out, t, valid, window_s=None) -> float:
     """Sum of squares of the BIN_S-s means of ``out`` [deg/h] over the valid samples (the run's
-    mean removed), over the first ``window_s`` [s] after power-on (None: the whole run)."""
+    mean removed), over the first ``window_s`` [s] after power-on (None: the whole run); NaN with
+    fewer than MIN_BINS means (nothing to score)."""
     t = np.asarray(t, np.float64) - float(t[0])
     ok = np.asarray(valid, bool) & np.isfinite(out)
     if ok.sum() < 2:
@@ -103,7 +109,12 @@ def _binned_sq(out, t, valid, window_s=None) -> float:
     sums = np.bincount(b[keep], weights=x[keep])
     cnt = np.bincount(b[keep])
     m = sums[cnt > 0] / cnt[cnt > 0]
-    return float(m @ m)
+    return float(m @ m) if len(m) >= MIN_BINS else float("nan")
+
+
+def _ratio(after: float, before: float) -> float:
+    """after / before; +inf (a failed fold) when either is not a finite score or before is 0."""
+    return after / before if np.isfinite(after) and np.isfinite(before) and before > 0 else float("inf")
 
 
 def _outputs(logs, model) -> list:
@@ -135,7 +146,7 @@ def _fold_scores(outputs, g_runs, window_s) -> list:
         den = sum(p[1] for j, p in enumerate(parts) if j != i)
         amp = num / den if den > 0 else 0.0
         after = y - amp * gc
-        out.append(tuple(_binned_sq(after, t, ok, w) / max(_binned_sq(y, t, ok, w), 1e-300) for w in (window_s, None)))
+        out.append(tuple(_ratio(_binned_sq(after, t, ok, w), _binned_sq(y, t, ok, w)) for w in (window_s, None)))
     return out
 
 
@@ -182,9 +193,9 @@ def add_turn_on(logs, model, res, refit):
 
     logs = list(logs)
     cfg = model.config
-    info = {"method": "leave-one-power-on-out (host_tools.fitting.turn_on)", "margin": MARGIN,
+    info = {"method": "two-stage: the model's compensated outputs, the turn-on's size cross-validated by leaving "
+                      "one power-on out (host_tools.fitting.turn_on)", "margin": MARGIN,
             "start_window_s": START_WINDOW_S, "chosen": None}
-    info["start_spread"] = None
     taus = candidate_taus(logs) if len(logs) >= MIN_RUNS else []
     gens = [t for t in cfg.aux.terms if t.get("gen") != "decay_on"]
     late = [log for log in logs if not starts_at_power_on(log)]
@@ -212,20 +223,16 @@ def add_turn_on(logs, model, res, refit):
         return model, res
     poly = poly_terms(model)
 
-    def fit_with(train, decay, full=False):
-        """The model fitted on ``train``: the poly terms, k7 = the model's generators (``kept``,
-        weights kept) plus ``decay`` (None: all the model's generators, no decay) at the weight that least squares gives it beside them; ``full``:
-        (model, FitResult), else the model."""
-        if decay is None:
-            return refit(train, cfg if gens else replace(cfg, aux=AuxConfig()), tuple(poly) + ((K_AUX,) if gens else ()))[0]
+    def fit_with(train, decay):
+        """(model, FitResult) fitted on ``train``: the poly terms, k7 = the model's generators
+        (``kept``, weights kept) plus ``decay`` at the weight least squares gives it beside them."""
         terms = [dict(decay, weight=1.0)]
         if kept:
             r = decay_weight(train, replace(cfg, aux=AuxConfig.from_terms(kept, cfg.rate.fs)), poly, decay)
             terms = kept + [dict(decay, weight=r)]
             total = sum(abs(t["weight"]) for t in terms)
             terms = [dict(t, weight=t["weight"] / total) for t in terms]
-        fitted = refit(train, replace(cfg, aux=AuxConfig.from_terms(terms, cfg.rate.fs)), tuple(poly) + (K_AUX,))
-        return fitted if full else fitted[0]
+        return refit(train, replace(cfg, aux=AuxConfig.from_terms(terms, cfg.rate.fs)), tuple(poly) + (K_AUX,))
 
     from host_tools.golden.regressors import generator_values
     outputs = _outputs(logs, model)
@@ -236,8 +243,8 @@ def add_turn_on(logs, model, res, refit):
         sc = _fold_scores(outputs, [generator_values(log, decay, cfg.rate.fs) for log in logs], w)
         start, whole = [x[0] for x in sc], [x[1] for x in sc]
         ok = max(start) <= 1.0 - MARGIN and max(whole) <= RUN_TOLERANCE
-        rows.append({"tau_s": tau, "window_s": w, "start_ratio": [round(x, 4) for x in start],
-                     "run_ratio": [round(x, 4) for x in whole], "kept": ok})
+        rows.append({"tau_s": tau, "window_s": w, "start_ratio": [round(x, 4) if np.isfinite(x) else None for x in start],
+                     "run_ratio": [round(x, 4) if np.isfinite(x) else None for x in whole], "kept": ok})
         if ok and (best is None or float(np.mean(start)) < best[1]):
             best = (tau, float(np.mean(start)), decay)
     info["candidates"] = rows
@@ -246,7 +253,7 @@ def add_turn_on(logs, model, res, refit):
                        f"power-on without raising the whole run's by more than {100 * (RUN_TOLERANCE - 1):g} %")
         model.fit["turn_on"] = info
         return model, res
-    new, new_res = fit_with(logs, best[2], full=True)
+    new, new_res = fit_with(logs, best[2])
     for key, value in model.fit.items():
         new.fit.setdefault(key, value)
     info.update(chosen=f"decay_on tau {best[0]:g} s", tau_s=best[0],

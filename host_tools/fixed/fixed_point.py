@@ -22,15 +22,15 @@ from host_tools.golden import runlog as rl
 from host_tools.golden.checks import check_sample_rate
 from host_tools.fixed.quantize import quantize
 from host_tools.fixed.quantize_parts import aux_channel_fracs
-from host_tools.golden.input_check import FREQ_RAIL, RANGE_KEYS, input_flags
+from host_tools.golden.input_check import FREQ_RAIL, RANGE_KEYS, input_flags, model_columns
 from host_tools.golden.regressors import power_on_counter
 
 
 def log_words(log, config) -> dict:
     """Input words of a run log under a ModelConfig: ``p`` (proxy), ``r`` (rate), ``mode``,
     ``restart``, ``z`` (0: the external Z word is not used by the host), ``invalid`` (uint8[n]: the
-    input-invalid bit, host_tools.golden.input_check.input_flags with ``word_range``: the rate or
-    proxy word outside what the sensor can report or its word can hold), ``input_sat`` (bool[n]:
+    input-invalid bit, host_tools.golden.input_check.input_flags with ``word_range`` on
+    input_check.model_columns: the rate, proxy or an aux-read F / T word outside what the sensor can report or its word can hold), ``input_sat`` (bool[n]:
     an aux channel word the pipeline reads was saturated), and for an aux 'sum' generator the channel
     words it reads: ``f`` (F), ``t`` (T), ``aux`` (int64[n, n_chan]: the aux_* columns of
     firmware_ref.aux.aux_columns as A_c words with the quantizer's AF_c) and ``k`` (the counter
@@ -38,7 +38,7 @@ def log_words(log, config) -> dict:
     pname, pcol = log.proxy(config.proxy.kind)
     p, _ = inputs.proxy_words(pcol, config.proxy.kind)
     r, _ = inputs.rate_words(log.rate_dph)
-    bad, _ = input_flags(log, ("rate_dph", pname), word_range=True)
+    bad, _ = input_flags(log, model_columns(log, config), word_range=True)
     n = len(log)
     restart = np.zeros(n, np.uint8)
     restart[np.asarray(log.segments, np.int64)] = 1

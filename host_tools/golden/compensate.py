@@ -28,8 +28,9 @@ Exact semantics (the fixed-point reference copies them):
 * **u** from the proxy column of the model's kind (host_tools.golden.proxy); **v** from the same column
   by the model's rate estimator, restarted at every ``RunLog.segments`` start
   (host_tools.golden.rate); **z** from the aux generator (0 for 'none').
-* **Input-invalid samples** ``bad[i]`` (host_tools.golden.input_check.input_flags on ``rate_dph``
-  and the model's proxy column: outside what the sensor can report): the rate estimator restarts
+* **Input-invalid samples** ``bad[i]`` (host_tools.golden.input_check.input_flags on ``rate_dph``,
+  the model's proxy column and the freq_hz / temp_c its k7 generators read,
+  input_check.model_columns: outside what the sensor can report): the rate estimator restarts
   at a bad sample and at the one after it (host_tools.golden.input_check.rate_restarts: the bad
   word never enters its memory; the estimator re-warms as after a gap, flag 4); the combiner never
   uses a bad sample and does not commit a window that held one (host_tools.golden.reversal), so
@@ -68,7 +69,7 @@ import numpy as np
 
 from host_tools.golden import runlog as rl
 from host_tools.golden.checks import check_sample_rate
-from host_tools.golden.flags import STALE_KEY, add_flags, note_aux_inputs
+from host_tools.golden.flags import POWER_ON_KEY, STALE_KEY, add_flags, note_aux_inputs
 from host_tools.golden.model import BiasModel, ModelConfig
 from host_tools.golden.proxy import ProxyConfig, parse_range
 from host_tools.golden.rate import RateConfig, parse_rate_range
@@ -77,7 +78,7 @@ from host_tools.golden import reversal as _reversal
 from host_tools.golden.reversal import (ReversalConfig, check_modes, combine, combine_values, max_stale_for,
                                         sign_of, window_ages)
 
-from host_tools.golden.input_check import INPUT_KEY, STUCK_KEY, input_flags, rate_restarts
+from host_tools.golden.input_check import INPUT_KEY, STUCK_KEY, input_flags, model_columns, rate_restarts
 from firmware_ref.vocabulary import (FLAG_EXCHANGE, FLAG_INPUT_SAT, FLAG_PROXY_CLAMPED, FLAG_RATE_CLAMPED,  # noqa: F401
                                      FLAG_STALE, FLAG_WARMUP, GOLDEN_FLAG_NAMES as FLAG_NAMES)
 # Defaults of a new model, the one place: fit_config_from_logs (and fit_logs for the terms) fill
@@ -141,8 +142,8 @@ def prepare(log, config) -> Prepared:
     BiasModel); see the module doc for the exact semantics."""
     cfg = _config_of(config)
     check_sample_rate(log, cfg.rate.fs)
-    pcol, p = log.proxy(cfg.proxy.kind)
-    bad, _ = input_flags(log, ("rate_dph", pcol))
+    _, p = log.proxy(cfg.proxy.kind)
+    bad, _ = input_flags(log, model_columns(log, cfg))
     u, u_clamped = cfg.proxy.normalize(p)
     v, v_clamped, warm = cfg.rate.normalize(p, rate_restarts(log.segments, bad))
     z = aux_regressor(log, cfg.aux, bad)
@@ -238,16 +239,44 @@ def note_host_checks(out, log, model: BiasModel, prep: Prepared | None = None, w
     out = note_aux_inputs(out, aux_inputs_clamped(log, model.config.aux))
     for key in (STALE_KEY, INPUT_KEY, STUCK_KEY):
         out.metadata.pop(key, None)
-    _, rep = input_flags(log, ("rate_dph", log.proxy(model.config.proxy.kind)[0]), word_range)
+    _, rep = input_flags(log, model_columns(log, model.config), word_range)
     if rep.flagged:
         out.metadata[INPUT_KEY] = rep.invalid_text()
     if rep.stuck:
         out.metadata[STUCK_KEY] = rep.stuck_text()
+    out.metadata.pop(POWER_ON_KEY, None)
+    caveat = power_on_caveat(log, model)
+    if caveat:
+        out.metadata[POWER_ON_KEY] = caveat
     k, age = stale_by_age(log, model, prep)
     if k:
         out.metadata[STALE_KEY] = (f"{k} samples; the log's windows reach {age:g} s before the other mode's is "
                                    f"renewed, the model allows max_stale_s {model.config.reversal.max_stale_s:g} s")
     return out
+
+
+POWER_ON_TOLERANCE_S = 1.0   # a log starts at its power-on when its first t_s is within this (or 2 samples)
+
+
+def power_on_caveat(log, model: BiasModel) -> str:
+    """'' or why ``model``'s time-since-power-on term (an aux ``decay_on`` generator, which counts
+    from the log's first sample and restarts after each gap, as the firmware after a restart) does
+    not fit ``log``: the log did not start at its power-on (first t_s later than 1 s or two
+    samples), or it has gaps (each restarts the term as if the gyroscope had been powered on)."""
+    if not any(t.get("gen") == "decay_on" for t in model.config.aux.terms) or not len(log):
+        return ""
+    t = np.asarray(log.t_s, np.float64)
+    period = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    said = []
+    if not 0.0 <= float(t[0]) <= max(POWER_ON_TOLERANCE_S, 2.0 * period):
+        said.append(f"the log starts at t_s = {float(t[0]):g} s, not at its power-on")
+    gaps = len(log.segments) - 1
+    if gaps > 0:
+        said.append(f"{gaps} gap(s) restart it (first at row {int(log.segments[1])})")
+    if not said:
+        return ""
+    return ("the model's term in the time since power-on (decay_on) counts from the log's first sample: "
+            + "; ".join(said) + "; the output there carries a turn-on that did not happen")
 
 
 def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.RunLog:
@@ -279,6 +308,17 @@ def compensate(log, model: BiasModel, impl: str = "float", table=None) -> rl.Run
         "compensation_valid": f"{nvalid} of {len(prep)} samples",
     })
     return note_host_checks(blank_invalid(add_flags(out, prep.flags)), log, model, prep)
+
+
+def checked(log, model: BiasModel) -> rl.RunLog:
+    """What :func:`compensate` would report about ``log`` under ``model`` (float), without the
+    output columns: the input log (its arrays shared) with ``flags`` and the host checks' metadata, for
+    host_tools.golden.flags.problems (e.g. `hdrg fit`'s look at its training runs; memory: one
+    prepare, not a compensated copy of the log)."""
+    prep = prepare(log, model)
+    out = log.with_columns(flags=np.asarray(prep.flags, np.int64))   # the input's columns shared, not copied
+    out.metadata["compensation_impl"] = "float"
+    return note_host_checks(out, log, model, prep)
 
 
 def fit_config_from_logs(logs, proxy_kind: str | None = None, rate_estimator: str | None = None,

@@ -48,6 +48,7 @@ EXTRAPOLATION = {VOC.FLAG_PROXY_CLAMPED: "the proxy is outside the model's proxy
                  VOC.FLAG_AUX_CLAMPED: "the k7 regressor is outside its range"}
 WARN_FRACTION = 0.01   # warn when more than 1 % of the samples are clamped (extrapolation)
 AUX_INPUTS_KEY = "aux_inputs_clamped"   # metadata: 'column count, ...' of aux inputs outside the model's range
+POWER_ON_KEY = "power_on_term"   # metadata: why the model's time-since-power-on term may not fit this log
 STALE_KEY = "stale_by_age"   # metadata: 'N samples; ...' not valid only because the other mode's window was too old
 
 
@@ -145,6 +146,9 @@ def problems(out) -> list:
     stuck = str(out.metadata.get(STUCK_KEY, "") or "").strip()
     if stuck:
         msgs.append(stuck_message(stuck))
+    power_on = str(out.metadata.get(POWER_ON_KEY, "") or "").strip()
+    if power_on:
+        msgs.append(f"power-on term: {power_on}")
     if str(out.metadata.get("compensation_impl", "")).strip() == "fixed":
         k = int(np.count_nonzero(flags & SATURATION))    # an input-invalid word is a saturated word there too
     else:

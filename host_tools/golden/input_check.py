@@ -55,6 +55,18 @@ from firmware_ref import inputs
 RATE_FS_KEYS = ("rate_full_scale_dph", "rate_full_scale_dps")   # metadata: the rate full scale
 RANGE_KEYS = {"freq_hz": "freq_range_hz", "temp_c": "temp_range_c"}  # metadata: the plausible range LO..HI
 CHECKED = ("rate_dph", "freq_hz", "temp_c")                        # the columns the test reads
+
+
+def model_columns(log, config) -> tuple:
+    """The checked columns a model reads from ``log`` (``config``: its ModelConfig): ``rate_dph``,
+    its proxy column, and freq_hz / temp_c where its k7 generators read them: one mask for the
+    float path, the fixed point's input-invalid bit and the fit's view of a compensation."""
+    cols = ["rate_dph", log.proxy(config.proxy.kind)[0]]
+    for term in config.aux.terms:
+        col = term.get("column")
+        if col in CHECKED and col in log and col not in cols:
+            cols.append(col)
+    return tuple(cols)
 STUCK_N = 256              # this many identical consecutive proxy values or more: stuck
 INPUT_KEY = "input_invalid"    # metadata of a compensated log: 'N samples; column K (first row R: ...), ...'
 STUCK_KEY = "input_stuck"      # metadata of a compensated log: 'column rows A..B (N samples), ...'
@@ -190,6 +202,13 @@ def column_flags(log, col: str, limits: dict | None = None, word_range: bool = F
     """bool[n]: the samples of column ``col`` (one of CHECKED) outside what the sensor can report
     (``limits``: :func:`declared_limits`; ``word_range`` as there)."""
     lim = declared_limits(log, word_range) if limits is None else limits
+    if col == "freq_hz" and not word_range:
+        # the float path serves any positive frequency: compare in Hz (the word saturates at 16384 Hz)
+        x = np.asarray(log[col], np.float64)
+        lo, hi = (_range(log.metadata[RANGE_KEYS[col]], RANGE_KEYS[col], log.source)
+                  if str(log.metadata.get(RANGE_KEYS[col], "")).strip() else (0.0, np.inf))
+        with np.errstate(invalid="ignore"):
+            return ~np.isfinite(x) | (x <= 0) | (x < lo) | (x > hi)
     w = _words(col, np.asarray(log[col], np.float64))
     if col == "rate_dph":
         return np.abs(w) >= lim["rate_dph"]
@@ -235,7 +254,7 @@ def input_flags(log, columns=None, word_range: bool = False) -> tuple:
     mask = np.zeros(n, bool)
     rep = InputReport(log.source, n)
     for col in cols:
-        bad = column_flags(log, col, lim)
+        bad = column_flags(log, col, lim, word_range)
         k = int(np.count_nonzero(bad))
         rep.counts[col] = k
         rep.limits[col] = lim[col + "_text"]
@@ -259,7 +278,15 @@ def warn_inputs(logs) -> list:
     (InputWarning, once per log) how many samples the fit leaves out and any stuck proxy."""
     import warnings
 
-    return [fit_mask(log, warn=lambda text: warnings.warn(text, InputWarning, stacklevel=3)) for log in logs]
+    from host_tools.errors import UserError
+
+    masks = [fit_mask(log, warn=lambda text: warnings.warn(text, InputWarning, stacklevel=3)) for log in logs]
+    for log, m in zip(logs, masks):
+        if len(m) and not m.any():
+            _, rep = input_flags(log)
+            raise UserError(f"{log.source}: every sample is outside what the sensor can report "
+                            f"({rep.invalid_text()}): nothing to fit; check the log or its declared ranges")
+    return masks
 
 
 def fit_mask(log, warn=None) -> np.ndarray:

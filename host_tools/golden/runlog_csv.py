@@ -489,9 +489,14 @@ def _locate_bad_row(lines, names, source, first_line, blank=()):
                                                   f"valid is 0)")
             try:
                 float(cell)
+                if not _NUMBER_TEXT.fullmatch(cell):     # float() also takes '1_000', other digits
+                    raise ValueError(cell)
             except ValueError:
                 raise RunLogError(source, lineno, f"column '{names[k]}': {cell.strip()!r} is not a number") from None
     raise RunLogError(source, None, "could not parse the data rows")
+
+
+_NUMBER_TEXT = re.compile(_NUMBER.pattern.decode("ascii"), re.I | re.ASCII)
 
 
 def _float_or_blank(cell: str) -> float:
