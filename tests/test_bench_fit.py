@@ -7,13 +7,13 @@ their ratios, and the largest coefficient difference.  Goal: 1e7 samples in < 1 
 faster than lstsq, memory independent of n.
 """
 import time
-import tracemalloc
 
 import numpy as np
 import pytest
 
 from firmware_ref.terms import N_TERMS
 from host_tools.fitting import fit as F
+from tracing import traced
 
 ALL = tuple(range(N_TERMS))
 
@@ -33,18 +33,6 @@ def _data(n, seed=0):
     return u, v, z, y
 
 
-def _traced(fn):
-    """(result, seconds, peak traced MB) of one call under tracemalloc."""
-    tracemalloc.start()
-    tracemalloc.reset_peak()
-    t0 = time.perf_counter()
-    out = fn()
-    dt = time.perf_counter() - t0
-    peak = tracemalloc.get_traced_memory()[1] / 2 ** 20
-    tracemalloc.stop()
-    return out, dt, peak
-
-
 @pytest.mark.benchmark
 @pytest.mark.parametrize("n", [10 ** 6, 10 ** 7])
 def test_fit_throughput_vs_lstsq(benchmark, n):
@@ -56,7 +44,7 @@ def test_fit_throughput_vs_lstsq(benchmark, n):
     ours()  # load the compiled kernel
     coef = benchmark.pedantic(ours, rounds=5 if n <= 10 ** 6 else 3, iterations=1)
     t_ours = benchmark.stats.stats.min
-    _, _, peak_ours = _traced(ours)
+    _, _, peak_ours = traced(ours, unit=2 ** 20)
 
     # reference: build the design explicitly and solve with lstsq (one round at 1e7: ~1.4 GB design)
     def ref():
@@ -65,7 +53,7 @@ def test_fit_throughput_vs_lstsq(benchmark, n):
         t1 = time.perf_counter()
         c = np.linalg.lstsq(X, y, rcond=None)[0]
         return c, t1 - t0
-    (c_ref, t_design), t_ref, peak_ref = _traced(ref)
+    (c_ref, t_design), t_ref, peak_ref = traced(ref, unit=2 ** 20)
 
     benchmark.extra_info.update({
         "n": n, "ours_s": t_ours, "lstsq_s": t_ref, "lstsq_design_s": t_design,

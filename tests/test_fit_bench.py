@@ -26,7 +26,6 @@ import os
 import subprocess
 import sys
 import time
-import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +37,7 @@ from host_tools.fitting import fit_lag as FL
 from host_tools.fitting.fit_pipeline import fit_default
 from host_tools.golden import compensate as hc
 from host_tools.golden.regressors import regressor_matrix
+from tracing import traced
 
 ROOT = Path(__file__).resolve().parent.parent
 SIX_H = 21600.0          # [s]
@@ -47,18 +47,6 @@ SCENARIO = "paper-mr-cycle-4dpm"
 @pytest.fixture(scope="module")
 def log_1hz():
     return api.simulate(SCENARIO, seed=0, duration_s=SIX_H, sample_rate_hz=1.0)
-
-
-def _traced(fn):
-    """(result, seconds, peak traced MB) of one call under tracemalloc."""
-    tracemalloc.start()
-    tracemalloc.reset_peak()
-    t0 = time.perf_counter()
-    out = fn()
-    dt = time.perf_counter() - t0
-    peak = tracemalloc.get_traced_memory()[1] / 1e6
-    tracemalloc.stop()
-    return out, dt, peak
 
 
 def _block_accumulators(log):
@@ -172,11 +160,11 @@ def test_default_fit_100hz_6h_memory(benchmark):
     log = api.simulate(SCENARIO, seed=0, duration_s=SIX_H, sample_rate_hz=100.0)
     n = len(log)
     model, res = fit_default([log], lag_block="off")      # the base model the screen starts from
-    _, t_screen, peak_screen = _traced(lambda: FL.screen([log], model))
+    _, t_screen, peak_screen = traced(lambda: FL.screen([log], model))
     nkeys = len(FL.LAG_TAUS_S) + (len(FL.SENSOR_TAUS_S) if FL.sensor_source([log], model.config) else 0)
     width = 1 + len([k for k in model.terms if k not in (0, 7)]) + 3 * nkeys + 1   # poly | lag powers | y
     dense_mb = n * width * 8 / 1e6
-    (model, _), t_fit, peak_fit = benchmark.pedantic(lambda: _traced(lambda: fit_default([log])), rounds=1, iterations=1)
+    (model, _), t_fit, peak_fit = benchmark.pedantic(lambda: traced(lambda: fit_default([log])), rounds=1, iterations=1)
     benchmark.extra_info.update({"samples": n, "fit_s": t_fit, "fit_peak_MB": peak_fit, "screen_s": t_screen,
                                  "screen_peak_MB": peak_screen, "dense_screen_matrix_MB": dense_mb,
                                  "screen_peak_over_dense": peak_screen / dense_mb, "terms": list(model.terms)})

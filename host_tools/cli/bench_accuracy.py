@@ -7,6 +7,8 @@ import sys
 
 import numpy as np
 
+from host_tools.cli.options import add_engine_options
+
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--devices", type=int, default=50, help="number of random devices (default 50)")
@@ -14,13 +16,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--start", type=int, default=0, metavar="I",
                         help="first device index (devices I .. I+N-1; default 0), to split a run over machines "
                              "without Dask (then --merge)")
-    engine = parser.add_mutually_exclusive_group()
-    engine.add_argument("--workers", type=int, default=None, metavar="N",
-                        help="local worker processes, one thread each (default: all cores; 1: in this "
-                             "process); the records are the serial run's, in device order")
-    engine.add_argument("--scheduler", metavar="ADDRESS",
-                        help="run on a Dask distributed cluster (e.g. tcp://host:8786; workers started with "
-                             "--nthreads 1) instead of local processes")
+    add_engine_options(parser, "device order")
     parser.add_argument("--merge", nargs="+", metavar="JSON", default=None,
                         help="instead: merge --json files of split runs (same options, disjoint devices) and "
                              "print their tables (with --json: write the merged result)")

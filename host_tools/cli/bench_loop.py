@@ -7,19 +7,14 @@ import os
 import sys
 
 from host_tools.atomic import atomic_open
+from host_tools.cli.options import add_engine_options
 from host_tools.errors import UserError
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--runs", type=int, default=120, help="runs (a third clean; default 120)")
     parser.add_argument("--seed", type=int, default=0, help="benchmark seed (devices S*100000 + i)")
-    engine = parser.add_mutually_exclusive_group()
-    engine.add_argument("--workers", type=int, default=None, metavar="N",
-                        help="local worker processes, one thread each (default: all cores; 1: in this "
-                             "process); the records are the serial run's, in run order")
-    engine.add_argument("--scheduler", metavar="ADDRESS",
-                        help="run on a Dask distributed cluster (e.g. tcp://host:8786; workers started with "
-                             "--nthreads 1) instead of local processes")
+    add_engine_options(parser, "run order")
     parser.add_argument("--shard", default="0/1", metavar="K/M",
                         help="only runs i with i %% M == K (one part per machine, without Dask; then --merge)")
     parser.add_argument("--merge", nargs="+", default=None, metavar="JSON",

@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from host_tools.cli.options import add_engine_options
+
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("manifest", metavar="MANIFEST", nargs="?",
@@ -11,11 +13,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "manifest.csv, else one sub-directory per device with train*/holdout* run logs)")
     parser.add_argument("-o", "--output", "--out", metavar="DIR", help="output directory (created; a second run resumes)")
     parser.add_argument("--spec", metavar="JSON", help="pass/fail spec (default: --print-spec)")
-    engine = parser.add_mutually_exclusive_group()
-    engine.add_argument("--workers", type=int, default=None, metavar="N",
-                        help="local worker processes, one thread each (default: all cores; 1: in this process)")
-    engine.add_argument("--scheduler", metavar="ADDRESS",
-                        help="Dask distributed scheduler (e.g. tcp://host:8786) instead of local processes")
+    add_engine_options(parser)
     parser.add_argument("--worst", type=int, default=10, metavar="K", help="rows of the worst-devices table (default 10)")
     parser.add_argument("--no-progress", action="store_true", help="no progress counter on stderr")
     parser.add_argument("--print-spec", action="store_true", help="print the default spec as JSON, then exit")

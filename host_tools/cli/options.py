@@ -95,6 +95,18 @@ def add_model_options(parser: argparse.ArgumentParser, what: str = "the model") 
     parser.add_argument("--rate-range", default=None, help="declared largest |d proxy/dt| [proxy units/s] (default: from data)")
 
 
+def add_engine_options(parser: argparse.ArgumentParser, order: str = "") -> None:
+    """``--workers N`` / ``--scheduler ADDRESS`` (exclusive): the engine of host_tools.lot.parallel;
+    ``order``: what the records' order is (e.g. "device order"), said in --workers' help."""
+    engine = parser.add_mutually_exclusive_group()
+    engine.add_argument("--workers", type=int, default=None, metavar="N",
+                        help="local worker processes, one thread each (default: all cores; 1: in this process)"
+                             + (f"; the records are the serial run's, in {order}" if order else ""))
+    engine.add_argument("--scheduler", metavar="ADDRESS",
+                        help="run on a Dask distributed cluster (e.g. tcp://host:8786; workers started with "
+                             "--nthreads 1) instead of local processes")
+
+
 def add_port_options(parser: argparse.ArgumentParser) -> None:
     """--port and --baud of the commands that talk to the controller."""
     parser.add_argument("--port", required=True, help="serial port or pyserial URL (/dev/ttyUSB0, /dev/pts/5, loop://)")

@@ -75,6 +75,19 @@ def pivoted_cholesky(work, tol, L, perm) -> int:
     return r
 
 
+@nb.njit(cache=True, nogil=True, inline="always")
+def _reflect(V, tau, kept, r, x):
+    """x <- H_{kept-1} ... H_0 x in place: the Householder reflectors h < ``kept`` (vectors V[:, h],
+    factors tau[h]) on the first ``r`` entries (the order of operations of LAPACK's dormqr)."""
+    for h in range(kept):
+        d = 0.0
+        for i in range(h, r):
+            d += V[i, h] * x[i]
+        d *= tau[h]
+        for i in range(h, r):
+            x[i] -= d * V[i, h]
+
+
 @nb.njit(cache=True, nogil=True)
 def _sse_sets(W, t, rank, G, b, yy, basis, sets, lens, rcond, out):
     """out[s, f] = sum over banks k of the held-out squared error of term set s on fold f.
@@ -111,13 +124,7 @@ def _sse_sets(W, t, rank, G, b, yy, basis, sets, lens, rcond, out):
                         continue                      # zero column, or beyond the rank of R
                     for i in range(r):
                         x[i] = W[f, kb, i, col] / nrm
-                    for h in range(kept):             # apply the reflectors so far
-                        d = 0.0
-                        for i in range(h, r):
-                            d += V[i, h] * x[i]
-                        d *= tau[h]
-                        for i in range(h, r):
-                            x[i] -= d * V[i, h]
+                    _reflect(V, tau, kept, r, x)      # apply the reflectors so far
                     a2 = 0.0
                     for i in range(kept, r):
                         a2 += x[i] * x[i]
@@ -142,13 +149,7 @@ def _sse_sets(W, t, rank, G, b, yy, basis, sets, lens, rcond, out):
                 if kept:
                     for i in range(r):
                         qt[i] = t[f, kb, i]
-                    for h in range(kept):
-                        d = 0.0
-                        for i in range(h, r):
-                            d += V[i, h] * qt[i]
-                        d *= tau[h]
-                        for i in range(h, r):
-                            qt[i] -= d * V[i, h]
+                    _reflect(V, tau, kept, r, qt)
                     for i in range(kept - 1, -1, -1):   # back substitution R c = Q^T t
                         acc = qt[i]
                         for j in range(i + 1, kept):
