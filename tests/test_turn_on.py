@@ -151,3 +151,56 @@ def test_unscorable_held_out_power_on_fails_the_candidate():
     blind = ok & (t > 2000)                          # nothing valid in the start window
     scores = turn_on._fold_scores([(t, y - y.mean(), ok), (t, y - y.mean(), blind)], [y, y], 720.0)
     assert np.isinf(scores[1][0]) and scores[0][0] < 0.1
+
+
+def _both_valid(log, a, b):
+    ra, rb = compensate(log, a), compensate(log, b)
+    ok = (np.asarray(ra["valid"]) > 0) & (np.asarray(rb["valid"]) > 0)
+    return ra.rate_dph, rb.rate_dph, ok
+
+
+def test_the_output_is_linear_in_the_size_of_the_term(device, runs):
+    """with_decay's contract: out(size) = out(0) + size x response, with and without generators
+    already in k7 (the second decay enters beside the first and the weights are renormalized)."""
+    from host_tools.fitting.effects import effect_term
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        off, _ = fit_default(runs, turn_on="off")
+    log = _startup(device)
+    first = effect_term("decay_on", "turn_on", tau_s=120.0)
+    second = effect_term("decay_on", "turn_on", tau_s=480.0)
+    one = turn_on.with_decay(off, first, 1.7)
+    for base, decay, size in ((off, first, -2.5), (one, second, 3.0)):
+        resp = turn_on.responses([log], base, decay)[0]
+        y0, y1, ok = _both_valid(log, base, turn_on.with_decay(base, decay, size))
+        assert ok.mean() > 0.6 and np.abs(resp[ok]).max() > 0.05     # MR: exchanges are not valid
+        assert np.allclose(y1[ok], y0[ok] + size * resp[ok], atol=1e-9)
+    both = turn_on.with_decay(one, second, 3.0)
+    assert sum(abs(t["weight"]) for t in both.config.aux.terms) <= 1.0 + 1e-12
+    assert len(both.config.aux.terms) == len(one.config.aux.terms) + 1
+
+
+def test_the_shipped_term_is_the_scored_one_and_the_result_says_so(runs, fitted):
+    """No refit after the choice: the model is the base (the fit without the term) plus the term at
+    the size the held-out scoring fitted; the FitResult carries those coefficients, k7's standard
+    error NaN (not a least-squares estimate)."""
+    from host_tools.fitting.effects import effect_term
+    model, res = fitted
+    info = model.fit["turn_on"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        off, _ = fit_default(runs, turn_on="off")
+    again = turn_on.with_decay(off, effect_term("decay_on", "turn_on", tau_s=info["tau_s"]), info["scale"])
+    assert np.array_equal(again.coef, model.coef) and again.config.aux.terms == model.config.aux.terms
+    assert np.array_equal(res.coef, model.coef) and tuple(res.terms) == tuple(model.terms)
+    assert np.isnan(res.stderr[7]) and np.isfinite(res.stderr[0])
+    assert f"{info['amp_dph']:+.3g} deg/h at power-on" in info["chosen"]
+
+
+def test_a_run_the_model_fits_worse_weighs_less():
+    t = np.arange(3000.0)
+    ok = np.ones(len(t), bool)
+    rng = np.random.default_rng(1)
+    calm, rough = rng.normal(0, 0.1, len(t)), 5.0 * np.sin(t / 300.0)
+    w = turn_on._run_weights([(t, calm, ok), (t, rough, ok), (t, np.zeros(len(t)), ok)])
+    assert w[0] > 100 * w[1] > 0 and w[2] == 0.0

@@ -6,10 +6,10 @@ parasitic-charge settling that no thermometer sees, beside its self-heating):
 
 * **calibrate** with ``hdrg fit``'s defaults (host_tools.fitting.fit_pipeline.fit_default) on
   :func:`calibration_runs`, each from its own power-on: two mode-reversal chamber runs (TRAIN_RUNS:
-  one soaked at the warm end of the range, one at the cold end) and one 45-min start-up at constant
-  ambient (a lab's room, TRAIN_STARTUP_OFFSET_C above the middle of the range): the protocol that
-  lets the fit tell a turn-on from the self-heating's temperature-dependent bias
-  (host_tools.fitting.turn_on);
+  one soaked at the warm end of the range, one at the cold end) and two 45-min start-ups at
+  constant ambient (a lab's room on two days, TRAIN_STARTUPS: degC above the middle of the range):
+  the protocol that lets the fit tell a turn-on from the self-heating's temperature-dependent
+  bias, and hold one room start-up out while the other teaches it (host_tools.fitting.turn_on);
 * **start-ups**: STARTUPS power-ons (indices 2, 3, ...) at constant ambient, each STARTUP_S (45
   min) long, the ambient drawn inside the calibrated range (:func:`ambient_of`);
 * **pipelines**: mode reversal alone (the default combiner on the raw output, no model), the
@@ -45,8 +45,9 @@ from host_tools.simulation.sim_foreign import STARTUP_S, foreign_device, simulat
 # power-on at each end of the range, so that a turn-on that depends on the temperature is told
 # from one that does not (host_tools.fitting.turn_on: MIN_START_SPREAD)
 TRAIN_RUNS = ((4.0, 0, False), (2.0, 1, True))
-TRAIN_STARTUP_OFFSET_C = 8.0   # plus one 45-min power-on at constant ambient, this far above the range's middle [degC]
-TRAIN_STARTUP_POWER_ON = 99    # ... its power-on index (the evaluated start-ups are 2, 3, ...)
+# plus 45-min power-ons at constant ambient: (degC above the range's middle, power-on index; the
+# evaluated start-ups are 2, 3, ...): a lab's room on two days
+TRAIN_STARTUPS = ((8.0, 99), (9.5, 98))
 STARTUPS = 4                        # start-ups per device (the paper's four data sets)
 FIRST_OUTPUT_S = 180.0              # the first mode-reversal output after power-on [s]
 TURN_ON_S = 300.0                   # the turn-on window ends 5 min after power-on [s]
@@ -65,13 +66,11 @@ def ambient_of(dev, power_on: int) -> float:
 
 
 def calibration_runs(dev, effect: str | None = EFFECT) -> list:
-    """The calibration runs of ``dev`` (a ForeignDevice): TRAIN_RUNS, then one start-up of
-    STARTUP_S at constant ambient TRAIN_STARTUP_OFFSET_C above the middle of the range (power-on
-    index TRAIN_STARTUP_POWER_ON); every one from its own power-on."""
+    """The calibration runs of ``dev`` (a ForeignDevice): TRAIN_RUNS, then the TRAIN_STARTUPS
+    start-ups of STARTUP_S at constant ambient; every one from its own power-on."""
     runs = [simulate_foreign(dev, rate, True, p, p, effect=effect, start_low=cold) for rate, p, cold in TRAIN_RUNS]
     mid = 0.5 * (dev.chamber["high_c"] + dev.chamber["low_c"])
-    runs.append(simulate_foreign(dev, 1.0, True, TRAIN_STARTUP_POWER_ON, TRAIN_STARTUP_POWER_ON, effect=effect,
-                                 ambient_c=mid + TRAIN_STARTUP_OFFSET_C))
+    runs += [simulate_foreign(dev, 1.0, True, p, p, effect=effect, ambient_c=mid + above) for above, p in TRAIN_STARTUPS]
     return runs
 
 
@@ -198,7 +197,7 @@ def run_benchmark(n_devices: int = 20, seed: int = 0, startups: int = STARTUPS, 
             progress(f"device {i + 1}/{n_devices} ({time.time() - t0:.0f} s)")
     config = {"devices": n_devices, "start": start, "seed": seed, "startups": startups, "startup_s": STARTUP_S,
               "train_runs": [{"rate_c_per_min": r, "power_on": p, "cold_start": c} for r, p, c in TRAIN_RUNS]
-              + [{"ambient_above_middle_c": TRAIN_STARTUP_OFFSET_C, "power_on": TRAIN_STARTUP_POWER_ON}], "effect": effect, "loop": loop,
+              + [{"ambient_above_middle_c": a, "power_on": p} for a, p in TRAIN_STARTUPS], "effect": effect, "loop": loop,
               "elapsed_s": round(time.time() - t0, 1)}
     return {"config": config, "records": records, "summary": summarize(records)}
 
@@ -209,7 +208,8 @@ def format_table(result: dict) -> str:
     c = result["config"]
     lines = [f"Start-up at constant ambient: {s['devices']} foreign devices (set {c['seed']}, "
              f"{'with their turn-on' if c['effect'] else 'control: no turn-on'}), {c['startups']} "
-             f"power-ons of {c['startup_s'] / 60:.0f} min each, calibrated on 2 chamber runs and 1 start-up "
+             f"power-ons of {c['startup_s'] / 60:.0f} min each, calibrated on {len(TRAIN_RUNS)} chamber runs and "
+             f"{len(TRAIN_STARTUPS)} room start-ups "
              f"with hdrg fit's defaults; from power-on + {FIRST_OUTPUT_S:g} s, less the {LATE_S[0] / 60:.0f}-"
              f"{LATE_S[1] / 60:.0f} min mean", "",
              f"{'pipeline':22s} {'stability':>10s} {'p-p':>8s} {'|mean|':>8s} {'0-5 min rms':>12s} {'min valid':>10s}",
