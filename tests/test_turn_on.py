@@ -160,24 +160,32 @@ def _both_valid(log, a, b):
 
 
 def test_the_output_is_linear_in_the_size_of_the_term(device, runs):
-    """with_decay's contract: out(size) = out(0) + size x response, with and without generators
-    already in k7 (the second decay enters beside the first and the weights are renormalized)."""
+    """with_decay's contract: out(size) = out(0) + size x response, and the decay adds ``size`` deg/h
+    at power-on to every coefficient bank alike: alone in k7, and beside generators whose k7
+    differs between the banks (then with its sign twin, the weights renormalized)."""
     from host_tools.fitting.effects import effect_term
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        off, _ = fit_default(runs, turn_on="off")
+        lagged, _ = fit_default(runs, turn_on="off")
+        plain, _ = fit_default(runs, turn_on="off", lag_block="off")
+    assert lagged.config.aux.terms and not (7 in plain.terms and plain.config.aux.terms)
+    k7 = np.array(lagged.banks)[:, 7]
+    assert len(k7) == 2 and not np.isclose(k7[0], k7[1]) and turn_on.decay_terms_needed(lagged) == 2
     log = _startup(device)
-    first = effect_term("decay_on", "turn_on", tau_s=120.0)
-    second = effect_term("decay_on", "turn_on", tau_s=480.0)
-    one = turn_on.with_decay(off, first, 1.7)
-    for base, decay, size in ((off, first, -2.5), (one, second, 3.0)):
+    decay = effect_term("decay_on", "turn_on", tau_s=240.0)
+    for base, size in ((plain, -2.5), (lagged, 3.0)):
         resp = turn_on.responses([log], base, decay)[0]
-        y0, y1, ok = _both_valid(log, base, turn_on.with_decay(base, decay, size))
+        new = turn_on.with_decay(base, decay, size)
+        y0, y1, ok = _both_valid(log, base, new)
         assert ok.mean() > 0.6 and np.abs(resp[ok]).max() > 0.05     # MR: exchanges are not valid
         assert np.allclose(y1[ok], y0[ok] + size * resp[ok], atol=1e-9)
-    both = turn_on.with_decay(one, second, 3.0)
-    assert sum(abs(t["weight"]) for t in both.config.aux.terms) <= 1.0 + 1e-12
-    assert len(both.config.aux.terms) == len(one.config.aux.terms) + 1
+        assert np.allclose(turn_on.decay_size(new, 240.0), size, rtol=1e-9)
+        assert sum(abs(t["weight"]) for t in new.config.aux.terms) <= 1.0 + 1e-12
+    full = turn_on.with_decay(lagged, decay, 1.0)
+    while len(full.config.aux.terms) + 2 <= 6:
+        full = turn_on.with_decay(full, effect_term("decay_on", "turn_on", tau_s=60.0 * len(full.config.aux.terms)), 0.1)
+    with pytest.raises(ValueError, match="chip's limit"):
+        turn_on.with_decay(full, effect_term("decay_on", "turn_on", tau_s=999.0), 1.0)
 
 
 def test_the_shipped_term_is_the_scored_one_and_the_result_says_so(runs, fitted):
@@ -194,7 +202,9 @@ def test_the_shipped_term_is_the_scored_one_and_the_result_says_so(runs, fitted)
     assert np.array_equal(again.coef, model.coef) and again.config.aux.terms == model.config.aux.terms
     assert np.array_equal(res.coef, model.coef) and tuple(res.terms) == tuple(model.terms)
     assert np.isnan(res.stderr[7]) and np.isfinite(res.stderr[0])
-    assert f"{info['amp_dph']:+.3g} deg/h at power-on" in info["chosen"]
+    assert len(info["amp_dph"]) == len(model.banks) and "deg/h at power-on" in info["chosen"]
+    true = foreign_device(DEVICE).effects["turn_on"]["amp_dph"]       # the device's, deg/h at power-on
+    assert all(0.5 < a / true < 2.0 for a in info["amp_dph"]), (info["amp_dph"], true)
 
 
 def test_a_run_the_model_fits_worse_weighs_less():

@@ -38,7 +38,9 @@ Choice (:func:`add_turn_on`), on the training runs only:
   When the base's generators fill the chip's AUX_MAX_TERMS, the sign-twin terms of a
   mode-reversal lag block make room (each coefficient bank keeps its own k7), and the base is
   refitted without them first.  model.fit["turn_on"]: the candidates' scores, the choice, its
-  size at power-on.
+  size at power-on per coefficient bank (``amp_dph``: k7_b x the term's weight, deg/h; beside
+  generators whose k7 differs between the banks, the term enters each bank in that proportion,
+  which the response and so the scoring include).
 
 Why not refit all coefficients with the term: a chamber run that starts soaked at an end of the
 range holds its turn-on where the polynomial's end is learned, so a refit trades the two, and
@@ -57,7 +59,7 @@ import numpy as np
 from firmware_ref.formats import AUX_MAX_TERMS
 from firmware_ref.terms import K_AUX
 
-TAU_GRID_S = (60.0, 120.0, 240.0, 480.0, 960.0, 1920.0)   # candidate time constants [s]
+TAU_GRID_S = (60.0, 85.0, 120.0, 170.0, 240.0, 340.0, 480.0, 680.0, 960.0, 1360.0, 1920.0)   # candidate time constants [s], ratio 2^(1/2)
 MAX_TAU_FRACTION = 0.25     # tau <= this x the shortest training run (host_tools.fitting.effects: turn_on)
 START_WINDOW_S = 2700.0     # scored window after each power-on [s]: the paper's 45-min start-up
 MARGIN = 0.2                # start-window SSE must fall by this fraction on every held-out power-on
@@ -177,27 +179,51 @@ def _fold_scores(outputs, g_runs, window_s) -> list:
     return out
 
 
+def decay_terms_needed(model) -> int:
+    """How many k7 terms :func:`with_decay` adds to ``model``: 1, or 2 beside generators whose k7
+    differs between the two coefficient banks of a regress_first model (the decay and its sign
+    twin, so that it enters both banks alike)."""
+    banks = np.array(model.banks, np.float64)[:, K_AUX]
+    gens = K_AUX in model.terms and model.config.aux.terms
+    return 1 if not gens or len(banks) == 1 or np.isclose(banks[0], banks[1], rtol=1e-9) else 2
+
+
 def with_decay(model, decay, scale: float):
     """``model`` (a BiasModel) with the ``decay`` term (a ``decay_on`` generator term) added to k7
-    at ``scale``: without generators in k7, the decay is k7's only term (weight 1) and every
-    bank's k7 is ``scale`` [deg/h]; beside the model's generators (weights w_j, bank coefficients
-    k7_b), the decay's weight is ``scale`` / mean_b k7_b and, when sum |w| then exceeds 1, all
-    weights are divided by that sum and every k7_b multiplied by it (the other terms' part of the
-    bias unchanged).  Either way the compensated output is linear in ``scale``: out(scale) =
-    out(0) + scale x the response (:func:`responses`)."""
+    so that it adds ``scale`` x g [deg/h] to the bias of every coefficient bank (a turn-on flips
+    like the rate, so the targets s x rate of both banks hold it alike):
+
+    * without generators in k7: the decay is k7's only term (weight 1), every bank's k7 = scale;
+    * beside generators (weights w_j, bank coefficients k7_b): one bank, or k7_1 = k7_2: the
+      decay's weight is scale / k7; two banks with k7_1 != k7_2: the decay with weight
+      scale (1/k7_1 + 1/k7_2) / 2 and its sign twin (``sign`` True: + in mode 1, - in mode 2) with
+      weight scale (1/k7_1 - 1/k7_2) / 2.  When sum |w| then exceeds 1, all weights are divided
+      by it and every k7_b multiplied by it (the other terms' part of the bias unchanged).
+
+    The compensated output is linear in ``scale``: out(scale) = out(0) + scale x the response
+    (:func:`responses`).  ValueError when a bank's k7 is 0 beside generators, or when k7 would hold
+    more than AUX_MAX_TERMS terms."""
     from host_tools.golden.model import BiasModel
     from host_tools.golden.regressors import AuxConfig
 
     cfg = model.config
     gens = list(cfg.aux.terms) if K_AUX in model.terms else []
     banks = np.array(model.banks, np.float64)
+    k7 = banks[:, K_AUX]
     if not gens:
         terms, banks[:, K_AUX] = [dict(decay, weight=1.0)], scale
     else:
-        ref = float(np.mean(banks[:, K_AUX]))
-        if abs(ref) < 1e-9 * max(1.0, float(np.max(np.abs(banks[:, K_AUX])))):
-            ref = float(banks[np.argmax(np.abs(banks[:, K_AUX])), K_AUX])
-        terms = gens + [dict(decay, weight=scale / ref if ref else 0.0)]
+        if np.any(k7 == 0.0):
+            raise ValueError("a coefficient bank's k7 is 0: a decay cannot share k7 with its generators")
+        if decay_terms_needed(model) == 1:
+            added = [dict(decay, weight=scale / float(k7[0]))]
+        else:
+            inv = 1.0 / k7
+            added = [dict(decay, weight=0.5 * scale * float(inv[0] + inv[1])),
+                     dict(decay, sign=True, weight=0.5 * scale * float(inv[0] - inv[1]))]
+        terms = gens + added
+        if len(terms) > AUX_MAX_TERMS:
+            raise ValueError(f"k7 would hold {len(terms)} generator terms (the chip's limit is {AUX_MAX_TERMS})")
         total = sum(abs(t["weight"]) for t in terms)
         if total > 1.0:
             terms = [dict(t, weight=t["weight"] / total) for t in terms]
@@ -205,6 +231,15 @@ def with_decay(model, decay, scale: float):
     return BiasModel(replace(cfg, aux=AuxConfig.from_terms(terms, cfg.rate.fs)),
                      tuple(sorted(set(model.terms) | {K_AUX})), banks[0], dict(model.fit), model.source,
                      banks[1] if len(banks) > 1 else None)
+
+
+def decay_size(model, tau_s: float) -> list:
+    """Per coefficient bank: what the ``decay_on`` terms of time constant ``tau_s`` in ``model``'s
+    k7 add to the bias at power-on (g = 1) [deg/h]: k7_b x sum_j w_j (x -1 in bank 2 for a sign twin)."""
+    banks = np.array(model.banks, np.float64)[:, K_AUX]
+    ds = [t for t in model.config.aux.terms if t.get("gen") == "decay_on" and float(t["tau_s"]) == float(tau_s)]
+    return [float(k * sum(t["weight"] * (-1.0 if (b == 1 and t.get("sign")) else 1.0) for t in ds))
+            for b, k in enumerate(banks)]
 
 
 def responses(logs, model, decay) -> list:
@@ -256,10 +291,14 @@ def add_turn_on(logs, model, res, refit):
     gens = [t for t in cfg.aux.terms if t.get("gen") != "decay_on"]
     late = [log for log in logs if not starts_at_power_on(log)]
     spread = start_spread(logs, cfg.proxy) if len(logs) >= MIN_RUNS and not late else 0.0
-    # beside the turn-on, k7 keeps the model's generators; when the chip's AUX_MAX_TERMS are all
-    # used, the sign-twin terms of a mode-reversal lag block go (each bank keeps its own k7)
-    kept = gens if len(gens) < AUX_MAX_TERMS else [t for t in gens if not t.get("sign")]
-    if len(kept) >= AUX_MAX_TERMS:
+    # beside the turn-on, k7 keeps the model's generators; when the chip's AUX_MAX_TERMS cannot
+    # also hold the decay (with its sign twin: decay_terms_needed), the sign-twin terms of a
+    # mode-reversal lag block go (each bank keeps its own k7)
+    kept = (gens if len(gens) + decay_terms_needed(model) <= AUX_MAX_TERMS
+            else [t for t in gens if not t.get("sign")])
+    if len(gens) < len(cfg.aux.terms) and K_AUX in model.terms:
+        info["why"] = "k7 already holds a decay since power-on"
+    elif len(kept) + (1 if not kept or model.coef_mode2 is None else 2) > AUX_MAX_TERMS:
         info["why"] = f"k7 already holds {len(gens)} generator terms (the chip's limit is {AUX_MAX_TERMS})"
     elif late:
         info["why"] = (f"{late[0].source} does not start at its power-on (first t_s {float(late[0].t_s[0]):g} s; t_s is "
@@ -305,9 +344,11 @@ def add_turn_on(logs, model, res, refit):
         return model, res
     scale = -_amplitude(outputs, best[3])
     new = with_decay(base, best[2], scale)
-    at_power_on = float(np.mean(np.array(new.banks)[:, K_AUX])) * float(new.config.aux.terms[-1]["weight"])
-    info.update(chosen=f"decay_on tau {best[0]:g} s, {at_power_on:+.3g} deg/h at power-on", tau_s=best[0],
-                scale=scale, amp_dph=at_power_on,
+    sizes = decay_size(new, best[0])
+    size = (f"{sizes[0]:+.3g}" if len(sizes) == 1 or np.isclose(sizes[0], sizes[1], rtol=0.01)
+            else f"{sizes[0]:+.3g} (mode 1) / {sizes[1]:+.3g} (mode 2)")
+    info.update(chosen=f"decay_on tau {best[0]:g} s, {size} deg/h at power-on", tau_s=best[0],
+                scale=scale, amp_dph=sizes,
                 why=f"it lowers the start-window error by >= {100 * MARGIN:g} % on every held-out power-on")
     new.fit["turn_on"] = info
     return new, _result_of(base_res, new)
