@@ -190,8 +190,8 @@ def test_the_output_is_linear_in_the_size_of_the_term(device, runs):
 
 def test_the_shipped_term_is_the_scored_one_and_the_result_says_so(runs, fitted):
     """No refit after the choice: the model is the base (the fit without the term) plus the term at
-    the size the held-out scoring fitted; the FitResult carries those coefficients, k7's standard
-    error NaN (not a least-squares estimate)."""
+    the size the held-out scoring fitted; the FitResult carries those coefficients and finite
+    standard errors."""
     from host_tools.fitting.effects import effect_term
     model, res = fitted
     info = model.fit["turn_on"]
@@ -201,7 +201,8 @@ def test_the_shipped_term_is_the_scored_one_and_the_result_says_so(runs, fitted)
     again = turn_on.with_decay(off, effect_term("decay_on", "turn_on", tau_s=info["tau_s"]), info["scale"])
     assert np.array_equal(again.coef, model.coef) and again.config.aux.terms == model.config.aux.terms
     assert np.array_equal(res.coef, model.coef) and tuple(res.terms) == tuple(model.terms)
-    assert np.isnan(res.stderr[7]) and np.isfinite(res.stderr[0])
+    assert np.all(np.isfinite(res.stderr)) and res.stderr[7] > 0       # the fit's refusals pass (hdrg fit)
+    assert info["size_stderr_dph"] > 0
     assert len(info["amp_dph"]) == len(model.banks) and "deg/h at power-on" in info["chosen"]
     true = foreign_device(DEVICE).effects["turn_on"]["amp_dph"]       # the device's, deg/h at power-on
     assert all(0.5 < a / true < 2.0 for a in info["amp_dph"]), (info["amp_dph"], true)
@@ -214,3 +215,24 @@ def test_a_run_the_model_fits_worse_weighs_less():
     calm, rough = rng.normal(0, 0.1, len(t)), 5.0 * np.sin(t / 300.0)
     w = turn_on._run_weights([(t, calm, ok), (t, rough, ok), (t, np.zeros(len(t)), ok)])
     assert w[0] > 100 * w[1] > 0 and w[2] == 0.0
+
+
+def test_hdrg_fit_writes_a_turn_on_model_and_says_its_size(runs, tmp_path, capsys):
+    """The CLI end to end: the model with the term passes the fit's refusals (k7's standard error
+    is a number), and the printout gives the term's size at power-on with its standard error."""
+    from host_tools.cli import main
+    from host_tools.golden.model import BiasModel
+    from host_tools.golden.runlog import write
+    names = []
+    for i, run in enumerate(runs):
+        names.append(str(tmp_path / f"run{i}.npz"))
+        write(run, names[-1])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["fit", *names, "-o", str(tmp_path / "model.json")]) == 0
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if x.startswith("power-on transient"))
+    assert "deg/h at power-on +- " in line and "nan" not in out.lower()
+    model = BiasModel.from_json(tmp_path / "model.json")
+    assert any(t["gen"] == "decay_on" for t in model.config.aux.terms)
+    assert model.fit["turn_on"]["size_stderr_dph"] > 0

@@ -76,7 +76,8 @@ def run(args) -> int:
         print(f"lag-state block (u: proxy, T: sensor): not kept ({why})")
     turn = model.fit.get("turn_on")
     if turn:
-        print(f"power-on transient (time since power-on, k7): {turn['chosen'] or 'not learned'} ({turn.get('why', '')})")
+        se = f" +- {turn['size_stderr_dph']:.2g} (100-s means)" if turn.get("size_stderr_dph") is not None else ""
+        print(f"power-on transient (time since power-on, k7): {turn['chosen'] or 'not learned'}{se} ({turn.get('why', '')})")
     print(f"{args.output}: {len(res.terms)} terms {['k%d' % k for k in res.terms]}, n={res.n}, "
           f"rms={res.rms:.4g} deg/h, cond={res.cond:.3g}")
     rev = model.config.reversal

@@ -267,6 +267,26 @@ def _amplitude(outputs, resp) -> float:
     return num / den if den > 0 else 0.0
 
 
+def _size_stderr(outputs, resp, scale: float) -> float:
+    """Standard error [deg/h] of the size ``scale`` (:func:`_amplitude`), from the BIN_S means of
+    every run (weighted as in the fit of the size; fewer correlated errors than the samples, still
+    optimistic for drift): sqrt(sum w |Y + scale R|^2 / (bins - 1) / sum w |R|^2)."""
+    num = den = 0.0
+    bins = 0
+    for (t, y, ok), r, wt in zip(outputs, resp, _run_weights(outputs)):
+        if not ok.any():
+            continue
+        b = (t[ok] // BIN_S).astype(np.int64)
+        cnt = np.bincount(b)
+        keep = cnt > 0
+        rc = r[ok] - r[ok].mean()
+        ym, rm = (np.bincount(b, weights=x)[keep] / cnt[keep] for x in (y[ok], rc))
+        num += wt * float(np.sum((ym + scale * rm) ** 2))
+        den += wt * float(rm @ rm)
+        bins += int(keep.sum())
+    return float(np.sqrt(num / max(bins - 1, 1) / den)) if den > 0 else float("inf")
+
+
 def candidate_taus(logs) -> list:
     """The taus of TAU_GRID_S within MAX_TAU_FRACTION x the shortest run [s]."""
     shortest = min(float(log.t_s[-1] - log.t_s[0]) for log in logs)
@@ -322,6 +342,11 @@ def add_turn_on(logs, model, res, refit):
                                tuple(poly_terms(model)) + (K_AUX,))
         for key, value in model.fit.items():
             base.fit.setdefault(key, value)
+    k7 = np.array(base.banks, np.float64)[:, K_AUX]
+    if K_AUX in base.terms and base.config.aux.terms and np.any(k7 == 0.0):
+        info["why"] = "a coefficient bank's k7 is 0 beside the model's generators: a decay cannot share k7 with them"
+        model.fit["turn_on"] = info
+        return model, res
     outputs = _outputs(logs, base)
     rows, best = [], None
     for tau in taus:
@@ -343,6 +368,8 @@ def add_turn_on(logs, model, res, refit):
         model.fit["turn_on"] = info
         return model, res
     scale = -_amplitude(outputs, best[3])
+    se = _size_stderr(outputs, best[3], scale)
+    info["size_stderr_dph"] = se if np.isfinite(se) else None
     new = with_decay(base, best[2], scale)
     sizes = decay_size(new, best[0])
     size = (f"{sizes[0]:+.3g}" if len(sizes) == 1 or np.isclose(sizes[0], sizes[1], rtol=0.01)
@@ -351,18 +378,22 @@ def add_turn_on(logs, model, res, refit):
                 scale=scale, amp_dph=sizes,
                 why=f"it lowers the start-window error by >= {100 * MARGIN:g} % on every held-out power-on")
     new.fit["turn_on"] = info
-    return new, _result_of(base_res, new)
+    return new, _result_of(base_res, base, new, se)
 
 
-def _result_of(res, model):
-    """``res`` (the base model's FitResult) with ``model``'s terms and coefficients: k7's size
-    comes from the held-out scoring, not from a least-squares fit, so its standard error is NaN."""
+def _result_of(res, base, model, size_stderr: float):
+    """``res`` (the base model's FitResult) with ``model``'s terms and coefficients.  k7's standard
+    error: without generators beside the decay, the size's (:func:`_size_stderr`, deg/h); beside
+    them, the base's k7 error scaled as k7 was by the renormalization of the weights."""
     if res is None:
         return None
+    k0 = np.array(base.banks, np.float64)[:, K_AUX]
+    k1 = np.array(model.banks, np.float64)[:, K_AUX]
     err = [None if e is None else np.array(e, np.float64) for e in (res.stderr, res.stderr_mode2)]
-    for e in err:
+    gens = K_AUX in base.terms and bool(base.config.aux.terms)
+    for b, e in enumerate(err):
         if e is not None:
-            e[K_AUX] = float("nan")
+            e[K_AUX] = e[K_AUX] * abs(k1[b] / k0[b]) if gens else size_stderr
     return replace(res, coef=np.array(model.coef, np.float64), terms=tuple(model.terms), stderr=err[0],
                    coef_mode2=None if model.coef_mode2 is None else np.array(model.coef_mode2, np.float64),
                    stderr_mode2=err[1])
