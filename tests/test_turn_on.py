@@ -44,7 +44,8 @@ def test_turn_on_learned_and_it_lowers_the_startup_error(device, fitted):
     assert info["chosen"] and info["chosen"].startswith("decay_on"), info
     assert any(t["gen"] == "decay_on" for t in model.config.aux.terms) and 7 in model.terms
     assert all(row["kept"] == (max(row["start_ratio"]) <= 1 - turn_on.MARGIN and
-                               max(row["run_ratio"]) <= turn_on.RUN_TOLERANCE) for row in info["candidates"])
+                               max(row["run_ratio"]) <= turn_on.RUN_TOLERANCE and
+                               row["size_t"] >= turn_on.MIN_SIZE_T) for row in info["candidates"])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         off, _ = fit_default(bench.calibration_runs(device), turn_on="off")

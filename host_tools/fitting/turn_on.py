@@ -32,7 +32,8 @@ Choice (:func:`add_turn_on`), on the training runs only:
   and over the whole run, against the output without the term.  A held-out run with fewer than
   MIN_BINS means to score fails the candidate;
 * **kept** when, on EVERY held-out run, the window's error falls by at least MARGIN and the whole
-  run's rises by at most RUN_TOLERANCE.  Of several, the one of least mean error ratio over the
+  run's rises by at most RUN_TOLERANCE, and the size fitted on all runs is at least MIN_SIZE_T
+  times its standard error (:func:`_size_stderr`).  Of several, the one of least mean error ratio over the
   first START_WINDOW_S (one window for every tau).  The model shipped is the base with the term
   at the size weighted least squares gives on all runs: exactly what was scored, with no refit.
   When the base's generators fill the chip's AUX_MAX_TERMS, the sign-twin terms of a
@@ -67,6 +68,8 @@ MIN_RUNS = 2
 WINDOW_TAUS = 3.0           # scored window after power-on: this many time constants ...
 MIN_WINDOW_S = 600.0        # ... at least this long, at most START_WINDOW_S [s]
 RUN_TOLERANCE = 1.05        # the whole held-out run's error may not rise by more than this factor
+MIN_SIZE_T = 5.0            # the size fitted on all runs: at least this many standard errors (100-s means); chosen
+                            # on `hdrg bench startup --seed 1` (turn-ons 7.0 and up, the control's one 2.9)
 
 
 POWER_ON_TOLERANCE_S = 1.0  # a run starts at its power-on when its first t_s is within this (or 2 samples)
@@ -355,20 +358,24 @@ def add_turn_on(logs, model, res, refit):
         resp = responses(logs, base, decay)
         sc = _fold_scores(outputs, resp, w)
         start, whole = [x[0] for x in sc], [x[1] for x in sc]
-        ok = max(start) <= 1.0 - MARGIN and max(whole) <= RUN_TOLERANCE
+        scale = -_amplitude(outputs, resp)
+        se = _size_stderr(outputs, resp, scale)
+        size_t = abs(scale) / se if se > 0 else 0.0
+        ok = max(start) <= 1.0 - MARGIN and max(whole) <= RUN_TOLERANCE and size_t >= MIN_SIZE_T
         rows.append({"tau_s": tau, "window_s": w, "start_ratio": [round(x, 4) if np.isfinite(x) else None for x in start],
-                     "run_ratio": [round(x, 4) if np.isfinite(x) else None for x in whole], "kept": ok})
+                     "run_ratio": [round(x, 4) if np.isfinite(x) else None for x in whole],
+                     "size_t": round(size_t, 2), "kept": ok})
         rank = float(np.mean([x[0] for x in _fold_scores(outputs, resp, START_WINDOW_S)]))   # one window for all taus
         if ok and (best is None or rank < best[1]):
-            best = (tau, rank, decay, resp)
+            best = (tau, rank, decay, scale, se)
     info["candidates"] = rows
     if best is None:
         info["why"] = (f"no time constant lowers the start-window error by {100 * MARGIN:g} % on every held-out "
-                       f"power-on without raising the whole run's by more than {100 * (RUN_TOLERANCE - 1):g} %")
+                       f"power-on without raising the whole run's by more than {100 * (RUN_TOLERANCE - 1):g} %, "
+                       f"with a size at least {MIN_SIZE_T:g} x its standard error")
         model.fit["turn_on"] = info
         return model, res
-    scale = -_amplitude(outputs, best[3])
-    se = _size_stderr(outputs, best[3], scale)
+    scale, se = best[3], best[4]
     info["size_stderr_dph"] = se if np.isfinite(se) else None
     new = with_decay(base, best[2], scale)
     sizes = decay_size(new, best[0])
