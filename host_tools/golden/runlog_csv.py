@@ -190,6 +190,29 @@ def _eisel_lemire(w, q, t_hi, t_lo):
     return np.int64(mant | (_U(power2) << _U(52)))
 
 
+@numba.njit(cache=True, inline="always")   # inlined: as a call per cell, 1e6 rows read in 0.38-0.42 s, not 0.36 s
+def _digits(buf, i, n, w, nd, ndig, exp, wide, frac):
+    """The run of decimal digits at ``buf[i:]`` (up to ``n``) added to a number being parsed: ``w``
+    the significand of its first 19 significant digits (``nd`` of them so far; a further one sets
+    ``wide``), ``ndig`` all digits read; ``frac``: digits after the decimal point, each kept one
+    and each leading zero lowering the decimal exponent ``exp``.  Returns (i, w, nd, ndig, exp, wide)."""
+    while i < n and 48 <= buf[i] <= 57:
+        d = _U(buf[i] - 48)
+        ndig += 1
+        if nd > 0 or d != _U(0):
+            if nd < 19:
+                w = w * _TEN + d
+                nd += 1
+                if frac:
+                    exp -= 1
+            else:
+                wide = True
+        elif frac:
+            exp -= 1
+        i += 1
+    return i, w, nd, ndig, exp, wide
+
+
 @numba.njit(cache=True)
 def _parse_rows(buf, out, row0, blank_ok, hard, t_hi, t_lo, p10):
     """Parse the complete lines of ``buf`` (uint8, every line ends with ``\\n``) into ``out[:, row0:]``
@@ -210,32 +233,10 @@ def _parse_rows(buf, out, row0, blank_ok, hard, t_hi, t_lo, p10):
                 neg, signed = buf[i] == 45, True
                 i += 1
             w, nd, ndig, exp, wide, bad = _U(0), 0, 0, 0, False, False
-            while i < n and 48 <= buf[i] <= 57:
-                d = _U(buf[i] - 48)
-                ndig += 1
-                if nd > 0 or d != _U(0):
-                    if nd < 19:
-                        w = w * _TEN + d
-                        nd += 1
-                    else:
-                        wide = True
-                i += 1
+            i, w, nd, ndig, exp, wide = _digits(buf, i, n, w, nd, ndig, exp, wide, False)
             if i < n and buf[i] == 46:
                 dot = True
-                i += 1
-                while i < n and 48 <= buf[i] <= 57:
-                    d = _U(buf[i] - 48)
-                    ndig += 1
-                    if nd > 0 or d != _U(0):
-                        if nd < 19:
-                            w = w * _TEN + d
-                            nd += 1
-                            exp -= 1
-                        else:
-                            wide = True
-                    else:
-                        exp -= 1
-                    i += 1
+                i, w, nd, ndig, exp, wide = _digits(buf, i + 1, n, w, nd, ndig, exp, wide, True)
             if ndig > 0 and i < n and (buf[i] == 101 or buf[i] == 69):
                 i += 1
                 eneg = False
