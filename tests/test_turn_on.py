@@ -150,7 +150,8 @@ def test_unscorable_held_out_power_on_fails_the_candidate():
     y = np.exp(-t / 240.0)
     ok = np.ones(len(t), bool)
     blind = ok & (t > 2000)                          # nothing valid in the start window
-    scores = turn_on._fold_scores([(t, y - y.mean(), ok), (t, y - y.mean(), blind)], [y, y], 720.0)
+    outputs = [(t, y - y.mean(), ok), (t, y - y.mean(), blind)]
+    _, scores = turn_on._fold_scores(outputs, [y, y], turn_on._run_weights(outputs), (720.0,))
     assert np.isinf(scores[1][0]) and scores[0][0] < 0.1
 
 

@@ -111,6 +111,17 @@ BIN_S = 100.0               # scored: means over this many seconds (the stabilit
 MIN_BINS = 3                # a held-out run is scored only with this many BIN_S means in the window
 
 
+def _bin_means(t, x, window_s=None) -> np.ndarray:
+    """The BIN_S-s means of ``x`` [deg/h] at times ``t`` [s since power-on], over the first
+    ``window_s`` [s] (None: all), of the bins that hold samples."""
+    b = (np.asarray(t) // BIN_S).astype(np.int64)
+    if window_s is not None:
+        keep = np.asarray(t) < window_s
+        b, x = b[keep], np.asarray(x)[keep]
+    cnt = np.bincount(b)
+    return np.bincount(b, weights=x)[cnt > 0] / cnt[cnt > 0]
+
+
 def _binned_sq(out, t, valid, window_s=None) -> float:
     """Sum of squares of the BIN_S-s means of ``out`` [deg/h] over the valid samples (the run's
     mean removed), over the first ``window_s`` [s] after power-on (None: the whole run); NaN with
@@ -119,13 +130,8 @@ def _binned_sq(out, t, valid, window_s=None) -> float:
     ok = np.asarray(valid, bool) & np.isfinite(out)
     if ok.sum() < 2:
         return float("nan")
-    b = (t[ok] // BIN_S).astype(np.int64)
-    keep = np.ones(len(b), bool) if window_s is None else t[ok] < window_s
     x = np.asarray(out, np.float64)[ok]
-    x = x - float(np.mean(x))
-    sums = np.bincount(b[keep], weights=x[keep])
-    cnt = np.bincount(b[keep])
-    m = sums[cnt > 0] / cnt[cnt > 0]
+    m = _bin_means(t[ok], x - float(np.mean(x)), window_s)
     return float(m @ m) if len(m) >= MIN_BINS else float("nan")
 
 
@@ -155,21 +161,21 @@ def _run_weights(outputs) -> list:
     the term's size (weighted least squares); 0 for a run with nothing to score."""
     out = []
     for t, y, ok in outputs:
-        b = (t[ok] // BIN_S).astype(np.int64)
-        cnt = np.bincount(b)
-        m = np.bincount(b, weights=y[ok])[cnt > 0] / cnt[cnt > 0] if ok.any() else np.zeros(0)
+        m = _bin_means(t[ok], y[ok])
         ms = float(m @ m) / len(m) if len(m) else 0.0
         out.append(1.0 / ms if ms > 0 else 0.0)
     return out
 
 
-def _fold_scores(outputs, g_runs, window_s) -> list:
-    """Per held-out run i: (error ratio over the first ``window_s`` [s], over the whole run) of the
-    output with the term (``g_runs``: per run the term's response; its size by least squares on
-    the OTHER runs' outputs, each run weighted by :func:`_run_weights` and its own offset free) to
-    the output without it; errors = sums of squares of BIN_S means."""
+def _fold_scores(outputs, g_runs, weights, windows) -> tuple:
+    """The term of response ``g_runs`` (per run) on ``outputs``, its size fitted by least squares
+    (each run weighted by ``weights``, :func:`_run_weights`, and its own offset free): (the size
+    on all runs, i.e. the output's change is size x response; per held-out run i, the error ratio
+    of the output with the term sized on the OTHER runs to the output without it over the first
+    ``w`` [s] for each w of ``windows``, then over the whole run).  Errors are sums of squares of
+    BIN_S means."""
     parts = []
-    for (t, y, ok), g, wt in zip(outputs, g_runs, _run_weights(outputs)):
+    for (t, y, ok), g, wt in zip(outputs, g_runs, weights):
         gc = np.where(ok, g - (g[ok].mean() if ok.any() else 0.0), 0.0)
         parts.append((wt * float(gc @ y), wt * float(gc @ gc), gc))
     out = []
@@ -178,8 +184,9 @@ def _fold_scores(outputs, g_runs, window_s) -> list:
         den = sum(p[1] for j, p in enumerate(parts) if j != i)
         amp = num / den if den > 0 else 0.0
         after = y - amp * gc
-        out.append(tuple(_ratio(_binned_sq(after, t, ok, w), _binned_sq(y, t, ok, w)) for w in (window_s, None)))
-    return out
+        out.append(tuple(_ratio(_binned_sq(after, t, ok, w), _binned_sq(y, t, ok, w)) for w in (*windows, None)))
+    num, den = sum(p[0] for p in parts), sum(p[1] for p in parts)
+    return -(num / den if den > 0 else 0.0), out
 
 
 def decay_terms_needed(model) -> int:
@@ -260,33 +267,19 @@ def responses(logs, model, decay) -> list:
     return out
 
 
-def _amplitude(outputs, resp) -> float:
-    """Least-squares scale of the responses ``resp`` on the outputs (each run weighted by
-    :func:`_run_weights`, its offset free)."""
-    num = den = 0.0
-    for (t, y, ok), r, wt in zip(outputs, resp, _run_weights(outputs)):
-        rc = np.where(ok, r - (r[ok].mean() if ok.any() else 0.0), 0.0)
-        num, den = num + wt * float(rc @ y), den + wt * float(rc @ rc)
-    return num / den if den > 0 else 0.0
-
-
-def _size_stderr(outputs, resp, scale: float) -> float:
-    """Standard error [deg/h] of the size ``scale`` (:func:`_amplitude`), from the BIN_S means of
+def _size_stderr(outputs, resp, weights, scale: float) -> float:
+    """Standard error [deg/h] of the size ``scale`` (:func:`_fold_scores`), from the BIN_S means of
     every run (weighted as in the fit of the size; fewer correlated errors than the samples, still
     optimistic for drift): sqrt(sum w |Y + scale R|^2 / (bins - 1) / sum w |R|^2)."""
     num = den = 0.0
     bins = 0
-    for (t, y, ok), r, wt in zip(outputs, resp, _run_weights(outputs)):
+    for (t, y, ok), r, wt in zip(outputs, resp, weights):
         if not ok.any():
             continue
-        b = (t[ok] // BIN_S).astype(np.int64)
-        cnt = np.bincount(b)
-        keep = cnt > 0
-        rc = r[ok] - r[ok].mean()
-        ym, rm = (np.bincount(b, weights=x)[keep] / cnt[keep] for x in (y[ok], rc))
+        ym, rm = _bin_means(t[ok], y[ok]), _bin_means(t[ok], r[ok] - r[ok].mean())
         num += wt * float(np.sum((ym + scale * rm) ** 2))
         den += wt * float(rm @ rm)
-        bins += int(keep.sum())
+        bins += len(ym)
     return float(np.sqrt(num / max(bins - 1, 1) / den)) if den > 0 else float("inf")
 
 
@@ -351,21 +344,21 @@ def add_turn_on(logs, model, res, refit):
         model.fit["turn_on"] = info
         return model, res
     outputs = _outputs(logs, base)
+    weights = _run_weights(outputs)
     rows, best = [], None
     for tau in taus:
         w = window_of(tau)
         decay = effect_term("decay_on", "turn_on", tau_s=tau)
         resp = responses(logs, base, decay)
-        sc = _fold_scores(outputs, resp, w)
-        start, whole = [x[0] for x in sc], [x[1] for x in sc]
-        scale = -_amplitude(outputs, resp)
-        se = _size_stderr(outputs, resp, scale)
+        scale, sc = _fold_scores(outputs, resp, weights, (w, START_WINDOW_S))   # START_WINDOW_S: one window for all taus
+        start, whole = [x[0] for x in sc], [x[2] for x in sc]
+        se = _size_stderr(outputs, resp, weights, scale)
         size_t = abs(scale) / se if se > 0 else 0.0
         ok = max(start) <= 1.0 - MARGIN and max(whole) <= RUN_TOLERANCE and size_t >= MIN_SIZE_T
         rows.append({"tau_s": tau, "window_s": w, "start_ratio": [round(x, 4) if np.isfinite(x) else None for x in start],
                      "run_ratio": [round(x, 4) if np.isfinite(x) else None for x in whole],
                      "size_t": round(size_t, 2), "kept": ok})
-        rank = float(np.mean([x[0] for x in _fold_scores(outputs, resp, START_WINDOW_S)]))   # one window for all taus
+        rank = float(np.mean([x[1] for x in sc]))
         if ok and (best is None or rank < best[1]):
             best = (tau, rank, decay, scale, se)
     info["candidates"] = rows
