@@ -40,8 +40,8 @@ def test_gap_free_run_uses_its_whole_length():
 def test_the_caveat_is_in_the_verdict_detail_of_a_kept_step_only():
     base = {"effect": "periodic", "kind": "effect", "material": True, "caveat": "period 1199 s: fewer than two cycles",
             "heldout_error": {"before": 10.0, "after": 5.0}}
-    kept = verdict_detail_text([{**base, "confirmed": True}], hold=True)
-    reverted = verdict_detail_text([{**base, "confirmed": False}], hold=True)
+    kept = verdict_detail_text([{**base, "confirmed": True}])
+    reverted = verdict_detail_text([{**base, "confirmed": False}])
     assert "fewer than two cycles" in kept and "fewer than two cycles" not in reverted
 
 

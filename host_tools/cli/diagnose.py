@@ -71,6 +71,8 @@ def run(args) -> int:
         print(f"  {k}. {it['effect']} ({params}): {fmt_value(it['after']['std_dph'])} / {fmt_value(it['after']['std100_dph'])}"
               f"  [CV gain {it['cv_gain']:.3f} >= {it['threshold']:.3f}; {it['status']}]")
     print(f"  {report['verdict_detail']}")
+    if (report.get("taken_from_fit") or {}).get("text"):
+        print(f"  note: {report['taken_from_fit']['text']}")
     for m in report.get("not_scanned") or []:
         print(f"  note: not scanned: {m}")
     if report.get("several_runs"):

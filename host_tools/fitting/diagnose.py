@@ -4,6 +4,18 @@ model lacks, add that effect through the auxiliary term k7, and report the error
 
 Procedure (:func:`diagnose`)
 ----------------------------
+0. **What hdrg fit takes out** (:func:`taken_from_fit`, several training runs only): each power-on
+   moves the bias by its own offset, and every run recorded from its power-on holds the device's
+   turn-on.  ``hdrg fit``'s model of the training runs (host_tools.fitting.fit_pipeline.fit_default, the
+   loop's options) gives both: its per-run offsets (fit_pipeline.without_run_offsets) come out of
+   the training runs, and its power-on term, when it chose one (host_tools.fitting.turn_on), out of the
+   training and held-out runs (turn_on.without_term: size x g x the mode sign).  The loop works on
+   those runs, does not offer a second power-on term (family ``turn_on``), keeps AUX_RESERVED k7
+   terms free, and its final model holds the term again (turn_on.with_decay; equal outputs on
+   every valid sample).  Without this the per-power-on offsets and the turn-on are structure the
+   loop explains with whatever channel wanders like them (`hdrg bench startup --loop`, set 0: the
+   loop's start-up error 0.94 x mode reversal alone's against hdrg fit's 0.39 x; docs/LOOP.md
+   "Several power-ons").
 1. **Fit** the starting model on the training runs exactly as ``hdrg fit`` does with its defaults
    (:func:`base_options` / :func:`base_model`: the options not given are None, so
    host_tools.golden.compensate's DEFAULT_RATE / DEFAULT_ORDER / DEFAULT_COMBINER / DEFAULT_TERMS apply:
@@ -66,7 +78,10 @@ Procedure (:func:`diagnose`)
    are normalized by the sum of their magnitudes (so |z| <= 1 everywhere, host_tools.golden.regressors)
    and baked into ``AuxConfig('sum', ...)``; the fitter then fits the 17 coefficients with k7.
    (A rate_estimator winner changes the model's rate estimator instead.)  **Confirm** it on the
-   held-out runs (:data:`CONFIRM_RULE`): if the held-out error does not drop, the step is
+   held-out runs (:data:`CONFIRM_RULE`; with no held-out runs and several training runs,
+   CROSS_CONFIRM: on each training run in turn, both models refitted on the other runs,
+   diagnose_confirm.step_errors_leaving_runs_out, the rows pooled as held-out runs; the whole-model
+   structural steps below are scored that way already): if the held-out error does not drop, the step is
    reported ``confirmed: false`` and reverted, its family is not offered again (a periodic
    step: the periods within PERIOD_EXCLUDE_RATIO = 2^(1/2) of it).  Iterate while a
    candidate passes the rule, until ``max_iter`` (3) steps are kept in the phase or
@@ -128,7 +143,7 @@ import numpy as np
 
 from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE, CONFIRM_TOL_1S, CONFIRM_TOL_RMS,  # noqa: F401
                                          EFFECT_RULE, HELDOUT_METRIC, REPORT_TAUS, STAT_KEYS, clean_stats, fmt_value, residuals, heldout_score,
-                                         stats_one, step_metric, confirmed_on_holdout, error_stats, leg_rms,
+                                         stats_one, step_metric, confirmed_on_holdout, error_stats, leg_rms, step_errors_leaving_runs_out,
                                          material_on_holdout, noise_floor, offsets_hold, step_errors)
 from host_tools.fitting.diagnose_noise import (allan_bridged, noise_series, artifact_of, characterize,  # noqa: F401
                                        combiner_lines, noise_model, spectral_lines, surrogates)
@@ -138,8 +153,10 @@ from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, DRIFT_MARGIN,
                                       NULL_QUANTILE, PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, TRIES_PER_STEP, Accepted,
                                       loop_config, poly_terms, scan_candidates, step_key, kind_of, refit_with, rivals)
 from host_tools.fitting.diagnose_structure import order_step, settle_step
+from host_tools.fitting.effects import FAMILIES
 from host_tools.fitting.fit import check_cv_blocks, fit_logs
-from host_tools.fitting.fit_pipeline import fit_default
+from host_tools.fitting.fit_pipeline import fit_default, without_run_offsets
+from host_tools.fitting.turn_on import chosen_term, with_decay, without_term
 from host_tools.golden.checks import check_distinct_runs, same_runs
 from host_tools.golden.model import jsonable
 
@@ -157,6 +174,10 @@ RULE = ("accept the best candidate iff (a) its cross-validated gain (1 - held-ou
         f"leaves <= 1/{DRIFT_MARGIN:g} of the CV residual of the best structural candidate")
 
 
+CROSS_CONFIRM = True   # no held-out runs, several training runs: confirm every step leaving one run out
+CROSS_NOTE = ("; with no held-out runs, on each training run in turn, both models refitted on the other runs "
+              "(the rows pooled as held-out runs)")
+AUX_RESERVED = 2   # k7 terms kept free for the power-on term taken from hdrg fit (with its sign twin)
 COMPETE = False   # structure phase: score the effect candidates too and yield to a better one (see diagnose())
 COMPETE_FAMILIES = ("aging",)   # ... these always, under diagnose_scan.DRIFT_MARGIN: a drift in time, which a long lag mimics
 
@@ -170,6 +191,16 @@ def base_options(*, proxy=None, rate_estimator=None, rate_n=None, rate_shift=Non
     return dict(proxy_kind=proxy, rate_estimator=rate_estimator, n=rate_n, shift=rate_shift,
                 proxy_range=proxy_range, rate_range=rate_range,
                 reversal={"combiner": combiner, "settle_s": settle_s, "order": order} if reversal else None)
+
+
+RATE_KEYS = ("rate_estimator", "n", "shift")
+
+
+def fit_options(opts) -> dict:
+    """``opts`` (:func:`base_options`) as keyword arguments of fit_default: the rate options only
+    when one of them is given (else fit_default's own choice of the rate estimator)."""
+    given = any(opts.get(k) is not None for k in RATE_KEYS)
+    return {k: v for k, v in opts.items() if given or k not in RATE_KEYS}
 
 
 def base_model(train, opts, terms=None):
@@ -187,13 +218,43 @@ def base_model(train, opts, terms=None):
     offers the rate estimator, iir 9 included, under CV and held-out confirmation.  No per-run offsets
     (fit_default run_offsets="off"): the thresholds were calibrated without them; no power-on
     transient term (turn_on="off"): the loop offers its own turn_on family under its own tests."""
-    if all(opts.get(k) is None for k in ("rate_estimator", "n", "shift")):
-        kw = {k: v for k, v in opts.items() if k not in ("rate_estimator", "n", "shift")}
+    if all(opts.get(k) is None for k in RATE_KEYS):
         model = fit_default(train, terms, drop_unidentifiable=True, lag_block="off", rate_prefer=None, run_offsets="off",
-                            turn_on="off", **kw)[0]
+                            turn_on="off", **fit_options(opts))[0]
         return model, model.config
     cfg = loop_config(train, opts)
     return fit_logs(train, cfg, terms, drop_unidentifiable=True)[0], cfg
+
+
+def taken_from_fit(train, hold, opts, terms=None) -> tuple:
+    """Step 0 (module doc): with several training runs, what ``hdrg fit`` learns of them that is
+    not an effect of the device's temperature: each run's offset (per coefficient bank: what a
+    power-on changes) and the power-on term (host_tools.fitting.turn_on).  ``fit_default`` on
+    ``train`` with the loop's options; returns (the training runs with both taken out, the
+    held-out runs with the power-on term taken out, ``given`` {"run_offsets_dph", "turn_on", "text"},
+    ``term``: (decay term, scale) for the final model, or None).  One run: nothing is taken."""
+    import warnings
+
+    given = {"run_offsets_dph": None, "turn_on": None, "text": None}
+    if len(train) < 2:
+        return train, hold, given, None
+    with warnings.catch_warnings():     # the base model's fit warns about the inputs once
+        warnings.simplefilter("ignore")
+        fitted = fit_default(train, terms, drop_unidentifiable=True, **fit_options(opts))[0]
+    train = without_run_offsets(train, fitted)
+    given["run_offsets_dph"] = (fitted.fit.get("run_offsets") or {}).get("offsets_dph")
+    term = chosen_term(fitted)
+    if term is not None:
+        fs = fitted.config.rate.fs
+        train = [without_term(log, *term, fs) for log in train]
+        hold = [without_term(log, *term, fs) for log in hold]
+        given["turn_on"] = fitted.fit["turn_on"]["chosen"]
+    parts = ([f"the offsets of the {len(train)} runs"] if given["run_offsets_dph"] else []) + \
+        ([f"the power-on term ({given['turn_on']})"] if term else [])
+    if parts:
+        given["text"] = (f"taken from hdrg fit's model of the training runs: {' and '.join(parts)}; the loop works on "
+                         f"the runs without them" + ("; the final model holds the power-on term" if term else ""))
+    return train, hold, given, term
 
 
 FLOOR_RATIO = 1.05   # the final model's held-out error may exceed the flight stack's cubic's by this factor at most
@@ -253,15 +314,25 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     opts = base_options(proxy=proxy, rate_estimator=rate_estimator, rate_n=rate_n, rate_shift=rate_shift,
                         combiner=combiner, order=order, settle_s=settle_s, proxy_range=proxy_range,
                         rate_range=rate_range, reversal=rev)
+    train_in, hold_in = train, hold
+    train, hold, given, term = taken_from_fit(train, hold, opts, terms)
+    if given["text"]:
+        say(given["text"])
+    if term is not None:     # the loop does not offer a second power-on term, and keeps k7 room for it
+        families = tuple(f for f in (families or FAMILIES) if f != "turn_on")
     say(f"fitting the base model on {len(train)} training run(s)")
     model, cfg = base_model(train, opts, terms)
-    if all(opts.get(k) is None for k in ("rate_estimator", "n", "shift")):
+    if all(opts.get(k) is None for k in RATE_KEYS):
         # keep the rate estimator `hdrg fit` chose (auto on MR): every later refit builds its config
         # from opts, which must not fall back to DEFAULT_RATE behind the step's back
         r = cfg.rate
         opts = {**opts, "rate_estimator": r.estimator, "n": r.n, "shift": r.shift}
     poly = poly_terms(model)
     evals = hold if hold else train
+    cross = not hold and len(train) >= 2 and CROSS_CONFIRM      # steps confirmed leaving one training run out
+    checked = bool(hold) or cross
+    where = "on held-out" if hold else "leaving one training run out"
+    checked_on = "on the held-out runs" if hold else "leaving one training run out" if cross else "on the training runs"
     rng = np.random.default_rng(seed)
     accepted: list[Accepted] = []
     gen_terms: list = []
@@ -272,8 +343,8 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     first_stats = error_stats(evals, model)
     report = {"train": [log.source for log in train], "holdout": [log.source for log in hold],
               "evaluated_on": "holdout" if hold else "train", "rule": RULE,
-              "confirm_rule": CONFIRM_RULE if hold else "no held-out runs: steps are not confirmed",
-              "effect_rule": EFFECT_RULE if hold else "no held-out runs: every accepted effect step is named",
+              "confirm_rule": CONFIRM_RULE + ("" if hold else CROSS_NOTE) if checked else "no held-out runs: steps are not confirmed",
+              "effect_rule": EFFECT_RULE if checked else "no held-out runs: every accepted effect step is named",
               "settings": {"g_min": g_min, "n_surrogates": n_surrogates, "null_quantile": NULL_QUANTILE,
                            "cv": "runs" if len(train) >= 2 else f"{cv_blocks} blocks round-robin in {cv_folds} folds",
                            "max_iter": max_iter, "max_tries": max_tries, "seed": seed, "terms": [int(k) for k in poly]},
@@ -281,8 +352,8 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                            "train": error_stats(train, model) if hold else first_stats},
               "noise_floor": noise_floor(evals, model),
               "holdout_in_training": [f"held-out run {b} has the same data as training run {a}: its 'confirmation' "
-                                      f"is not independent" for a, b in same_runs(train, hold)],
-              "not_scanned": not_scanned(train + hold)}
+                                      f"is not independent" for a, b in same_runs(train_in, hold_in)],
+              "not_scanned": not_scanned(train_in + hold_in), "taken_from_fit": given}
     characterization = None
     artifacts = None
     it = 0
@@ -308,7 +379,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
             also = frozenset(COMPETE_FAMILIES) if phase == "structure" and "effect" in phases else frozenset()
             scan = scan_candidates(train, cfg, model, poly, gen_terms, rng, n_surrogates, g_min, cv_blocks, cv_folds,
                          families, rate_alternatives and rate_choice is None, frozenset(excluded),
-                         phase=None if compete else phase, also=also)
+                         phase=None if compete else phase, also=also, reserved=AUX_RESERVED if term else 0)
             if characterization is None:
                 characterization = {"train": scan["characterization"],
                                     "holdout": [characterize(log, r, pr.valid, cfg.rate.fs, pr.v)
@@ -329,7 +400,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                 break
             best = scan["winner"]
             say(f"iteration {number}: {best['label']} passes (CV gain {best['gain']:.3f} >= {scan['threshold']:.3f}); "
-                f"refitting and checking it on the {'held-out' if hold else 'training'} runs")
+                f"refitting and checking it {checked_on}")
             before_model, before_cfg, before_gen, before_rate = model, cfg, gen_terms, rate_choice
             before = error_stats(evals, model)
             if best["family"] == "rate_estimator":
@@ -341,9 +412,13 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                 gen_terms = gen_terms + acc.terms
             model, cfg = refit_with(train, loop_config(train, opts, rate=rate_choice), poly, gen_terms)
             after = error_stats(evals, model)
-            cb, ca = step_errors(evals, before_model, model)     # the one metric (HELDOUT_METRIC)
-            confirmed = confirmed_on_holdout(cb, ca) if hold else None
-            material = (confirmed and material_on_holdout(cb, ca)) if hold else None
+            if cross:    # no held-out runs: each training run is held out of a refit of both models
+                fit_with = lambda rate, gens: lambda runs: refit_with(runs, loop_config(runs, opts, rate=rate), poly, gens)[0]   # noqa: E731
+                cb, ca = step_errors_leaving_runs_out(train, fit_with(before_rate, before_gen), fit_with(rate_choice, gen_terms))
+            else:
+                cb, ca = step_errors(evals, before_model, model)     # the one metric (HELDOUT_METRIC)
+            confirmed = confirmed_on_holdout(cb, ca) if checked else None
+            material = (confirmed and material_on_holdout(cb, ca)) if checked else None
             entry = {"effect": acc.family, "params": acc.params, "kind": kind_of(acc.family, acc.params),
                      "before": clean_stats(before), "after": clean_stats(after), "confirmed": confirmed, "material": material,
                      "heldout_error": step_metric(cb, ca),
@@ -359,12 +434,12 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
             entry["_plot"] = (before_model, model, best)
             iterations.append(entry)
             if confirmed is False:
-                say(f"iteration {number}: {acc.family} NOT confirmed on the held-out runs ({_metric_text(entry)}): reverted")
-                entry["status"] = "not confirmed on held-out: reverted (the model stays the last confirmed one)"
+                say(f"iteration {number}: {acc.family} NOT confirmed {checked_on} ({_metric_text(entry)}): reverted")
+                entry["status"] = f"not confirmed {where}: reverted (the model stays the last confirmed one)"
                 model, cfg, gen_terms, rate_choice = before_model, before_cfg, before_gen, before_rate
                 excluded.add(step_key(acc.family, acc.params))
             else:
-                entry["status"] = "confirmed on held-out" if confirmed else "accepted (no held-out runs)"
+                entry["status"] = f"confirmed {where}" if confirmed else "accepted (no held-out runs)"
                 if is_minor(entry):
                     h = entry["heldout_error"]
                     entry["status"] += (f" (minor: held-out error down {1 - h['after'] / h['before']:.0%} only; kept, "
@@ -372,7 +447,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                 entry["status"] += "".join(f" ({n})" for n in kept_step_notes(entry))
                 accepted.append(acc)
                 kept += 1
-                say(f"iteration {number}: {acc.family} {'confirmed on the held-out runs' if confirmed else 'accepted (no held-out runs)'} "
+                say(f"iteration {number}: {acc.family} {'confirmed ' + checked_on if confirmed else 'accepted (no held-out runs)'} "
                     f"({_metric_text(entry)}): kept")
         else:
             if max_iter > 0:
@@ -402,6 +477,9 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     if floor and floor.get("replaced"):
         say(f"the final model's held-out error {floor['model_dph']:.4g} deg/h is above {FLOOR_RATIO:g} x the "
             f"flight stack's cubic ({floor['cubic_dph']:.4g} deg/h): the cubic is the final model")
+    if term is not None:     # the final model holds the power-on term: judged on the runs as given
+        model = with_decay(model, term[0], term[1])
+        train, hold, evals = train_in, hold_in, hold_in if hold_in else train_in
     final = error_stats(evals, model)
     verdict = verdict_of(iterations)
     final_train = error_stats(train, model) if hold else final
@@ -410,9 +488,9 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                    "generalization": generalization(heldout_score(final_train)[0], heldout_score(final)[0]) if hold else None,
                    "several_runs": several_runs_caveat(len(train)),
                    "extrapolation": extrapolation(final) if hold else [],
-                   "verdict": verdict, "verdict_detail": verdict_detail_text(iterations, hold), "cubic_floor": floor,
+                   "verdict": verdict, "verdict_detail": verdict_detail_text(iterations, where if checked else None), "cubic_floor": floor,
                    "artifacts": artifacts, "stopped": stopped, "characterization": characterization})
-    model.fit["diagnose"] = {"effects": [] if floor and floor.get("replaced") else
+    model.fit["diagnose"] = {"taken_from_fit": given["text"], "effects": [] if floor and floor.get("replaced") else
                              [{"effect": a.family, "params": a.params} for a in accepted],
                              "verdict": report["verdict"]}
     if out_dir is not None:

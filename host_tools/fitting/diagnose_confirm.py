@@ -144,6 +144,19 @@ def step_errors(logs, before: BiasModel, after: BiasModel) -> tuple:
     return {**_mean_stats(rows_b), "runs": rows_b}, {**_mean_stats(rows_a), "runs": rows_a}
 
 
+def step_errors_leaving_runs_out(train, before_fit, after_fit) -> tuple:
+    """:func:`step_errors` with no held-out runs, by leaving one training run out: for each run,
+    ``before_fit(others)`` and ``after_fit(others)`` (callables: training runs -> BiasModel) fitted
+    on the other runs and judged on it; the rows are pooled as those of held-out runs."""
+    rows_b, rows_a = [], []
+    for i, log in enumerate(train):
+        others = [lg for j, lg in enumerate(train) if j != i]
+        b, a = step_errors([log], before_fit(others), after_fit(others))
+        rows_b += b["runs"]
+        rows_a += a["runs"]
+    return {**_mean_stats(rows_b), "runs": rows_b}, {**_mean_stats(rows_a), "runs": rows_a}
+
+
 def confirmed_on_holdout(before, after) -> bool:
     """CONFIRM_RULE: the held-out std of 100-s averages (1-s where 100 s is undefined) drops by at
     least CONFIRM_MIN_DROP, the held-out std of 1-s averages does not rise by more than

@@ -131,12 +131,14 @@ def kept_step_notes(entry) -> list:
     return notes
 
 
-def verdict_detail_text(iterations, hold) -> str:
+def verdict_detail_text(iterations, where="on held-out") -> str:
+    """The verdict's detail: each step's fate; ``where`` the steps were confirmed ('on held-out',
+    'leaving one training run out'; None: not confirmed)."""
     if not iterations:
         return "no candidate passed the selection rule on the training runs"
     parts = []
     for k, e in enumerate(iterations, 1):
-        tag = {True: "confirmed on held-out", False: "not confirmed on held-out (reverted)",
+        tag = {True: f"confirmed {where}", False: f"not confirmed {where} (reverted)",
                None: "not confirmed (no held-out runs)"}[e["confirmed"]]
         if is_minor(e):
             tag += " (minor: kept, not named as an effect)"
@@ -208,6 +210,8 @@ def markdown(doc, model) -> str:
         params = ", ".join(f"{a}={fmt_value(b) if isinstance(b, float) else b}" for a, b in it["params"].items())
         lines.append(_row(k, it["effect"], params, it["after"], it.get("cv_gain"), it.get("threshold"), it["status"]))
     lines += ["", f"{doc['verdict_detail']}.  Confirmation: {doc['confirm_rule']}."]
+    if (doc.get("taken_from_fit") or {}).get("text"):
+        lines += ["", f"Before the loop: {doc['taken_from_fit']['text']}."]
     fl = doc.get("cubic_floor") or {}
     if fl.get("cubic_dph") is not None and fl.get("model_dph") is not None:
         lines += ["", f"Floor: the flight stack's cubic in temperature gives {fmt_value(fl['cubic_dph'])} deg/h on the held-out "

@@ -346,10 +346,11 @@ def _excluded(c, excluded) -> bool:
 
 
 def scan_candidates(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_blocks, cv_folds, families, rate_alt,
-          excluded=frozenset(), phase=None, also=frozenset()):
+          excluded=frozenset(), phase=None, also=frozenset(), reserved=0):
     """Score every candidate (module doc, steps 3-4) against the current base; returns a dict with
     the ranking, the null, the decision and the (refined) winner.  ``phase``: offer only that
-    phase's candidates (None: all), and the families in ``also`` besides."""
+    phase's candidates (None: all), and the families in ``also`` besides; ``reserved``: k7 terms
+    kept free for a term the final model adds."""
     fs = cfg.rate.fs
     preps = [prepare(log, replace(cfg, aux=AuxConfig())) for log in train]
     gen_cols = [[generator_values(log, t, fs) for t in gen_terms] for log in train]
@@ -414,7 +415,7 @@ def scan_candidates(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_bl
              and (phase is None or phase_of(c.family, c.params) == phase or c.family in also)]
     # the model goes to the firmware: its k7 sum holds at most AUX_MAX_TERMS terms, so a candidate
     # that would not fit beside the accepted ones is not offered (the report says how many)
-    room = AUX_MAX_TERMS - len(gen_terms)
+    room = AUX_MAX_TERMS - reserved - len(gen_terms)
     n_full = sum(len(c.terms) > room for c in cands)
     cands = [c for c in cands if len(c.terms) <= room]
 

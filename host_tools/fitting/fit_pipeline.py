@@ -317,6 +317,18 @@ def run_offsets(logs, model) -> list:
     return out
 
 
+def without_run_offsets(logs, model) -> list:
+    """``logs`` with the per-run offsets that ``model``'s fit removed (model.fit["run_offsets"],
+    fitted on these same runs in this order) taken out of their rates; ``logs`` as they are when
+    the fit removed none."""
+    offsets = (model.fit.get("run_offsets") or {}).get("offsets_dph")
+    if not offsets:
+        return list(logs)
+    if len(offsets) != len(logs):
+        raise ValueError(f"the model's fit removed the offsets of {len(offsets)} runs, not of these {len(logs)}")
+    return [_shifted(log, o) for log, o in zip(logs, offsets)]
+
+
 def _shifted(log, offsets):
     """``log`` with its rate moved so that the fit target of each bank loses its offset (one bank:
     target y = rate; two banks (regress_first): y = s * rate, so mode 2 moves the other way)."""

@@ -283,6 +283,30 @@ def _size_stderr(outputs, resp, weights, scale: float) -> float:
     return float(np.sqrt(num / max(bins - 1, 1) / den)) if den > 0 else float("inf")
 
 
+def without_term(log, decay, size: float, fs: float):
+    """``log`` with what the ``decay`` term (a ``decay_on`` generator term) at ``size`` [deg/h] adds
+    to the bias of every coefficient bank taken out of its rate: size x g, times the mode sign s on
+    a mode-reversal log (the term flips like the rate; a bank's target is s x rate).  Compensating
+    it with a model equals compensating ``log`` with that model plus the term (:func:`with_decay`)
+    on every valid sample (s = 0 only in exchanges)."""
+    from host_tools.golden.regressors import generator_values, mode_sign
+
+    g = size * generator_values(log, decay, fs)
+    rate = np.asarray(log.rate_dph, np.float64)
+    return log.with_columns(rate_dph=rate - (mode_sign(log.mode) * g if log.reversal else g))
+
+
+def chosen_term(model):
+    """(the ``decay_on`` term, its scale [deg/h at power-on]) that :func:`add_turn_on` put in
+    ``model``, or None when it chose none."""
+    from host_tools.fitting.effects import effect_term
+
+    info = model.fit.get("turn_on") or {}
+    if not info.get("chosen"):
+        return None
+    return effect_term("decay_on", "turn_on", tau_s=info["tau_s"]), float(info["scale"])
+
+
 def candidate_taus(logs) -> list:
     """The taus of TAU_GRID_S within MAX_TAU_FRACTION x the shortest run [s]."""
     shortest = min(float(log.t_s[-1] - log.t_s[0]) for log in logs)
