@@ -4,18 +4,20 @@ model lacks, add that effect through the auxiliary term k7, and report the error
 
 Procedure (:func:`diagnose`)
 ----------------------------
-0. **What hdrg fit takes out** (:func:`taken_from_fit`, several training runs only): each power-on
-   moves the bias by its own offset, and every run recorded from its power-on holds the device's
+0. **What is not an effect of temperature** (several training runs only): each power-on moves
+   the bias by its own offset, and every run recorded from its power-on holds the device's
    turn-on.  ``hdrg fit``'s model of the training runs (host_tools.fitting.fit_pipeline.fit_default, the
-   loop's options) gives both: its per-run offsets (fit_pipeline.without_run_offsets) come out of
-   the training runs, and its power-on term, when it chose one (host_tools.fitting.turn_on), out of the
-   training and held-out runs (turn_on.without_term: size x g x the mode sign).  The loop works on
-   those runs, does not offer a second power-on term (family ``turn_on``), keeps AUX_RESERVED k7
-   terms free, and its final model holds the term again (turn_on.with_decay; equal outputs on
-   every valid sample).  Without this the per-power-on offsets and the turn-on are structure the
-   loop explains with whatever channel wanders like them (`hdrg bench startup --loop`, set 0: the
-   loop's start-up error 0.94 x mode reversal alone's against hdrg fit's 0.39 x; docs/LOOP.md
-   "Several power-ons").
+   loop's options; :func:`taken_from_fit`) gives the power-on term when it chose one
+   (host_tools.fitting.turn_on): it is taken out of the training and held-out runs
+   (turn_on.without_term: size x g x the mode sign), and each training run's offset per
+   coefficient bank (its mean residual under that model, the term included) out of that run
+   (fit_pipeline.run_offsets, fit_pipeline.without_run_offsets).  The loop works on those runs
+   (its report's errors are on them), does not offer a second power-on term (family
+   ``turn_on``), keeps AUX_RESERVED k7 terms free, and the model it writes holds the term again
+   (turn_on.with_decay; the same output on every valid sample of the runs as given).  Without
+   this the per-power-on offsets and the turn-on are structure the loop explains with whatever
+   channel wanders like them (`hdrg bench startup --loop`, set 0: the loop's start-up error 0.94
+   x mode reversal alone's against hdrg fit's 0.39 x; docs/LOOP.md "Several power-ons").
 1. **Fit** the starting model on the training runs exactly as ``hdrg fit`` does with its defaults
    (:func:`base_options` / :func:`base_model`: the options not given are None, so
    host_tools.golden.compensate's DEFAULT_RATE / DEFAULT_ORDER / DEFAULT_COMBINER / DEFAULT_TERMS apply:
@@ -78,10 +80,10 @@ Procedure (:func:`diagnose`)
    are normalized by the sum of their magnitudes (so |z| <= 1 everywhere, host_tools.golden.regressors)
    and baked into ``AuxConfig('sum', ...)``; the fitter then fits the 17 coefficients with k7.
    (A rate_estimator winner changes the model's rate estimator instead.)  **Confirm** it on the
-   held-out runs (:data:`CONFIRM_RULE`; with no held-out runs and several training runs,
-   CROSS_CONFIRM: on each training run in turn, both models refitted on the other runs,
+   held-out runs (:data:`CONFIRM_RULE`; with no held-out runs and several training runs, on
+   each training run in turn, both models refitted on the other runs,
    diagnose_confirm.step_errors_leaving_runs_out, the rows pooled as held-out runs; the whole-model
-   structural steps below are scored that way already): if the held-out error does not drop, the step is
+   structural steps below too): if the held-out error does not drop, the step is
    reported ``confirmed: false`` and reverted, its family is not offered again (a periodic
    step: the periods within PERIOD_EXCLUDE_RATIO = 2^(1/2) of it).  Iterate while a
    candidate passes the rule, until ``max_iter`` (3) steps are kept in the phase or
@@ -155,7 +157,7 @@ from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, DRIFT_MARGIN,
 from host_tools.fitting.diagnose_structure import order_step, settle_step
 from host_tools.fitting.effects import FAMILIES
 from host_tools.fitting.fit import check_cv_blocks, fit_logs
-from host_tools.fitting.fit_pipeline import fit_default, without_run_offsets
+from host_tools.fitting.fit_pipeline import fit_default, run_offsets, without_run_offsets
 from host_tools.fitting.turn_on import chosen_term, with_decay, without_term
 from host_tools.golden.checks import check_distinct_runs, same_runs
 from host_tools.golden.model import jsonable
@@ -174,7 +176,6 @@ RULE = ("accept the best candidate iff (a) its cross-validated gain (1 - held-ou
         f"leaves <= 1/{DRIFT_MARGIN:g} of the CV residual of the best structural candidate")
 
 
-CROSS_CONFIRM = True   # no held-out runs, several training runs: confirm every step leaving one run out
 CROSS_NOTE = ("; with no held-out runs, on each training run in turn, both models refitted on the other runs "
               "(the rows pooled as held-out runs)")
 AUX_RESERVED = 2   # k7 terms kept free for the power-on term taken from hdrg fit (with its sign twin)
@@ -216,45 +217,54 @@ def base_model(train, opts, terms=None):
     that start, and from the preferred start the loop bench's MR control got an "effect found"
     (seed 2, run 33: periodic 1153 s; docs/LOOP.md "Rate preference").  The structure phase still
     offers the rate estimator, iir 9 included, under CV and held-out confirmation.  No per-run offsets
-    (fit_default run_offsets="off"): the thresholds were calibrated without them; no power-on
-    transient term (turn_on="off"): the loop offers its own turn_on family under its own tests."""
+    (run_offsets="off": step 0 takes `hdrg fit`'s out of several runs) and no power-on term
+    (turn_on="off": step 0 takes `hdrg fit`'s out, or the loop offers its turn_on family)."""
     if all(opts.get(k) is None for k in RATE_KEYS):
-        model = fit_default(train, terms, drop_unidentifiable=True, lag_block="off", rate_prefer=None, run_offsets="off",
-                            turn_on="off", **fit_options(opts))[0]
+        model = fit_default(train, terms, drop_unidentifiable=True, lag_block="off", rate_prefer=None,
+                            run_offsets="off", turn_on="off", **fit_options(opts))[0]
         return model, model.config
     cfg = loop_config(train, opts)
     return fit_logs(train, cfg, terms, drop_unidentifiable=True)[0], cfg
 
 
 def taken_from_fit(train, hold, opts, terms=None) -> tuple:
-    """Step 0 (module doc): with several training runs, what ``hdrg fit`` learns of them that is
-    not an effect of the device's temperature: each run's offset (per coefficient bank: what a
-    power-on changes) and the power-on term (host_tools.fitting.turn_on).  ``fit_default`` on
-    ``train`` with the loop's options; returns (the training runs with both taken out, the
-    held-out runs with the power-on term taken out, ``given`` {"run_offsets_dph", "turn_on", "text"},
-    ``term``: (decay term, scale) for the final model, or None).  One run: nothing is taken."""
+    """Step 0 (module doc): with several training runs, ``hdrg fit``'s model of them
+    (``fit_default``, the loop's options) gives what is not an effect of temperature: its power-on
+    term, when it chose one (host_tools.fitting.turn_on), comes out of the training and held-out
+    runs, and each training run's offset per coefficient bank (its mean residual under that model,
+    the term included: fit_pipeline.run_offsets) out of that run.  Returns (training runs, held-out
+    runs, ``given`` {"run_offsets_dph", "turn_on"}, ``term``: (decay term, scale) for the final
+    model, or None).  One run: nothing is taken."""
     import warnings
 
-    given = {"run_offsets_dph": None, "turn_on": None, "text": None}
+    given = {"run_offsets_dph": None, "turn_on": None}
     if len(train) < 2:
         return train, hold, given, None
     with warnings.catch_warnings():     # the base model's fit warns about the inputs once
         warnings.simplefilter("ignore")
         fitted = fit_default(train, terms, drop_unidentifiable=True, **fit_options(opts))[0]
-    train = without_run_offsets(train, fitted)
-    given["run_offsets_dph"] = (fitted.fit.get("run_offsets") or {}).get("offsets_dph")
+    if fitted.fit.get("run_offsets", {}).get("offsets_dph"):
+        given["run_offsets_dph"] = run_offsets(train, fitted)
+        fitted.fit["run_offsets"] = {**fitted.fit["run_offsets"], "offsets_dph": given["run_offsets_dph"]}
+        train = without_run_offsets(train, fitted)
     term = chosen_term(fitted)
     if term is not None:
         fs = fitted.config.rate.fs
         train = [without_term(log, *term, fs) for log in train]
         hold = [without_term(log, *term, fs) for log in hold]
         given["turn_on"] = fitted.fit["turn_on"]["chosen"]
-    parts = ([f"the offsets of the {len(train)} runs"] if given["run_offsets_dph"] else []) + \
-        ([f"the power-on term ({given['turn_on']})"] if term else [])
-    if parts:
-        given["text"] = (f"taken from hdrg fit's model of the training runs: {' and '.join(parts)}; the loop works on "
-                         f"the runs without them" + ("; the final model holds the power-on term" if term else ""))
     return train, hold, given, term
+
+
+def taken_text(given) -> str | None:
+    """What step 0 took out (``given`` {"run_offsets_dph", "turn_on"}), for the report; None: nothing."""
+    parts = (["each training run's offset (per coefficient bank, its mean residual under hdrg fit's model)"]
+             if given["run_offsets_dph"] else []) + \
+        ([f"hdrg fit's power-on term ({given['turn_on']})"] if given["turn_on"] else [])
+    if not parts:
+        return None
+    return (f"taken out of the runs before the loop: {' and '.join(parts)}"
+            + ("; the final model holds the power-on term" if given["turn_on"] else ""))
 
 
 FLOOR_RATIO = 1.05   # the final model's held-out error may exceed the flight stack's cubic's by this factor at most
@@ -316,10 +326,11 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                         rate_range=rate_range, reversal=rev)
     train_in, hold_in = train, hold
     train, hold, given, term = taken_from_fit(train, hold, opts, terms)
+    given["text"] = taken_text(given)
     if given["text"]:
         say(given["text"])
     if term is not None:     # the loop does not offer a second power-on term, and keeps k7 room for it
-        families = tuple(f for f in (families or FAMILIES) if f != "turn_on")
+        families = tuple(f for f in (FAMILIES if families is None else families) if f != "turn_on")
     say(f"fitting the base model on {len(train)} training run(s)")
     model, cfg = base_model(train, opts, terms)
     if all(opts.get(k) is None for k in RATE_KEYS):
@@ -329,7 +340,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
         opts = {**opts, "rate_estimator": r.estimator, "n": r.n, "shift": r.shift}
     poly = poly_terms(model)
     evals = hold if hold else train
-    cross = not hold and len(train) >= 2 and CROSS_CONFIRM      # steps confirmed leaving one training run out
+    cross = not hold and len(train) >= 2      # steps confirmed leaving one training run out
     checked = bool(hold) or cross
     where = "on held-out" if hold else "leaving one training run out"
     checked_on = "on the held-out runs" if hold else "leaving one training run out" if cross else "on the training runs"
@@ -473,13 +484,14 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                         f" ({_metric_text(entry)})")
         stops[phase] = stopped
     stopped = stops.get("effect") or stops.get("structure")
-    floor, model = cubic_floor(train, hold, model) if hold else (None, model)
+    loop_train, loop_hold = train, hold
+    final_model = with_decay(model, term[0], term[1]) if term is not None else model   # what is written
+    floor, chosen = cubic_floor(train_in, hold_in, final_model) if hold else (None, final_model)
     if floor and floor.get("replaced"):
         say(f"the final model's held-out error {floor['model_dph']:.4g} deg/h is above {FLOOR_RATIO:g} x the "
             f"flight stack's cubic ({floor['cubic_dph']:.4g} deg/h): the cubic is the final model")
-    if term is not None:     # the final model holds the power-on term: judged on the runs as given
-        model = with_decay(model, term[0], term[1])
-        train, hold, evals = train_in, hold_in, hold_in if hold_in else train_in
+        model, train, hold, evals = chosen, train_in, hold_in, hold_in
+    # else the loop's model without the term on the loop's runs: the final model's output on the runs as given
     final = error_stats(evals, model)
     verdict = verdict_of(iterations)
     final_train = error_stats(train, model) if hold else final
@@ -490,11 +502,12 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                    "extrapolation": extrapolation(final) if hold else [],
                    "verdict": verdict, "verdict_detail": verdict_detail_text(iterations, where if checked else None), "cubic_floor": floor,
                    "artifacts": artifacts, "stopped": stopped, "characterization": characterization})
+    model = chosen
     model.fit["diagnose"] = {"taken_from_fit": given["text"], "effects": [] if floor and floor.get("replaced") else
                              [{"effect": a.family, "params": a.params} for a in accepted],
                              "verdict": report["verdict"]}
     if out_dir is not None:
-        write_report(report, model, out_dir, train, hold, plots=plots)
+        write_report(report, model, out_dir, loop_train, loop_hold, plots=plots)
     for entry in iterations:
         entry.pop("_plot", None)
     return report, model

@@ -147,13 +147,19 @@ def step_errors(logs, before: BiasModel, after: BiasModel) -> tuple:
 def step_errors_leaving_runs_out(train, before_fit, after_fit) -> tuple:
     """:func:`step_errors` with no held-out runs, by leaving one training run out: for each run,
     ``before_fit(others)`` and ``after_fit(others)`` (callables: training runs -> BiasModel) fitted
-    on the other runs and judged on it; the rows are pooled as those of held-out runs."""
-    rows_b, rows_a = [], []
+    on the other runs and judged on it; pooled (:func:`pooled_step_errors`)."""
+    pairs = []
     for i, log in enumerate(train):
         others = [lg for j, lg in enumerate(train) if j != i]
-        b, a = step_errors([log], before_fit(others), after_fit(others))
-        rows_b += b["runs"]
-        rows_a += a["runs"]
+        pairs.append(step_errors([log], before_fit(others), after_fit(others)))
+    return pooled_step_errors(pairs)
+
+
+def pooled_step_errors(pairs) -> tuple:
+    """(before, after) of several :func:`step_errors` results (one per held-out fold), their run
+    rows pooled as those of held-out runs."""
+    rows_b = [r for b, _ in pairs for r in b["runs"]]
+    rows_a = [r for _, a in pairs for r in a["runs"]]
     return {**_mean_stats(rows_b), "runs": rows_b}, {**_mean_stats(rows_a), "runs": rows_a}
 
 

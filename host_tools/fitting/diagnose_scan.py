@@ -478,7 +478,8 @@ def scan_candidates(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_bl
            "noise_models": noise_models, "accept": False, "reason": None, "winner": None, "ranking": [],
            "best": None, "threshold": None, "null_max": [],
            "not_offered": (f"{n_full} candidates not offered: the firmware's k7 sum holds at most {AUX_MAX_TERMS} "
-                           f"terms and {len(gen_terms)} are taken" if n_full else None)}
+                           f"terms and {len(gen_terms)} are taken" + (f", {reserved} kept free for the power-on term" if reserved else "")
+                           if n_full else None)}
     if not rows:
         out["reason"] = "no candidates" + (f" ({out['not_offered']})" if n_full else "")
         return out

@@ -11,7 +11,7 @@ import numpy as np
 
 from host_tools.fitting.cv import fold_ids
 from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, clean_stats, heldout_score, step_metric, confirmed_on_holdout,
-                                         error_stats, material_on_holdout, step_errors)
+                                         error_stats, material_on_holdout, pooled_step_errors, step_errors)
 from host_tools.fitting.fit import fit_logs
 
 
@@ -64,7 +64,7 @@ def _whole_model_step(family, alts, train, hold, evals, cfg, model, cv_blocks, c
     (:func:`step_errors`: std of 100-s averages, 1-s where undefined, on the samples valid under
     both).  The best alternative is a step when it lowers the CV error by >= CONFIRM_MIN_DROP in
     total and in a strict majority of folds; then it is confirmed on the held-out runs like every
-    step.  Returns (entry, model), ({"skipped": why}, None) or (None, None)."""
+    step (with none and several training runs: on the folds' left-out runs, pooled).  Returns (entry, model), ({"skipped": why}, None) or (None, None)."""
     terms = tuple(model.terms)
     folds = _fold_logs(train, cv_blocks, cv_folds)
     try:
@@ -73,11 +73,12 @@ def _whole_model_step(family, alts, train, hold, evals, cfg, model, cv_blocks, c
         return None, None
     rows = []
     for params, alt in alts:
-        e0, e1 = [], []
+        e0, e1, pairs = [], [], []
         try:
             for (tr, te), mb in zip(folds, base_fits):
                 ma = fit_logs(tr, alt, terms, drop_unidentifiable=True)[0]
                 sb, sa = step_errors(te, mb, ma)
+                pairs.append((sb, sa))
                 e0.append(heldout_score(sb)[0])
                 e1.append(heldout_score(sa)[0])
         except ValueError:
@@ -85,7 +86,7 @@ def _whole_model_step(family, alts, train, hold, evals, cfg, model, cv_blocks, c
         if any(e is None for e in e0 + e1):
             continue
         e0, e1 = np.array(e0), np.array(e1)
-        rows.append({"params": params, "cfg": alt, "gain": float(1.0 - e1.sum() / e0.sum()),
+        rows.append({"params": params, "cfg": alt, "gain": float(1.0 - e1.sum() / e0.sum()), "pairs": pairs,
                      "folds_improved": int(np.sum(e1 < e0)), "folds": len(folds)})
     if not rows:
         return None, None
@@ -100,11 +101,14 @@ def _whole_model_step(family, alts, train, hold, evals, cfg, model, cv_blocks, c
     except (ValueError, ArithmeticError) as exc:
         return {"skipped": f"{label} gains {best['gain']:.3f} in CV but does not quantize on this build: {exc}"}, None
     before, after = error_stats(evals, model), error_stats(evals, alt_model)
-    cb, ca = step_errors(evals, model, alt_model)
-    confirmed = confirmed_on_holdout(cb, ca) if hold else None
+    cross = not hold and len(train) >= 2     # no held-out runs: the folds left one training run out each
+    cb, ca = pooled_step_errors(best["pairs"]) if cross else step_errors(evals, model, alt_model)
+    checked = bool(hold) or cross
+    where = "on held-out" if hold else "leaving one training run out"
+    confirmed = confirmed_on_holdout(cb, ca) if checked else None
     entry = {"effect": family, "params": dict(best["params"]), "kind": "structure",
              "before": clean_stats(before), "after": clean_stats(after), "confirmed": confirmed,
-             "material": (confirmed and material_on_holdout(cb, ca)) if hold else None,
+             "material": (confirmed and material_on_holdout(cb, ca)) if checked else None,
              "heldout_error": step_metric(cb, ca),
              "train_before": clean_stats(error_stats(train, model)), "train_after": clean_stats(error_stats(train, alt_model)),
              "cv_gain": best["gain"], "threshold": CONFIRM_MIN_DROP, "refined_from": None,
@@ -114,6 +118,6 @@ def _whole_model_step(family, alts, train, hold, evals, cfg, model, cv_blocks, c
                          for r in sorted(rows, key=lambda r: -r["gain"])],
              "null_max": [], "aux": alt_model.config.aux.to_dict(), "rate": alt_model.config.rate.to_dict(),
              "before_runs": before["runs"], "after_runs": after["runs"],
-             "status": ("confirmed on held-out" if confirmed else "accepted (no held-out runs)") if confirmed is not False
-             else "not confirmed on held-out: reverted (the model stays the last confirmed one)"}
+             "status": (f"confirmed {where}" if confirmed else "accepted (no held-out runs)") if confirmed is not False
+             else f"not confirmed {where}: reverted (the model stays the last confirmed one)"}
     return entry, alt_model
