@@ -140,13 +140,11 @@ def _ratio(after: float, before: float) -> float:
     return after / before if np.isfinite(after) and np.isfinite(before) and before > 0 else float("inf")
 
 
-def _outputs(logs, model) -> list:
-    """Per run: (t [s since power-on], compensated output less its mean [deg/h], valid) of ``model``."""
-    from host_tools.golden.compensate import compensate
-
+def _outputs(logs, compensated) -> list:
+    """Per run: (t [s since power-on], compensated output less its mean [deg/h], valid) of the
+    ``compensated`` results (host_tools.golden.compensate.compensate of each run)."""
     out = []
-    for log in logs:
-        res = compensate(log, model)
+    for log, res in zip(logs, compensated):
         ok = (np.asarray(res["valid"]) > 0) & np.isfinite(res.rate_dph)
         y = np.where(ok, res.rate_dph, 0.0)
         if ok.any():
@@ -252,16 +250,19 @@ def decay_size(model, tau_s: float) -> list:
             for b, k in enumerate(banks)]
 
 
-def responses(logs, model, decay) -> list:
+def responses(logs, model, decay, compensated=None) -> list:
     """Per run: the change of the compensated output [deg/h] (float golden model) when ``decay``
     enters ``model`` at scale 1 (:func:`with_decay`), at the samples valid in both (0 elsewhere):
-    what the chip's output does with the term, through the combiner and the coefficient banks."""
+    what the chip's output does with the term, through the combiner and the coefficient banks.
+    ``compensated``: ``model``'s results on ``logs`` when the caller has them (None: computed)."""
     from host_tools.golden.compensate import compensate
 
     probe = with_decay(model, decay, 1.0)
+    if compensated is None:
+        compensated = [compensate(log, model) for log in logs]
     out = []
-    for log in logs:
-        a, b = compensate(log, model), compensate(log, probe)
+    for log, a in zip(logs, compensated):
+        b = compensate(log, probe)
         ok = (np.asarray(a["valid"]) > 0) & (np.asarray(b["valid"]) > 0) & np.isfinite(a.rate_dph) & np.isfinite(b.rate_dph)
         out.append(np.where(ok, b.rate_dph - a.rate_dph, 0.0))
     return out
@@ -367,13 +368,16 @@ def add_turn_on(logs, model, res, refit):
         info["why"] = "a coefficient bank's k7 is 0 beside the model's generators: a decay cannot share k7 with them"
         model.fit["turn_on"] = info
         return model, res
-    outputs = _outputs(logs, base)
+    from host_tools.golden.compensate import compensate
+
+    compensated = [compensate(log, base) for log in logs]      # once: every candidate's response is against it
+    outputs = _outputs(logs, compensated)
     weights = _run_weights(outputs)
     rows, best = [], None
     for tau in taus:
         w = window_of(tau)
         decay = effect_term("decay_on", "turn_on", tau_s=tau)
-        resp = responses(logs, base, decay)
+        resp = responses(logs, base, decay, compensated)
         scale, sc = _fold_scores(outputs, resp, weights, (w, START_WINDOW_S))   # START_WINDOW_S: one window for all taus
         start, whole = [x[0] for x in sc], [x[2] for x in sc]
         se = _size_stderr(outputs, resp, weights, scale)
