@@ -146,6 +146,7 @@ import numpy as np
 from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE, CONFIRM_TOL_1S, CONFIRM_TOL_RMS,  # noqa: F401
                                          EFFECT_RULE, HELDOUT_METRIC, REPORT_TAUS, STAT_KEYS, clean_stats, fmt_value, residuals, heldout_score,
                                          stats_one, step_metric, confirmed_on_holdout, error_stats, leg_rms, step_errors_leaving_runs_out,
+                                         confirmation, LEAVING_ONE_OUT,
                                          material_on_holdout, noise_floor, offsets_hold, step_errors)
 from host_tools.fitting.diagnose_noise import (allan_bridged, noise_series, artifact_of, characterize,  # noqa: F401
                                        combiner_lines, noise_model, spectral_lines, surrogates)
@@ -243,10 +244,9 @@ def taken_from_fit(train, hold, opts, terms=None) -> tuple:
     with warnings.catch_warnings():     # the base model's fit warns about the inputs once
         warnings.simplefilter("ignore")
         fitted = fit_default(train, terms, drop_unidentifiable=True, **fit_options(opts))[0]
-    if fitted.fit.get("run_offsets", {}).get("offsets_dph"):
+    if fitted.fit.get("run_offsets", {}).get("offsets_dph"):      # the fit removed offsets per run
         given["run_offsets_dph"] = run_offsets(train, fitted)
-        fitted.fit["run_offsets"] = {**fitted.fit["run_offsets"], "offsets_dph": given["run_offsets_dph"]}
-        train = without_run_offsets(train, fitted)
+        train = without_run_offsets(train, given["run_offsets_dph"])
     term = chosen_term(fitted)
     if term is not None:
         fs = fitted.config.rate.fs
@@ -340,10 +340,9 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
         opts = {**opts, "rate_estimator": r.estimator, "n": r.n, "shift": r.shift}
     poly = poly_terms(model)
     evals = hold if hold else train
-    cross = not hold and len(train) >= 2      # steps confirmed leaving one training run out
-    checked = bool(hold) or cross
-    where = "on held-out" if hold else "leaving one training run out"
-    checked_on = "on the held-out runs" if hold else "leaving one training run out" if cross else "on the training runs"
+    where = confirmation(train, hold)
+    cross, checked = where == LEAVING_ONE_OUT, where is not None
+    checked_on = "on the held-out runs" if hold else where or "on the training runs"
     rng = np.random.default_rng(seed)
     accepted: list[Accepted] = []
     gen_terms: list = []
@@ -500,7 +499,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                    "generalization": generalization(heldout_score(final_train)[0], heldout_score(final)[0]) if hold else None,
                    "several_runs": several_runs_caveat(len(train)),
                    "extrapolation": extrapolation(final) if hold else [],
-                   "verdict": verdict, "verdict_detail": verdict_detail_text(iterations, where if checked else None), "cubic_floor": floor,
+                   "verdict": verdict, "verdict_detail": verdict_detail_text(iterations, where), "cubic_floor": floor,
                    "artifacts": artifacts, "stopped": stopped, "characterization": characterization})
     model = chosen
     model.fit["diagnose"] = {"taken_from_fit": given["text"], "effects": [] if floor and floor.get("replaced") else

@@ -144,6 +144,15 @@ def step_errors(logs, before: BiasModel, after: BiasModel) -> tuple:
     return {**_mean_stats(rows_b), "runs": rows_b}, {**_mean_stats(rows_a), "runs": rows_a}
 
 
+ON_HELD_OUT, LEAVING_ONE_OUT = "on held-out", "leaving one training run out"
+
+
+def confirmation(train, hold) -> str | None:
+    """How a step is confirmed: ON_HELD_OUT with held-out runs, LEAVING_ONE_OUT with none and
+    several training runs (:func:`step_errors_leaving_runs_out`), None with neither (not confirmed)."""
+    return ON_HELD_OUT if hold else LEAVING_ONE_OUT if len(train) >= 2 else None
+
+
 def step_errors_leaving_runs_out(train, before_fit, after_fit) -> tuple:
     """:func:`step_errors` with no held-out runs, by leaving one training run out: for each run,
     ``before_fit(others)`` and ``after_fit(others)`` (callables: training runs -> BiasModel) fitted

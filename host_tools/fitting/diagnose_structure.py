@@ -11,7 +11,8 @@ import numpy as np
 
 from host_tools.fitting.cv import fold_ids
 from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, clean_stats, heldout_score, step_metric, confirmed_on_holdout,
-                                         error_stats, material_on_holdout, pooled_step_errors, step_errors)
+                                         error_stats, material_on_holdout, pooled_step_errors, step_errors,
+                                         confirmation, LEAVING_ONE_OUT)
 from host_tools.fitting.fit import fit_logs
 
 
@@ -101,10 +102,9 @@ def _whole_model_step(family, alts, train, hold, evals, cfg, model, cv_blocks, c
     except (ValueError, ArithmeticError) as exc:
         return {"skipped": f"{label} gains {best['gain']:.3f} in CV but does not quantize on this build: {exc}"}, None
     before, after = error_stats(evals, model), error_stats(evals, alt_model)
-    cross = not hold and len(train) >= 2     # no held-out runs: the folds left one training run out each
-    cb, ca = pooled_step_errors(best["pairs"]) if cross else step_errors(evals, model, alt_model)
-    checked = bool(hold) or cross
-    where = "on held-out" if hold else "leaving one training run out"
+    where = confirmation(train, hold)      # LEAVING_ONE_OUT: the folds left one training run out each
+    cb, ca = pooled_step_errors(best["pairs"]) if where == LEAVING_ONE_OUT else step_errors(evals, model, alt_model)
+    checked = where is not None
     confirmed = confirmed_on_holdout(cb, ca) if checked else None
     entry = {"effect": family, "params": dict(best["params"]), "kind": "structure",
              "before": clean_stats(before), "after": clean_stats(after), "confirmed": confirmed,

@@ -317,15 +317,14 @@ def run_offsets(logs, model) -> list:
     return out
 
 
-def without_run_offsets(logs, model) -> list:
-    """``logs`` with the per-run offsets that ``model``'s fit removed (model.fit["run_offsets"],
-    fitted on these same runs in this order) taken out of their rates; ``logs`` as they are when
-    the fit removed none."""
-    offsets = (model.fit.get("run_offsets") or {}).get("offsets_dph")
+def without_run_offsets(logs, offsets) -> list:
+    """``logs`` with ``offsets`` (per run, per coefficient bank [deg/h], as :func:`run_offsets`
+    gives them for these runs in this order) taken out of their rates; ``logs`` as they are for
+    none (None or [])."""
     if not offsets:
         return list(logs)
     if len(offsets) != len(logs):
-        raise ValueError(f"the model's fit removed the offsets of {len(offsets)} runs, not of these {len(logs)}")
+        raise ValueError(f"got the offsets of {len(offsets)} runs, not of these {len(logs)}")
     return [_shifted(log, o) for log, o in zip(logs, offsets)]
 
 
