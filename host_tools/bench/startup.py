@@ -27,7 +27,9 @@ parasitic-charge settling that no thermometer sees, beside its self-heating):
 Summary: per pipeline the median over devices of the per-device median stability (and variation,
 |mean|, the paper's third column), the median of
 the per-device ratio model / mode reversal alone, the median repeatability, the lowest valid
-share, and how many devices' models learned the turn-on (model.fit["turn_on"]).
+share, how many devices' models learned the turn-on (model.fit["turn_on"]), and for how many
+`hdrg fit` warned that, held out, it serves a calibration power-on worse than mode reversal alone
+(host_tools.fitting.turn_on.start_up_check; per device ``start_up_warning``).
 """
 from __future__ import annotations
 
@@ -122,6 +124,7 @@ def evaluate_device(seed: int, startups: int = STARTUPS, effect: str | None = EF
     rec["model_turn_on"] = (model.fit.get("turn_on") or {}).get("chosen")
     rec["model_turn_on_why"] = (model.fit.get("turn_on") or {}).get("why")
     rec["model_terms"] = len(model.terms)
+    rec["start_up_warning"] = bool(((model.fit.get("turn_on") or {}).get("start_up_check") or {}).get("worse"))
     loop_model = None
     if loop:
         from host_tools.fitting.diagnose import diagnose
@@ -164,7 +167,8 @@ def summarize(records) -> dict:
     turn-on; failed devices."""
     ok = [r for r in records if not r["error"]]
     out = {"devices": len(records), "failed": len(records) - len(ok),
-           "learned_turn_on": sum(1 for r in ok if r.get("model_turn_on"))}
+           "learned_turn_on": sum(1 for r in ok if r.get("model_turn_on")),
+           "start_up_warnings": sum(1 for r in ok if r.get("start_up_warning"))}
     names = PIPELINES + ((LOOP,) if ok and all(LOOP in s for r in ok for s in r["startups"]) else ())
     for name in names:
         stab = np.array([_device_stat(r, name, "stability") for r in ok])
@@ -222,5 +226,6 @@ def format_table(result: dict) -> str:
     lines += ["", f"median ratio of stabilities, model / mode reversal alone: {s['ratio_model_to_mr_alone']:.2f}"
               + (f"; loop / mode reversal alone: {s['ratio_loop_to_mr_alone']:.2f}" if "ratio_loop_to_mr_alone" in s else ""),
               f"models that learned the turn-on: {s['learned_turn_on']} of {s['devices'] - s['failed']}; "
-              f"failed devices: {s['failed']}"]
+              f"hdrg fit warned of a held-out start-up worse than mode reversal alone: "
+              f"{s.get('start_up_warnings', 0)}; failed devices: {s['failed']}"]
     return "\n".join(lines)

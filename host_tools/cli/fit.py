@@ -92,6 +92,12 @@ def run(args) -> int:
     sys.stdout.flush()      # the warnings (stderr) after the lines above
     for w in done.warnings:
         _warn(w)
+    check = (turn or {}).get("start_up_check") or {}
+    for row in check.get("runs", []):
+        if row["source"] in check["worse"]:
+            _warn(f"held out, the model compensates the first {check['window_s'] / 60:g} min after power-on of "
+                  f"{row['source']} {row['ratio']:.3g}x worse than mode reversal alone (1 sigma of 100-s means): "
+                  f"check it on a power-on before trusting it at start-up (hdrg report on a start-up log)")
     print_identifiability(model.fit)
     offs = model.fit.get("run_offsets")
     if offs and "why" in offs:

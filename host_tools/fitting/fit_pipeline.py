@@ -47,8 +47,8 @@ class FitPolicy:
       leave-one-leg-out rms by this fraction (the second with one leg of each sign of dT/dt);
     * ``cv_blocks``: time blocks of the cross-validation on one run;
     * ``turn_on``: 'auto' (the power-on transient as a k7 term when leave-one-power-on-out
-      lowers the start-up error by ``turn_on_margin`` on every held-out power-on,
-      host_tools.fitting.turn_on) or 'off';
+      lowers the held-out start windows' error by ``turn_on_margin`` (run-weighted) and makes no
+      power-on's start worse, host_tools.fitting.turn_on) or 'off';
     * ``order``, ``combiner``, ``settle_s`` [s], ``max_stale_s`` [s]: the mode-reversal settings;
     * ``run_offset_passes``, ``min_offset_overlap``: the per-run offsets of several runs;
     * ``min_samples_per_term``: fewer valid samples per coefficient are refused unless forced."""
@@ -148,7 +148,9 @@ def fit_default(logs, terms=None, *, drop_unidentifiable=None, lag_block=None, c
        model.fit["guard"]: the candidates' cross-validated rms and the choice.
     4. ``turn_on`` 'auto', ``terms`` None / 'auto' and no aux given: the power-on transient
        (host_tools.fitting.turn_on.add_turn_on: a ``decay_on`` term in k7 when
-       leave-one-power-on-out supports it; two or more runs).  'off': skipped.
+       leave-one-power-on-out supports it, the other coefficients refitted with it taken out; two
+       or more runs; it also checks each held-out power-on's first 45 min against mode reversal
+       alone).  'off': skipped.
     Returns (model, FitResult of the model kept)."""
     from host_tools.fitting.legs import PROXY_TERMS, identifiability
 
