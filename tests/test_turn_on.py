@@ -177,7 +177,7 @@ def test_a_fold_never_sees_its_held_out_run_and_a_failed_fold_fails(runs):
         for i in range(1, len(runs)):
             others = [r for j, r in enumerate(runs) if j != i]
             fold = refit(others, off.config, off.terms)[0]
-            folds.append((fold, [compensate(r, fold) for r in others]))
+            folds.append((fold, [compensate(r, fold) for r in others], compensate(runs[i], fold)))
         seen.clear()
         scores, models = turn_on._cv_ratios(runs, folds, effect_term("decay_on", "turn_on", tau_s=340.0), refit,
                                             (1020.0,))

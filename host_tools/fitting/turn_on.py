@@ -53,8 +53,9 @@ Choice (:func:`add_turn_on`), on the training runs only:
 
 Held out, the same folds also say what a user would see at start-up (:func:`start_up_check`):
 each mode-reversal run's first 45 min under the model refitted on the other runs (its terms as
-chosen on all runs), against mode reversal alone; only when the term is tried (above); model.fit["turn_on"]["start_up_check"], and `hdrg fit` warns for a run served
-WORSE_THAN_REVERSAL x worse.
+chosen on all runs), against mode reversal alone; only when the term is tried (above);
+model.fit["turn_on"]["start_up_check"], and `hdrg fit` warns for a run served WORSE_THAN_REVERSAL x
+worse.
 
 Why the run weights and the shape of the start: every power-on of a calibration shows the
 turn-on, but a chamber run that starts soaked at an end of the range also shows that end's
@@ -225,14 +226,20 @@ def _with_term(logs, base, decay, refit, compensated) -> tuple:
             weights)
 
 
+def _both_served(a, b) -> np.ndarray:
+    """The samples where both compensated results ``a`` and ``b`` give a valid, finite output."""
+    return (np.asarray(a["valid"]) > 0) & (np.asarray(b["valid"]) > 0) & np.isfinite(a.rate_dph) & np.isfinite(b.rate_dph)
+
+
 def _held_out_ratios(log, before, after, windows) -> tuple:
     """Error ratios on the held-out run ``log``, the model with the term ``after`` to the one
-    without ``before``: over the first ``w`` [s] after power-on for each w of ``windows``, then over
-    the whole run (sums of squares of BIN_S means, on the samples both serve)."""
+    without it (``before``: its results on ``log``): over the first ``w`` [s] after power-on for each
+    w of ``windows``, then over the whole run (sums of squares of BIN_S means, on the samples both
+    serve)."""
     from host_tools.golden.compensate import compensate
 
-    a, b = compensate(log, before), compensate(log, after)
-    ok = (np.asarray(a["valid"]) > 0) & (np.asarray(b["valid"]) > 0) & np.isfinite(a.rate_dph) & np.isfinite(b.rate_dph)
+    a, b = before, compensate(log, after)
+    ok = _both_served(a, b)
     t = np.asarray(log.t_s, np.float64)
     return tuple(_ratio(_binned_sq(b.rate_dph, t, ok, w, shape=w is not None), _binned_sq(a.rate_dph, t, ok, w, shape=w is not None))
                  for w in (*windows, None))
@@ -252,8 +259,8 @@ FAILED = (float("inf"),) * 3   # a fold that cannot be fitted or scored
 def _cv_ratios(logs, folds, decay, refit, windows) -> tuple:
     """Per held-out run i: :func:`_held_out_ratios` of the fit with the term on the OTHER runs
     (:func:`_with_term`, its size and its refit alike) against ``folds[i]`` = (the base refitted on
-    the other runs, its results on them; None: it could not be fitted), or FAILED; and those fits
-    (None where FAILED)."""
+    the other runs, its results on them, its results on run i; None: it could not be fitted), or
+    FAILED; and those fits (None where FAILED)."""
     out, models = [], []
     for i, fold in enumerate(folds):
         others = [log for j, log in enumerate(logs) if j != i]
@@ -261,7 +268,7 @@ def _cv_ratios(logs, folds, decay, refit, windows) -> tuple:
         if fold is not None:
             try:
                 model = _with_term(others, fold[0], decay, refit, fold[1])[0]
-                out.append(_held_out_ratios(logs[i], fold[0], model, windows))
+                out.append(_held_out_ratios(logs[i], fold[2], model, windows))
             except (ValueError, np.linalg.LinAlgError):
                 model = None
         if model is None:
@@ -381,7 +388,7 @@ def responses(logs, model, decay, compensated=None) -> list:
     out = []
     for log, a in zip(logs, compensated):
         b = compensate(log, probe)
-        ok = (np.asarray(a["valid"]) > 0) & (np.asarray(b["valid"]) > 0) & np.isfinite(a.rate_dph) & np.isfinite(b.rate_dph)
+        ok = _both_served(a, b)
         out.append(np.where(ok, b.rate_dph - a.rate_dph, 0.0))
     return out
 
@@ -490,11 +497,11 @@ def add_turn_on(logs, model, res, refit):
     from host_tools.golden.compensate import compensate
 
     compensated = [compensate(log, base) for log in logs]      # once: every candidate's response is against it
-    folds = []                       # per held-out run: the base refitted on the others, and its results there
+    folds = []           # per held-out run: the base refitted on the others, its results there and on the run
     for i in range(len(logs)):
         others = [log for j, log in enumerate(logs) if j != i]
         fold = _refit_or_none(refit, others, base)
-        folds.append(None if fold is None else (fold, [compensate(log, fold) for log in others]))
+        folds.append(None if fold is None else (fold, [compensate(log, fold) for log in others], compensate(logs[i], fold)))
     rows, best = [], None
     for tau in taus:
         w = window_of(tau)
