@@ -23,7 +23,9 @@ from firmware_ref.vocabulary import (AUX_GENERATORS, AUX_KINDS, COMBINERS, ESTIM
                                      STATE_NAMES)
 
 # -- input words ---------------------------------------------------------------------------------
-FREQ_FRAC = 18            # drive-frequency word: uint32, LSB 2^-18 Hz, 0 .. 16384 Hz
+FREQ_FRAC = 15            # drive-frequency word: uint32, LSB 2^-15 Hz, 0 .. 131072 Hz (FORMATS.md)
+FREQ_RANGE_HZ = float(1 << (32 - FREQ_FRAC))   # 131072 Hz: one past the largest word value
+FREQ_SUPPORTED_HZ = (1.0e3, 1.0e5)            # drive frequencies the derivation is checked over
 TEMP_FRAC = 16            # temperature word: int32, LSB 2^-16 degC
 RATE_FRAC = 10            # raw rate word: int32, LSB 2^-10 deg/h (+-2^21 deg/h = +-582.5 deg/s)
 Q = 30                    # u, v, z: int32 Q1.30, 1.0 = 2^30
@@ -131,7 +133,7 @@ def _p2(e: int) -> str:
 SIGNALS = (
     # inputs
     Fmt("F (drive frequency word)", "uint32", str(FREQ_FRAC), f"2^-{FREQ_FRAC} Hz = {2.0 ** -FREQ_FRAC:.4g} Hz",
-        "0 .. 16384 Hz", "RHU from float", "sat [0, 2^32-1], FLAG_INPUT_SAT", "inputs"),
+        f"0 .. {FREQ_RANGE_HZ:.0f} Hz", "RHU from float", "sat [0, 2^32-1], FLAG_INPUT_SAT", "inputs"),
     Fmt("T (temperature word)", "int32", str(TEMP_FRAC), f"2^-{TEMP_FRAC} degC = {2.0 ** -TEMP_FRAC:.4g} degC",
         "+-32768 degC", "RHU from float", "sym-sat, FLAG_INPUT_SAT", "inputs"),
     Fmt("R (raw rate word)", "int32", str(RATE_FRAC), f"2^-{RATE_FRAC} deg/h = {2.0 ** -RATE_FRAC:.4g} deg/h",
@@ -273,6 +275,12 @@ def derivation(fig: NoiseFigures = NoiseFigures()) -> dict:
         "f_noise_increase": noise_increase(fig.sigma_f_hz, lsb_f),
         "f_noise_increase_diff": noise_increase(fig.sigma_f_hz * math.sqrt(2), lsb_f * math.sqrt(2)),
         "f_range_hz": (1 << 32) * lsb_f,
+        # the same LSB over every supported drive frequency: the rule is on the frequency noise in Hz,
+        # so it holds wherever that noise is at least f_sigma_min_hz; the rate term's resolution
+        # (one LSB per sample at 1 degC/min) is coarsest at the lowest frequency
+        "f_sigma_min_hz": lsb_f / math.sqrt(12.0 * ((1.0 + fig.max_noise_increase) ** 2 - 1.0)),
+        "rate_resolution_lo_c_per_min": lsb_f * fig.fs_hz / (FREQ_SUPPORTED_HZ[0] * abs(fig.k_per_c) / 60.0),
+        "rate_resolution_hi_c_per_min": lsb_f * fig.fs_hz / (FREQ_SUPPORTED_HZ[1] * abs(fig.k_per_c) / 60.0),
         "pll_lsb_hz": fig.pll_lsb_hz,
         "sigma_rate_dph": sigma_rate,
         "q_r_max_dph": max_lsb_for_noise(sigma_rate, fig.max_noise_increase),

@@ -1,10 +1,10 @@
 """The coefficient table: one versioned binary layout of 32-bit little-endian words, shared by the
 C header, table.json, ``$readmemh`` memory files and the serial upload.
 
-Layout (version 3; ``LAYOUT`` below, rendered into FORMATS.md)::
+Layout (version 4; ``LAYOUT`` below, rendered into FORMATS.md)::
 
     word 0   magic 0x47524448 ("HDRG" as little-endian bytes)
-    word 1   version (3)
+    word 1   version (4)
     word 2   length: number of words including the CRC
     3..46    config words and bank 1's exponents and 17 coefficient mantissas (as version 1)
     47..71   order (0 combine_first, 1 regress_first), n_banks (1, 2), bank 2's exponents
@@ -23,7 +23,11 @@ Version 1 (47 fixed words, no order/bank-2 words) is still **read**, as order 0 
 with one bank: its words mean exactly what they meant (``from_words``; the C twin does the same).
 Version 2 has the same words; an iir rate estimator in it started after a 2^(shift+1)-sample
 warm-up, so a version-2 table with the iir is refused (quantize the model again), any other is
-read as it is.  Version 3: the iir starts at power-on (FORMATS.md).  Every writer writes version 3.
+read as it is.  Version 3: the iir starts at power-on (FORMATS.md).  Version 4: the same words, with
+the drive-frequency word F at LSB 2^-15 Hz (0 .. 131072 Hz; 2^-18 Hz before), so a table of
+version 3 or older whose proxy is the drive frequency, or one of whose aux input terms reads F,
+holds its F centres in the old LSB and is refused (quantize the model again); any other is read as
+it is.  Every writer writes version 4.
 
 Signed fields are stored as two's complement.  :class:`Table` holds the decoded fields;
 ``to_words/from_words``, ``to_bytes/from_bytes``, ``to_memh``/``from_memh`` (one 8-digit hex word
@@ -65,17 +69,20 @@ def horner_bounds(e_row, e_7, e_acc, mant) -> list:
     return rows, bounds
 
 MAGIC = 0x47524448
-VERSION = 3
-VERSIONS_READ = (1, 2, 3)
+VERSION = 4
+VERSIONS_READ = (1, 2, 3, 4)
 # the first layout version whose iir starts with the gear (firmware_ref.rate); an older table with
 # the iir estimator was quantized for the blanked start-up and is refused
 IIR_GEAR_VERSION = 3
+# the first layout version of the 2^-15 Hz drive-frequency word (formats.FREQ_FRAC); an older table
+# that reads F (proxy or aux input term) was quantized for 2^-18 Hz and is refused
+FREQ_WORD_VERSION = 4
 ORDER_COMBINE_FIRST, ORDER_REGRESS_FIRST = 0, 1
 
 # (field, type, meaning) of words 0..46
 LAYOUT = (
     ("magic", "uint32", "0x47524448 ('HDRG')"),
-    ("version", "uint32", "layout version (3; 2 and 1 (order 0, one bank) are read unless iir)"),
+    ("version", "uint32", "layout version (4; 3, 2 and 1 (order 0, one bank) are read unless iir or reading F)"),
     ("length", "uint32", "words including the CRC"),
     ("proxy_kind", "uint32", "0 freq (P = F word, uint32), 1 temp (P = T word, int32)"),
     ("p_ref", "int32", "proxy centre P_REF in proxy-word LSB (freq: uint32 bit pattern)"),
@@ -302,6 +309,12 @@ class Bank:
     mant: tuple
 
 
+def _old_freq_word(source: str, version: int, why: str) -> str:
+    return (f"{source}: a version-{version} table was quantized for the old drive-frequency word (LSB 2^-18 Hz, "
+            f"0 .. 16384 Hz) and {why}; this firmware reads F at 2^-{F.FREQ_FRAC} Hz (0 .. "
+            f"{F.FREQ_RANGE_HZ:.0f} Hz, table version {FREQ_WORD_VERSION}): quantize the model again (hdrg quantize)")
+
+
 class TableError(ValueError):
     """A table that cannot be used (bad magic, version, length, CRC, or field value)."""
 
@@ -495,16 +508,22 @@ class Table:
         npar = vals["aux_nparams"]
         if n_fixed + npar + 1 != len(words):
             raise TableError(f"{source}: aux_nparams {npar} does not match the length {len(words)}")
+        if words[1] < FREQ_WORD_VERSION and vals["proxy_kind"] == 0:
+            raise TableError(_old_freq_word(source, words[1], "its proxy is the drive frequency"))
         params = [w - (1 << 32) if w >= 1 << 31 else w for w in words[n_fixed:n_fixed + npar]]
         kw = {f.name: vals[f.name] for f in fields(cls) if f.name in vals}
         if n_fixed == N_FIXED:
             kw.update(e_row2=tuple(vals[f"e2_{i}"] for i in range(4)), e_7_2=vals["e2_7"], e_acc2=vals["e2_acc"],
                       mant2=tuple(vals[f"m2_{k}"] for k in range(N_TERMS)))
         try:
-            return cls(e_row=tuple(vals[f"e_{i}"] for i in range(4)),
-                       mant=tuple(vals[f"m_{k}"] for k in range(N_TERMS)), aux_params=tuple(params), **kw)
+            table = cls(e_row=tuple(vals[f"e_{i}"] for i in range(4)),
+                        mant=tuple(vals[f"m_{k}"] for k in range(N_TERMS)), aux_params=tuple(params), **kw)
         except TableError as exc:
             raise TableError(f"{source}: {exc}") from None
+        if words[1] < FREQ_WORD_VERSION and table.aux_gen == 1 and any(
+                t.kind == KIND_INPUT and t.src == F.CH_F for t in decode_aux(table.aux_params).terms):
+            raise TableError(_old_freq_word(source, words[1], "an aux input term reads the drive frequency F"))
+        return table
 
     @classmethod
     def from_bytes(cls, data: bytes, source: str = "<bytes>") -> "Table":

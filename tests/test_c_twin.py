@@ -488,10 +488,12 @@ def table_cases():
 
     cases = [
         ("magic", [w[0] ^ 1] + w[1:], "MAGIC", 0),
-        ("version", recrc([w[0], 4] + w[2:]), "VERSION", 1),
+        ("version", recrc([w[0], 5] + w[2:]), "VERSION", 1),
         ("version_0", recrc([w[0], 0] + w[2:]), "VERSION", 1),
         # an iir table of layout version 2 was quantized for the blanked start-up: refused
         ("iir_v2", recrc([w[0], 2] + w[2:FI["rate_est"]] + [3] + w[FI["rate_est"] + 1:]), "VERSION", 1),
+        # a frequency-proxy table of layout version 3 holds P_REF in the old 2^-18 Hz word: refused
+        ("freq_word_v3", recrc([w[0], 3] + w[2:]), "VERSION", 1),
         ("short", w[:-2] + [w[-1]], "LENGTH", 2),
         ("length_word", recrc(w[:2] + [72] + w[3:]), "LENGTH", 2),
         ("crc", w[:-1] + [w[-1] ^ 0x80000000], "CRC", 72),
@@ -925,7 +927,7 @@ def test_evaluator_bank_select_and_version_1_table(c_exe):
     assert not np.array_equal(got[:300], got[300:])
     assert int(got[0]) == evaluate(int(u[0]), int(v[0]), int(z[0]), table, bank=2)[0]
     assert out[-1].startswith("ERR RANGE")
-    one = table_of("diff", "trend")
+    one = table_of("lsq", "trend")              # a temperature proxy: a version-1 frequency table is refused
     w = one.to_words()
     v1 = [w[0], 1, N_FIXED_V1 + 1] + w[3:N_FIXED_V1]
     v1 = v1 + [crc32_words(v1)]

@@ -10,6 +10,8 @@ import pytest
 from host_tools import cli
 from host_tools.bench import cost, cost_fpga
 
+pytestmark = pytest.mark.target      # the target toolchains: `pytest -m target` (.ci/run)
+
 ARM = shutil.which("arm-none-eabi-gcc") and shutil.which("qemu-system-arm") and cost.NEWLIB_SPECS.is_file()
 FPGA = all(shutil.which(t) for t in ("yosys", "iverilog", "vvp", "verilator"))
 

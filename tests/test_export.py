@@ -10,6 +10,7 @@ import zlib
 import numpy as np
 import pytest
 
+from firmware_ref import table as T
 from firmware_ref.table import MAGIC, Table, TableError
 from host_tools.vectors.builders import make_model, random_model, random_stream
 from host_tools.fixed import export as ex
@@ -53,9 +54,9 @@ def test_three_exports_hold_the_same_words(quantized, table_json, tmp_path, caps
     assert all(len(line) == 8 for line in memh.splitlines()) and len(memh.splitlines()) == len(words)
     assert [int(w, 16) for w in js["words"]] == words
     assert f"#define HDRG_TABLE_CRC32 0x{crc:08x}u" in header
-    assert f"#define HDRG_TABLE_MAGIC 0x{MAGIC:08x}u" in header and "#define HDRG_TABLE_LAYOUT_VERSION 3u" in header
+    assert f"#define HDRG_TABLE_MAGIC 0x{MAGIC:08x}u" in header and f"#define HDRG_TABLE_LAYOUT_VERSION {T.VERSION}u" in header
     assert f"#define HDRG_TABLE_WORDS {len(words)}u" in header
-    assert js["crc32"] == f"0x{crc:08x}" and js["layout_version"] == 3
+    assert js["crc32"] == f"0x{crc:08x}" and js["layout_version"] == T.VERSION
     # each decodes to the same table through the readers
     assert read_table(tmp_path / "out" / "hdrg_table.json") == quantized.table
     assert read_table(tmp_path / "out" / "hdrg_table.memh") == quantized.table
@@ -211,10 +212,10 @@ def test_two_bank_exports(tmp_path):
     assert t == q.table == read_table(tmp_path / "exp" / "hdrg_table.memh")
     assert ex.decode_c_header(text) == t.to_words()
     from firmware_ref.table import N_FIXED, N_FIXED_V1, crc32_words
-    one = quantize(make_model(), n_random=10).table
+    one = quantize(make_model(kind="temp", ref=20.0, span=40.0, rate_span=0.5), n_random=10).table
     w = one.to_words()
     v1 = [w[0], 1, N_FIXED_V1 + 1] + w[3:N_FIXED_V1]
     (tmp_path / "old.memh").write_text("".join(f"{x:08x}\n" for x in v1 + [crc32_words(v1)]))
     cli([str(tmp_path / "old.memh"), "--format", "mem", "-o", str(tmp_path / "exp1")])
     words = [int(x, 16) for x in (tmp_path / "exp1" / "hdrg_table.memh").read_text().split()]
-    assert words[1] == 3 and len(words) == N_FIXED + 1 and Table.from_words(words) == one
+    assert words[1] == T.VERSION and len(words) == N_FIXED + 1 and Table.from_words(words) == one

@@ -15,6 +15,7 @@ import pytest
 
 from firmware_ref import arith
 from firmware_ref import formats as F
+from firmware_ref import table as T
 from firmware_ref import inputs
 from firmware_ref.aux import sin_q30
 from firmware_ref.compensate import run_reference
@@ -201,7 +202,7 @@ def test_aux_table_words_roundtrip_and_validate():
     q = quantize(aux_model(), n_random=10)
     t = q.table
     words = t.to_words()
-    assert words[1] == 3 and words[FIELD_INDEX["aux_gen"]] == 1
+    assert words[1] == T.VERSION and words[FIELD_INDEX["aux_gen"]] == 1
     assert len(words) == 73 + 2 + 1 + 6 * F.AUX_TERM_WORDS and words[2] == len(words)
     assert Table.from_words(words) == t == Table.from_bytes(t.to_bytes()) == Table.from_memh(t.to_memh())
     aux = t.aux()

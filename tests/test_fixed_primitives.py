@@ -157,11 +157,12 @@ def test_word_conversion_vs_apytypes(name, frac, width, signed):
 
 
 def test_vector_words_specials():
-    w, sat = inputs.freq_words([6227.386, -1.0, 1e30, np.inf, 16384.0, 16384.0 - 0.75 * 2 ** -18])
+    top = F.FREQ_RANGE_HZ
+    w, sat = inputs.freq_words([6227.386, -1.0, 1e30, np.inf, top, top - 0.75 * 2.0 ** -F.FREQ_FRAC])
     assert w.tolist()[1:] == [0, F.UINT32_MAX, F.UINT32_MAX, F.UINT32_MAX, F.UINT32_MAX]
     assert sat.tolist() == [False, True, True, True, True, False]
     w, sat = inputs.rate_words([-np.inf, -(2.0 ** 21), 0.49999999999999994 * 2 ** -10, -0.5 * 2 ** -10])
     assert w.tolist() == [-F.INT32_SYM, -F.INT32_SYM, 0, 0] and sat.tolist() == [True, True, False, False]
     with pytest.raises(ValueError, match="NaN"):
         inputs.rate_words([1.0, np.nan])
-    assert inputs.from_words([1 << 18], F.FREQ_FRAC)[0] == 1.0
+    assert inputs.from_words([1 << F.FREQ_FRAC], F.FREQ_FRAC)[0] == 1.0

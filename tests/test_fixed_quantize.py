@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from firmware_ref import formats as F
 from firmware_ref.evaluator import evaluate
 from firmware_ref.kernel import evaluate_words
+from firmware_ref import table as T
 from firmware_ref.table import FIELD_INDEX, MAGIC, N_FIXED, Table, TableError
 from firmware_ref.terms import K_AUX, N_TERMS, TERM_POWERS
 from host_tools.vectors.builders import make_model
@@ -101,8 +102,8 @@ def test_quantized_table_fields():
     t = q.table
     assert (t.proxy_kind, t.rate_est, t.rate_n, t.rate_warmup, t.combiner) == (0, 2, 7, 6, 2)
     assert (t.settle_n, t.max_stale_n, t.power_on_n, t.exchange_n, t.dwell_n) == (2, 300, 1, 30, 120)
-    assert t.p_ref == round(6227.386 * 2 ** 18) and 2 ** 30 <= t.g_u < 2 ** 31 and 2 ** 30 <= t.g_v < 2 ** 31
-    lsb = 2.0 ** -18
+    assert t.p_ref == round(6227.386 * 2 ** F.FREQ_FRAC) and 2 ** 30 <= t.g_u < 2 ** 31 and 2 ** 30 <= t.g_v < 2 ** 31
+    lsb = 2.0 ** -F.FREQ_FRAC
     assert t.g_u * 2.0 ** -(30 + t.sh_u) == pytest.approx(lsb / 3.0, rel=1e-9)
     assert t.g_v * 2.0 ** -(30 + t.sh_v) == pytest.approx(1.0 / (model.config.rate.divisor * 0.003 / lsb), rel=1e-9)
     assert (1 << t.s_bits) - 1 > model.config.rate.divisor * 0.003 / lsb >= (1 << (t.s_bits - 2))
@@ -117,7 +118,7 @@ def test_quantized_table_fields():
     ({}, {0: 2e6, 1: 2e5}, "exceeds the output word range"),
     ({"span": 1e-7}, {}, "below one word LSB"),
     ({"kind": "temp", "ref": 0.0, "span": 1e5}, {}, "exceeds 2\\^30 word LSB"),
-    ({"ref": 20000.0}, {}, "outside the drive-frequency word"),
+    ({"ref": 2.0e5}, {}, "outside the drive-frequency word"),
     ({"rate_span": 1e-9}, {}, "below one word LSB per sample"),
     ({"rate_span": 1e12}, {}, "rate-sum range"),
     ({"estimator": "lsq", "n": 5000}, {}, "history buffer"),
@@ -149,7 +150,7 @@ def table():
 
 def test_table_roundtrips(table):
     words = table.to_words()
-    assert words[0] == MAGIC and words[1] == 3 and words[2] == len(words) == N_FIXED + 1 == 73
+    assert words[0] == MAGIC and words[1] == T.VERSION == 4 and words[2] == len(words) == N_FIXED + 1 == 73
     assert Table.from_words(words) == table
     data = table.to_bytes()
     assert data[:4] == b"HDRG" and len(data) == 4 * len(words)
@@ -163,7 +164,7 @@ def test_table_roundtrips(table):
 
 def test_table_readers_refuse_damage(table):
     words = table.to_words()
-    for i, bad, match in [(0, 0x12345678, "magic"), (1, 4, "version"), (1, 0, "version"), (2, 99, "length"), (30, words[30] ^ 1, "CRC")]:
+    for i, bad, match in [(0, 0x12345678, "magic"), (1, T.VERSION + 1, "version"), (1, 0, "version"), (2, 99, "length"), (30, words[30] ^ 1, "CRC")]:
         w = list(words)
         w[i] = bad
         with pytest.raises(TableError, match=match):
@@ -189,10 +190,13 @@ def _v1_words(table):
 
 
 def test_version_1_table_reads_as_combine_first_one_bank(table):
-    v1 = _v1_words(table)
+    temp = quantize(make_model(kind="temp", ref=20.0, span=40.0, combiner="trend", settle_s=2.0), n_random=10).table
+    v1 = _v1_words(temp)
     t = Table.from_words(v1, "old.memh")
-    assert t == table and t.order == 0 and t.n_banks == 1
-    assert t.to_words()[1] == 3                         # written back as version 3
+    assert t == temp and t.order == 0 and t.n_banks == 1
+    assert t.to_words()[1] == T.VERSION                 # written back as the current version
+    with pytest.raises(TableError, match=r"old drive-frequency word .* quantize the model again"):
+        Table.from_words(_v1_words(table), "old.memh")  # a frequency proxy at the 2^-18 Hz word: refused
     bad = list(v1)
     bad[2] += 25                                        # a version-1 length that only v2 would fit
     with pytest.raises(TableError, match="length"):
@@ -258,7 +262,7 @@ def test_hdrg_quantize_through_the_cli_registry(tmp_path, capsys, monkeypatch):
     assert cli.main(["quantize", str(tmp_path / "model.json"), "-o", str(tmp_path / "t.json")]) == 0
     assert read_table(tmp_path / "t.json").combiner == 1
     c = np.zeros(N_TERMS)
-    c[0] = 3e9
+    c[0], c[1] = 2e6, 2e5         # each |k| readable, their sum beyond the output word: quantize refuses
     make_model(coef=c).to_json(tmp_path / "big.json")
     capsys.readouterr()
     assert cli.main(["quantize", str(tmp_path / "big.json"), "-o", str(tmp_path / "x.json")]) == 2

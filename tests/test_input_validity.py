@@ -66,7 +66,7 @@ def test_defaults_and_declared_limits():
     with pytest.raises(ValueError, match="freq_range_hz"):
         ic.input_flags(_mr_log(10, freq_range_hz="high"))
     # a drive frequency above the F word's range: fine for the float model, invalid for the words
-    hi = _mr_log(10).with_columns(freq_hz=np.full(10, 20000.0))
+    hi = _mr_log(10).with_columns(freq_hz=np.full(10, 2.0e5))
     assert not ic.input_flags(hi)[0].any() and ic.input_flags(hi, word_range=True)[0].all()
 
 
@@ -331,8 +331,8 @@ def test_declared_frequency_range_above_the_word_is_compared_in_hz():
     from host_tools.golden.input_check import input_flags
     from host_tools.golden.runlog import RunLog
     t = np.arange(10.0)
-    for md, f, flagged in (({"freq_range_hz": "20000..30000"}, 25000.0, 0), ({"freq_range_hz": "10000..17000"}, 16384.0, 0),
-                           ({}, 25000.0, 0), ({"freq_range_hz": "20000..30000"}, 31000.0, 10)):
+    for md, f, flagged in (({"freq_range_hz": "200000..300000"}, 250000.0, 0), ({"freq_range_hz": "100000..140000"}, 131072.0, 0),
+                           ({}, 250000.0, 0), ({"freq_range_hz": "200000..300000"}, 310000.0, 10)):
         log = RunLog.from_arrays(metadata=md, t_s=t, rate_dph=np.zeros(10), freq_hz=np.full(10, f))
         assert int(input_flags(log)[0].sum()) == flagged, (md, f)
 

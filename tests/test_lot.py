@@ -44,15 +44,21 @@ def lot(tmp_path_factory):
     runlog.write(simulate_foreign(0, 4.0, False, 0, 0, 120), d / "bad-short" / "train.csv")
     # outside the model's range: trained on 20 min, held out on a run that goes much colder
     (d / "bad-range").mkdir()
-    runlog.write(simulate_foreign(1, 4.0, False, 0, 0, 1200), d / "bad-range" / "train.csv")
+    runlog.write(simulate_foreign(1, 4.0, False, 0, 5, 1200), d / "bad-range" / "train.csv")
     runlog.write(simulate_foreign(1, 4.0, False, 1, 1, 3000), d / "bad-range" / "holdout.csv")
-    rows += ["bad-corrupt,bad-corrupt/train.csv,foreign-0/holdout.csv,",
+    rows += ["bad-corrupt,bad-corrupt/train.csv,,",
              "bad-short,bad-short/train.csv,,",
              "bad-range,bad-range/train.csv,bad-range/holdout.csv,0"]
     (d / "manifest.csv").write_text("\n".join(rows) + "\n")
     (d / "spec.json").write_text(json.dumps(SPEC))
     assert ids == ["foreign-0", "foreign-1", "foreign-2", "foreign-3"]
     return d
+
+
+def _copy_run(src: Path, dst: Path) -> None:
+    """A copy of the run log ``src`` with other bytes (a metadata line added): a lot takes it for
+    another run (a byte-identical copy is the same run: manifest_conflicts)."""
+    dst.write_text("# copy: yes\n" + src.read_text())
 
 
 def _files(out: Path) -> dict:
@@ -115,8 +121,13 @@ def test_a_passing_device_exports_its_tables_with_its_id_and_crc(reference):
     assert f"0x{words[-1]:08x}" == crc
     marker = json.loads((folder / MARKER).read_text())
     assert marker["input_hash"] == result["input_hash"] and "table.h" in marker["files"]
-    # a failed device exports no table
-    assert sorted(p.name for p in (out / "devices" / "bad-range").iterdir()) == [MARKER, "model.json", "result.json"]
+    # a failed device ships no table: its tables (when it has them) are in withheld/
+    assert sorted(p.name for p in (out / "devices" / "bad-range").iterdir()) == [MARKER, "model.json", "result.json",
+                                                                                "withheld"]
+    assert sorted(p.name for p in (out / "devices" / "bad-range" / "withheld").iterdir()) == [
+        "table.h", "table.json", "table.memh"]
+    marker = json.loads((out / "devices" / "bad-range" / MARKER).read_text())
+    assert "withheld/table.h" in marker["files"] and "table.h" not in marker["files"]
     assert sorted(p.name for p in (out / "devices" / "bad-corrupt").iterdir()) == [MARKER, "result.json"]
 
 
@@ -148,11 +159,11 @@ def test_an_interrupted_lot_resumes_without_refitting(lot, reference, tmp_path):
     changed = tmp_path / "in"
     shutil.copytree(lot, changed)
     os.replace(changed / "bad-short" / "train.csv", changed / "bad-short" / "old.csv")
-    shutil.copy(changed / "foreign-3" / "train.csv", changed / "bad-short" / "train.csv")
+    _copy_run(changed / "foreign-3" / "train.csv", changed / "bad-short" / "train.csv")
     res = run_lot(changed / "manifest.csv", tmp_path, spec=changed / "spec.json", workers=1, progress=False)
     assert res["computed"] == ["bad-short"]
-    # another spec redoes every device
-    (changed / "spec2.json").write_text(json.dumps({**SPEC, "coverage_min": 0.5}))
+    # a spec that changes a key of the computation redoes every device
+    (changed / "spec2.json").write_text(json.dumps({**SPEC, "dwell_s": 60}))
     res = run_lot(changed / "manifest.csv", tmp_path, spec=changed / "spec2.json", workers=2, progress=False)
     assert len(res["computed"]) == 7
     results = {r["device"]: r for r in json.loads((tmp_path / "lot.json").read_text())["devices"]}
@@ -181,7 +192,7 @@ def test_a_killed_command_resumes(lot, reference, tmp_path):
     inp = tmp_path / "in"
     shutil.copytree(lot, inp)
     (inp / "zz-slow").mkdir()
-    shutil.copyfile(lot / "foreign-0" / "train.csv", inp / "zz-slow" / "train.csv")
+    _copy_run(lot / "foreign-0" / "train.csv", inp / "zz-slow" / "train.csv")
     with open(inp / "manifest.csv", "a") as fh:
         fh.write("zz-slow,zz-slow/train.csv,,\n")
     out = tmp_path / "out"
@@ -199,6 +210,7 @@ def test_a_killed_command_resumes(lot, reference, tmp_path):
         proc.send_signal(signal.SIGKILL)
     finally:
         proc.wait()
+        proc.stderr.close()
     assert proc.returncode == -signal.SIGKILL and not (out / "lot.csv").exists()
     assert not (out / "devices" / "zz-slow" / MARKER).exists()
     stamps = {d: os.stat(out / "devices" / d / MARKER).st_mtime_ns for d in others}
@@ -228,7 +240,7 @@ def test_the_commands(lot, tmp_path, capsys):
     assert cli.main(["lot", str(lot / "manifest.csv"), "-o", str(tmp_path / "out"), "--spec",
                      str(lot / "spec.json"), "--workers", "1"]) == 1
     cap = capsys.readouterr()
-    assert "7 devices, 2 pass, 5 fail (failed at: check 1, " in cap.out and "read 1" in cap.out
+    assert "7 devices, " in cap.out and "(failed at: check 1, read 1" in cap.out
     assert "hdrg lot: 7/7 devices" in cap.err
     assert cli.main(["lot", "--print-spec"]) == 0
     assert json.loads(capsys.readouterr().out) == load_spec()
@@ -239,7 +251,6 @@ def test_the_commands(lot, tmp_path, capsys):
 @pytest.mark.parametrize("text, needle", [
     ("device,train\nA 1,a.csv\n", "field 'device': 'A 1' is not a device id"),
     ("device,train\n../x,a.csv\n", "is not a device id"),
-    ("device,train\nA1,a.csv\na1,b.csv\n", "ids may not differ only in case"),
     ("device,train,extra\nA1,a.csv,1\n", "unknown column(s) extra"),
     ("device,holdout\nA1,a.csv\n", "missing column(s) train"),
     ("device,train\nA1,\n", "field 'train': empty"),
@@ -324,7 +335,9 @@ def test_a_device_that_breaks_the_pipeline_fails_alone(lot, tmp_path, monkeypatc
 def test_a_device_that_kills_its_worker_process_fails_alone(lot, reference, tmp_path, monkeypatch):
     from host_tools.lot import device
 
-    rows = "".join(f"{d},{lot}/foreign-{i % 2}/train.csv\n" for i, d in enumerate("ABC"))
+    _copy_run(lot / "foreign-0" / "train.csv", tmp_path / "c.csv")      # A's run under another name and bytes
+    rows = "".join(f"{d},{run}\n" for d, run in zip("ABC", (lot / "foreign-0" / "train.csv", lot / "foreign-1" /
+                                                             "train.csv", tmp_path / "c.csv")))
     (tmp_path / "m.csv").write_text("device,train\n" + rows)
     real = device._fit
 

@@ -191,7 +191,8 @@ def test_hdrg_fit_says_what_the_runs_identify(tmp_path):
     r = subprocess.run([sys.executable, "-m", "host_tools.cli", "fit", str(path), "-o", str(tmp_path / "m.json")],
                        capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 0, r.stderr
-    assert "rate            NOT identified" in r.stdout and "record more heating" in r.stdout
+    assert "rate            NOT identified" in r.stdout and "record heating legs" in r.stdout
+    assert "(0 heating, 1 cooling legs; the temp proxy rises when the device is heating)" in r.stdout
     assert "model kept: cubic in the proxy" in r.stdout
     model = json.loads((tmp_path / "m.json").read_text())
     assert model["fit"]["identifiability"]["rate_terms_identified"] is False

@@ -80,7 +80,8 @@ def test_extrapolation_flags_counts_warning_and_strict(runs, capsys, tmp_path, i
 def test_inside_the_range_no_warning(runs, capsys, tmp_path):
     rc, stdout, err = hdrg(capsys, "compensate", runs["narrow"], "--model", runs["model"], "-o", tmp_path / "c.csv",
                            "--strict")
-    assert rc == 0 and "warning" not in err and "flags:" in stdout
+    # the one warning: the model (one training run) did not calibrate the start-up, and this log starts at power-on
+    assert rc == 0 and [x for x in err.splitlines() if "warning" in x and "start-up" not in x] == [] and "flags:" in stdout
 
 
 def test_startup_model_on_a_cycle_warns(tmp_path, capsys):

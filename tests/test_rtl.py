@@ -14,6 +14,8 @@ from host_tools import vectors as V
 from host_tools.vectors.build import load_set
 from host_tools.vectors.runner import requests
 
+pytestmark = pytest.mark.target      # the target toolchains: `pytest -m target` (.ci/run)
+
 ICARUS = shutil.which("iverilog") and shutil.which("vvp")
 VERILATOR = shutil.which("verilator")
 CYCLES_GOAL = 200

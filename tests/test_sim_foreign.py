@@ -1,15 +1,19 @@
 """The foreign simulator family (host_tools.simulation.sim_foreign): determinism, sign convention, the
-noise-only floor run, every effect kind, CLI and bad arguments."""
+noise-only floor run, every effect kind, the drive-frequency range, the temperature-only devices
+(fitted and compensated end to end), CLI and bad arguments."""
 import copy
 import json
+import warnings
 
 import numpy as np
 import pytest
 
-from host_tools import cli
+from host_tools import api, cli
+from host_tools.bench.accuracy import floor_of, servable
 from host_tools.golden import runlog
-from host_tools.simulation.sim_foreign import (EFFECT_KINDS, EFFECTS, G0, T_REF_C, T_SCALE_C, foreign_device,
-                                    node_temperatures, simulate_foreign)
+from host_tools.golden.reversal import combine
+from host_tools.simulation.sim_foreign import (EFFECT_KINDS, EFFECTS, G0, TEMP_ONLY_SHARE, T_REF_C, T_SCALE_C,
+                                               chamber_profile, foreign_device, node_temperatures, simulate_foreign)
 
 DUR = 3000.0
 
@@ -38,11 +42,110 @@ def test_structure_is_randomized_within_the_documented_ranges():
     devs = [foreign_device(s) for s in range(40)]
     assert {len(d.nodes) for d in devs} == {2, 3, 4}
     assert all(60 <= n["tau_s"] <= 1500 for d in devs for n in d.nodes)
-    assert all(d.sensor_node != d.resonator_node for d in devs)
+    assert all(d.sensor_node != d.resonator_node for d in devs if d.logs_freq)   # temperature-only: below
     assert any(d.damping_node != d.resonator_node for d in devs) and any(d.damping_node == d.resonator_node for d in devs)
-    assert all(6e3 <= d.drive["f0_hz"] <= 30e3 for d in devs)
     assert any(n["parent"] >= 0 for d in devs for n in d.nodes[1:])      # series chains
     assert any(n["parent"] < 0 for d in devs for n in d.nodes[1:])       # parallel branches
+
+
+def test_drive_frequency_spans_3_to_40_khz():
+    f0 = np.array([foreign_device(s).drive["f0_hz"] for s in range(400)])
+    assert f0.min() >= 3e3 and f0.max() <= 40e3
+    assert f0.min() < 3.5e3 and f0.max() > 39.5e3                       # both ends reached
+    # roughly uniform: every 5-kHz band from 3 to 38 kHz holds some devices
+    assert all(np.any((f0 >= lo) & (f0 < lo + 5e3)) for lo in np.arange(3e3, 38e3, 5e3))
+    assert np.any(f0 < 6e3) and np.any(f0 > 30e3)                      # beyond the former 6..30 kHz
+
+
+# Version-1 draws (f0 then 6..30 kHz) of two devices: the same random number gives f0 now, and
+# every other parameter is unchanged (seed 25 is temperature-only: its sensor moved to the resonator).
+V1 = {0: {"f0_hz": 13193.085372897236, "omega_dph": 2.2449088969366753, "c1": 29.513778288034487,
+          "white_dph": 0.1908630374133519, "nco_step_hz": 0.00013055825716208348, "sensor_node": 1},
+      25: {"f0_hz": 19001.48536837229, "omega_dph": 1.3053740744307747, "c1": 28.157761960774092,
+           "white_dph": 0.3336704850637673, "nco_step_hz": 0.0007288424023632229, "sensor_node": 1}}
+
+
+@pytest.mark.parametrize("seed", sorted(V1))
+def test_the_wider_range_keeps_every_other_draw(seed):
+    d, v1 = foreign_device(seed), V1[seed]
+    assert (d.drive["f0_hz"] - 3e3) / 37e3 == pytest.approx((v1["f0_hz"] - 6e3) / 24e3, abs=1e-13)
+    assert (d.omega_dph, d.damping["c1"], d.noise["white_dph"], d.drive["nco_step_hz"]) == (
+        v1["omega_dph"], v1["c1"], v1["white_dph"], v1["nco_step_hz"])
+    assert d.sensor_node == (v1["sensor_node"] if d.logs_freq else d.resonator_node)
+    assert d.logs_freq == (seed != 25)
+
+
+def test_temperature_only_devices_are_a_deterministic_minority():
+    devs = [foreign_device(s) for s in range(800)]
+    only = [d for d in devs if not d.logs_freq]
+    share = len(only) / len(devs)
+    assert abs(share - TEMP_ONLY_SHARE) < 0.035, share                 # 1 in 8, +- 3 binomial sigma
+    assert all(d.sensor_node == d.resonator_node for d in only)         # an on-die sensor
+    assert all(d.sensor_node != d.resonator_node for d in devs if d.logs_freq)
+    assert [d.seed for d in only[:2]] == [25, 26]                       # deterministic
+    assert "not logged" in only[0].describe() and "not logged" not in devs[0].describe()
+
+
+def test_a_temperature_only_log_has_no_freq_hz_and_its_temp_c_tracks_the_resonator(tmp_path):
+    dev = foreign_device(25)
+    run = _run(dev, duration_s=None)
+    assert "freq_hz" not in run.columns
+    assert list(run.columns) == ["t_s", "rate_dph", "mode", "temp_c", "aux_vdd", "aux_acc_x", "aux_acc_y", "aux_acc_z"]
+    floor = _run(dev, duration_s=None, thermal=False)
+    np.testing.assert_array_equal(run["temp_c"], floor["temp_c"])
+    # temp_c = gain x T_resonator + offset, up to the sensor's white noise and quantization
+    t = run.t_s
+    prof = chamber_profile(dev, 4.0)
+    t_res = node_temperatures(dev, t, np.interp(t, prof[:, 0], prof[:, 1]))[dev.resonator_node]
+    err = run["temp_c"] - (dev.sensor["gain"] * t_res + dev.sensor["offset_c"])
+    assert np.std(err) < 1.2 * np.hypot(dev.sensor["noise_c"], dev.sensor["lsb_c"] / np.sqrt(12.0))
+    assert np.ptp(t_res) > 30.0
+    # the other columns are those the device would log with the frequency (same draws)
+    with_f = copy.deepcopy(dev)
+    with_f.logs_freq = True
+    ref = _run(with_f, duration_s=None)
+    assert "freq_hz" in ref.columns
+    for col in run.columns:
+        np.testing.assert_array_equal(run[col], ref[col])
+    # written and read back without the column; the CLI writes the same
+    path = tmp_path / "t.csv"
+    runlog.write(run, path)
+    back = runlog.read(path)
+    assert "freq_hz" not in back.columns
+    np.testing.assert_allclose(back["temp_c"], run["temp_c"])
+    out = tmp_path / "cli.csv"
+    assert cli.main(["simulate", "--family", "random", "--seed", "25", "--chamber-rate", "4", "--reversal", "on",
+                     "--duration", "600", "-o", str(out)]) == 0
+    assert "freq_hz" not in runlog.read(out).columns
+
+
+@pytest.mark.parametrize("reversal, most", [(True, 3.0), (False, 4.0)])
+def test_a_temperature_only_device_fits_and_compensates_end_to_end(tmp_path, reversal, most):
+    """`hdrg fit` (host_tools.api) on a log without freq_hz takes temp_c as the proxy; the model
+    compensates a held-out run of another power-on and chamber rate close to the noise floor."""
+    dev = foreign_device(25)
+    train, hold = tmp_path / "train.csv", tmp_path / "hold.csv"
+    runlog.write(simulate_foreign(dev, 4.0, reversal, 0, 0), train)
+    runlog.write(simulate_foreign(dev, 2.0, reversal, 1, 1), hold)
+    with pytest.warns(UserWarning, match="temp_c"):
+        model = api.fit(train)
+    assert model.config.proxy.kind == "temp" and model.config.proxy.column == "temp_c"
+    held = runlog.read(hold)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        out = api.compensate(hold, model)
+    serve = servable(held)
+    ok = (out["valid"] > 0) & serve
+    assert ok.sum() >= 0.99 * serve.sum()
+    floor = floor_of(simulate_foreign(dev, 2.0, reversal, 1, 1, thermal=False))
+    ratio = np.std(out.rate_dph[ok]) / floor                       # held-out std at 1 s / noise floor
+    if reversal:
+        c = combine(held, "pair")
+        v = np.asarray(c.valid, bool) & serve
+        raw = np.std(c.out_dph[v]) / floor                         # mode reversal alone
+    else:
+        raw = np.std(held.rate_dph[serve]) / floor                 # no model
+    assert ratio < most and ratio < 0.15 * raw, (ratio, raw)
 
 
 def _only(dev, keep):

@@ -17,6 +17,7 @@ from host_tools import vectors as V
 from test_c_twin import CFLAGS, GCC, build
 
 VECTORS = V.DEFAULT_DIR
+ROOT = VECTORS.parent
 needs_gcc = pytest.mark.skipif(GCC is None, reason="gcc not found on PATH: the C twin cannot be built")
 
 
@@ -97,7 +98,7 @@ def test_manifest_and_files(manifest):
     listed = set(manifest["files"])
     on_disk = {p.name for p in VECTORS.iterdir() if p.is_file()} - {"manifest.json", "README.md"}
     assert listed == on_disk
-    assert sum(f["bytes"] for f in manifest["files"].values()) < 20e6
+    assert sum(f["bytes"] for f in manifest["files"].values()) < 24e6
     text = (VECTORS / "manifest.json").read_text()
     for word in ("timestamp", "date", "time_utc", "created"):
         assert word not in text.lower()
@@ -290,6 +291,10 @@ def test_check_impl_passes_the_c_twin(c_exe, manifest):
     rep = V.check_impl(str(c_exe), VECTORS, log=quiet)
     assert rep["mismatches"] == 0 and rep["first"] is None
     assert {k: s["rows"] for k, s in rep["sets"].items()} == {k: s["rows"] for k, s in manifest["sets"].items()}
+    # the count the READMEs quote is the one `hdrg vectors check-impl` prints
+    line = f"PASS: {sum(s['rows'] for s in rep['sets'].values())} vectors in {len(rep['sets'])} sets"
+    for readme in (ROOT / "README.md", VECTORS / "README.md"):
+        assert line in readme.read_text(encoding="utf-8"), (readme, line)
 
 
 @needs_gcc

@@ -739,11 +739,23 @@ int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, uns
         *bad = HDRG_W_AUX_NPARAMS;
         return HDRG_ERR_LENGTH;
     }
+    if (words[HDRG_W_VERSION] < HDRG_FREQ_WORD_VERSION && t->proxy_kind == 0u) {
+        *bad = HDRG_W_VERSION;                      /* P_REF in the old 2^-18 Hz F word */
+        return HDRG_ERR_VERSION;
+    }
     t->n_words = (uint32_t)n_words;
     t->crc = words[n_words - 1u];
     err = check_fields(t, bad);
     if (err == HDRG_OK) {
         err = parse_aux(t, words + n_fixed, bad);
+    }
+    if (err == HDRG_OK && words[HDRG_W_VERSION] < HDRG_FREQ_WORD_VERSION) {
+        for (i = 0; i < t->aux_nterms; i++) {       /* an aux input term's REF in the old F word */
+            if (t->aux_term[i].kind == HDRG_AUX_INPUT && t->aux_term[i].src == 0u) {
+                *bad = HDRG_W_VERSION;
+                err = HDRG_ERR_VERSION;
+            }
+        }
     }
     if (err == HDRG_OK) {
         err = check_horner(t, bad);

@@ -20,7 +20,7 @@
  *     per sample: hdrg_step(&st, &in, &out);      (in: input words, out: outputs + intermediates)
  *     or hdrg_step_aux(&st, &in, &aux, &out) with the aux words A_c and the counter K (aux_gen 1)
  *
- * Units (FORMATS.md): F uint32 LSB 2^-18 Hz; T int32 LSB 2^-16 degC; R int32 LSB 2^-10 deg/h;
+ * Units (FORMATS.md): F uint32 LSB 2^-15 Hz (0 .. 131072 Hz); T int32 LSB 2^-16 degC; R int32 LSB 2^-10 deg/h;
  * u, v, z int32 Q1.30; y, B int64 LSB 2^-21 deg/h; OUT, BIAS int32 LSB 2^-10 deg/h; A_c int32
  * LSB 2^-AF_c (table); K int64 samples since power-on.
  */
@@ -74,10 +74,12 @@
 #error "HDRG_FIX_ORDER must be 0 or 1"
 #endif
 
-/* ---- table layout (version 3; versions 2 and 1 (order 0, one bank) are read unless iir) -- */
+/* ---- table layout (version 4; 3, 2 and 1 (order 0, one bank) are read unless iir or reading F) */
 #define HDRG_MAGIC 0x47524448u          /* 'HDRG' as little-endian bytes */
-#define HDRG_LAYOUT_VERSION 3u
+#define HDRG_LAYOUT_VERSION 4u
 #define HDRG_IIR_GEAR_VERSION 3u        /* the iir starts with the gear from this version on */
+#define HDRG_FREQ_WORD_VERSION 4u       /* F at LSB 2^-15 Hz from this version on (2^-18 Hz before): an
+                                           older table that reads F (proxy or aux input) is refused */
 #define HDRG_N_FIXED 72u                /* words 0..71: header, config, bank 1, aux header, order,
                                            n_banks, bank 2 */
 #define HDRG_N_FIXED_V1 47u             /* words 0..46 of a version-1 table */
@@ -178,7 +180,8 @@ enum hdrg_error {
     HDRG_OK = 0,
     HDRG_ERR_LENGTH,    /* fewer than 73 (version 1: 48) words, or the length word disagrees with the count */
     HDRG_ERR_MAGIC,     /* word 0 is not 0x47524448 */
-    HDRG_ERR_VERSION,   /* word 1 is not 1, 2 or 3, or an iir table of version 1 or 2 (blanked start-up) */
+    HDRG_ERR_VERSION,   /* word 1 is not 1..4, an iir table of version 1 or 2 (blanked start-up), or a
+                           table of version 1..3 that reads F (quantized for the 2^-18 Hz word) */
     HDRG_ERR_CRC,       /* the last word is not the CRC-32 of the others */
     HDRG_ERR_FIELD,     /* a field outside its legal range (which: *bad_word) */
     HDRG_ERR_HORNER,    /* the mantissas break the Horner interval bound (|acc| <= 2^31 - 1) */

@@ -133,7 +133,17 @@ class _Terminated(BaseException):
     """SIGTERM, raised in the main thread so that cleanups run."""
 
 
+_HANDLER_PID = [None]    # the process that installed _terminate (main)
+
+
 def _terminate(signum, frame):
+    """SIGTERM in the command: unwind (cleanups run).  In a process forked from it (a pool worker
+    before its own set-up) the default action instead: the process ends at once, without
+    unwinding into queues or pipes that nobody reads any more."""
+    if os.getpid() != _HANDLER_PID[0]:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        os.kill(os.getpid(), signal.SIGTERM)
+        return
     raise _Terminated()
 
 
@@ -144,8 +154,31 @@ def _describe(exc: BaseException) -> str:
     return str(exc) or type(exc).__name__
 
 
+def startup_problem() -> str | None:
+    """Why no command can run here, or None: standard output closed (``>&-``: what the command
+    prints would be lost), or NUMBA_NUM_THREADS an integer below 1 (numba refuses to import; a
+    value that is not an integer numba ignores with its own warning)."""
+    if sys.stdout is None:
+        return ("standard output is closed (>&-): what hdrg prints would be lost; redirect it instead "
+                "(e.g. >/dev/null)")
+    text = os.environ.get("NUMBA_NUM_THREADS")
+    if text is not None:
+        try:
+            n = int(text)
+        except ValueError:
+            n = None
+        if n is not None and n < 1:
+            return f"NUMBA_NUM_THREADS={text.strip()}: must be a number of threads >= 1 (or unset)"
+    return None
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    problem = startup_problem()      # stdout closed, NUMBA_NUM_THREADS < 1: before any command module is imported
+    if problem is not None:
+        if sys.stderr is not None:
+            print(f"hdrg: error: {problem}", file=sys.stderr)
+        return 2
     word = _command_word(argv)
     parser = build_parser(word if word in COMMANDS else None)
     args = parser.parse_args(argv)
@@ -153,6 +186,7 @@ def main(argv=None) -> int:
     main_thread = threading.current_thread() is threading.main_thread()
     if main_thread:
         # SIGTERM unwinds like Ctrl-C, so atomic writers remove their temporary files
+        _HANDLER_PID[0] = os.getpid()
         old_term = signal.signal(signal.SIGTERM, _terminate)
     try:
         return _run(args, mod)

@@ -1,6 +1,6 @@
 """``python -m host_tools.cli ...``: the same as ``hdrg ...``."""
 import sys
 
-from host_tools.cli import main
-
-sys.exit(main())
+if __name__ == "__main__":
+    from host_tools.cli import main
+    sys.exit(main())

@@ -3,7 +3,30 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+
+from host_tools.cli.options import seconds_type
+from host_tools.link.capture import MAX_DURATION_S
+
+MAX_SPEED = 1e6             # times real time; 0 already means "as fast as the link takes"
+MAX_RATE_HZ = 65536.0       # the INFO's and the table's fs_q16 word: up to 2^16 Hz
+
+
+def number_type(option: str, lo: float, hi: float, lo_open: bool, what: str):
+    """An argparse ``type``: a finite number in (lo, hi] (``lo_open``) or [lo, hi]; anything else
+    (NaN, inf, out of range, not a number) is a usage error naming ``option``, the value and the range."""
+    def parse(text):
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{option} {text!r}: not a number") from None
+        if not (math.isfinite(value) and (lo < value if lo_open else lo <= value) and value <= hi):
+            raise argparse.ArgumentTypeError(f"{option} {text}: must be {what} in {'(' if lo_open else '['}{lo:g}, "
+                                             f"{hi:g}]")
+        return value
+    parse.__name__ = "number"
+    return parse
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -14,10 +37,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", default="paper-mr-cycle-4dpm",
                         help="simulator scenario (hdrg simulate --list; default paper-mr-cycle-4dpm)")
     parser.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
-    parser.add_argument("--duration", type=float, default=None, metavar="S", help="run length [s] (default: the scenario's)")
-    parser.add_argument("--rate", type=float, default=1.0, metavar="HZ", help="sample rate [Hz] (default 1)")
-    parser.add_argument("--speed", type=float, default=1.0, metavar="X",
-                        help="X times real time (default 1; 0: as fast as the link takes frames)")
+    parser.add_argument("--duration", type=seconds_type("--duration", MAX_DURATION_S), default=None, metavar="S",
+                        help="run length [s] (default: the scenario's)")
+    parser.add_argument("--rate", type=number_type("--rate", 0.0, MAX_RATE_HZ, True, "a sample rate [Hz]"),
+                        default=1.0, metavar="HZ", help="sample rate [Hz] (default 1)")
+    parser.add_argument("--speed", type=number_type("--speed", 0.0, MAX_SPEED, False, "a speed-up factor"),
+                        default=1.0, metavar="X",
+                        help=f"X times real time, up to {MAX_SPEED:g} (default 1; 0: as fast as the link takes "
+                             f"frames)")
     parser.add_argument("--table", metavar="FILE", help="initial coefficient table (table.json, .bin, .memh); "
                                                         "default: the run's identity table (coefficients 0)")
     parser.add_argument("--name", default=None, help="device name reported in INFO")
@@ -28,25 +55,28 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from host_tools.link import frame as FR
+    from host_tools.link.codec import printable
     from host_tools.link.device import make_device, serve
+    from host_tools.link.host import check_baud, open_port
     from host_tools.link.transport import PortLink
     from host_tools.fixed.quantize import read_table
 
+    check_baud(args.baud, "--baud")
     table = read_table(args.table) if args.table else None
     link = None
     if args.port:
-        import serial
-        try:
-            link = PortLink(serial.serial_for_url(args.port, baudrate=args.baud, timeout=0, write_timeout=1.0))
-        except serial.SerialException as exc:
-            print(f"hdrg device: error: cannot open {args.port}: {exc}", file=sys.stderr)
-            return 2
+        link = PortLink(open_port(args.port, args.baud, timeout=0, write_timeout=1.0, option="--port"))
     kw = {} if args.name is None else {"name": args.name}
-    dev, name, log = make_device(args.scenario, args.seed, args.duration, args.rate, table, link,
-                                 speed=args.speed, **kw)
+    try:
+        dev, name, log = make_device(args.scenario, args.seed, args.duration, args.rate, table, link,
+                                     speed=args.speed, **kw)
+    except BaseException:
+        if link is not None:
+            link.close()
+        raise
     speed = "as fast as the link takes" if args.speed == 0 else f"{args.speed:g}x real time"
     print(f"hdrg device: virtual gyroscope on {name or args.port}", flush=True)
-    print(f"  {dev.name}: {len(log)} samples at {dev.run.fs_hz:g} Hz, {speed}; table CRC-32 0x{dev.table.crc:08x}; "
+    print(f"  {printable(dev.name)}: {len(log)} samples at {dev.run.fs_hz:g} Hz, {speed}; table CRC-32 0x{dev.table.crc:08x}; "
           f"protocol {FR.PROTO_MAJOR}.{FR.PROTO_MINOR}; Ctrl-C stops", flush=True)
     serve(dev, args.exit_at_end)
     s = dev.stats

@@ -3,11 +3,12 @@ host_tools.fitting.diagnose)."""
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 
 from host_tools import api
-from host_tools.cli.options import OUT_OPTIONS, add_model_options, example
+from host_tools.cli.options import OUT_OPTIONS, add_model_options, check_settle, example
 from host_tools.fitting.diagnose import CV_BLOCKS, CV_FOLDS, G_MIN, MAX_ITER, N_SURROGATES, fmt_value
 from host_tools.fitting.diagnose_scan import TRIES_PER_STEP
 from host_tools.errors import UserError
@@ -41,8 +42,7 @@ def run(args) -> int:
     from host_tools.atomic import atomic_open, refuse_overwrite
     from host_tools.golden.checks import check_fit_inputs
 
-    if args.max_iter < 0 or args.surrogates < 0 or (args.max_tries is not None and args.max_tries < 0):
-        raise UserError("--max-iter, --max-tries and --surrogates must be >= 0")
+    check_options(args)
     refuse_overwrite([args.json] + [os.path.join(args.out, f) for f in ("model.json", "diagnose.json", "diagnose.md")],
                      list(args.runs) + list(args.holdout))
     train = [rl.read(p) for p in args.runs]
@@ -88,6 +88,22 @@ def run(args) -> int:
     for m in summary_warnings(report):
         print(f"hdrg diagnose: warning: {m}", file=sys.stderr)
     return 0
+
+
+def check_options(args) -> None:
+    """UserError naming the first option out of range: --max-iter, --max-tries, --surrogates and
+    --seed must be >= 0, --cv-blocks and --cv-folds >= 1, --g-min (a fraction of the residual
+    variance) finite in [0, 1), --settle [s] finite and >= 0."""
+    for option, value in (("--max-iter", args.max_iter), ("--max-tries", args.max_tries),
+                          ("--surrogates", args.surrogates), ("--seed", args.seed)):
+        if value is not None and value < 0:
+            raise UserError(f"{option} {value}: must be >= 0")
+    for option, value in (("--cv-blocks", args.cv_blocks), ("--cv-folds", args.cv_folds)):
+        if value < 1:
+            raise UserError(f"{option} {value}: must be >= 1")
+    if not (math.isfinite(args.g_min) and 0 <= args.g_min < 1):
+        raise UserError(f"--g-min {args.g_min:g}: must be a fraction of the residual variance in [0, 1)")
+    check_settle(args.settle)
 
 
 def summary_warnings(report: dict) -> list:

@@ -7,9 +7,9 @@ import sys
 
 from firmware_ref.terms import TERM_NAMES
 from host_tools import api
-from host_tools.cli.options import add_model_options, example, out_option
+from host_tools.cli.options import add_model_options, check_settle, example, out_option
 from host_tools.fitting.fit import UnidentifiableError
-from host_tools.fitting.fit_pipeline import fit_policy
+from host_tools.fitting.fit_pipeline import check_terms, fit_policy
 from host_tools.golden.reversal import schedule_ages_s
 
 
@@ -18,9 +18,14 @@ def print_identifiability(fit: dict) -> None:
     (model.fit["guard"]), as `hdrg fit` prints them."""
     ident = fit.get("identifiability")
     if ident:
-        legs = ident.get("legs_per_sign", {})
-        print(f"what the training runs identify ({legs.get('rising', 0)} rising, {legs.get('falling', 0)} falling legs of "
-              f"the proxy):")
+        legs = ident.get("legs_per_temperature")
+        if legs:
+            head = (f"{legs['heating']} heating, {legs['cooling']} cooling legs; the {ident['proxy']} proxy rises when "
+                    f"the device is {ident['proxy_rises_when']}")
+        else:
+            legs = ident.get("legs_per_sign", {})
+            head = f"{legs.get('rising', 0)} rising, {legs.get('falling', 0)} falling legs of the proxy"
+        print(f"what the training runs identify ({head}):")
         for group, g in ident["groups"].items():
             print(f"  {group:15s} {'identified' if g['identified'] else 'NOT identified'}: {g['why']}"
                   + (f"; to identify it, record {g['record']}" if g["record"] else ""))
@@ -51,6 +56,8 @@ def _warn(message: str) -> None:
 
 
 def run(args) -> int:
+    check_terms(args.terms)
+    check_settle(args.settle)
     try:
         done = api.fit_with_result(args.runs, args.output, terms=args.terms, proxy=args.proxy,
                                    rate_estimator=args.rate_estimator, rate_n=args.rate_n, rate_shift=args.rate_shift,
@@ -75,7 +82,8 @@ def run(args) -> int:
         why = lag.get("error") or f"no candidate lowered the cross-validated rms by {100 * lag['margin']:.0f} %"
         print(f"lag-state block (u: proxy, T: sensor): not kept ({why})")
     turn = model.fit.get("turn_on")
-    if turn:
+    said = (model.fit.get("start_up") or {}).get("why", "").startswith("the power-on term")   # by the start-up warning
+    if turn and (turn.get("chosen") or not said):
         se = f" +- {turn['size_stderr_dph']:.2g} (100-s means)" if turn.get("size_stderr_dph") is not None else ""
         print(f"power-on transient (time since power-on, k7): {turn['chosen'] or 'not learned'}{se} ({turn.get('why', '')})")
     print(f"{args.output}: {len(res.terms)} terms {['k%d' % k for k in res.terms]}, n={res.n}, "
@@ -92,12 +100,6 @@ def run(args) -> int:
     sys.stdout.flush()      # the warnings (stderr) after the lines above
     for w in done.warnings:
         _warn(w)
-    check = (turn or {}).get("start_up_check") or {}
-    for row in check.get("runs", []):
-        if row["source"] in check["worse"]:
-            _warn(f"held out, the model compensates the first {check['window_s'] / 60:g} min after power-on of "
-                  f"{row['source']} {row['ratio']:.3g}x worse than mode reversal alone (1 sigma of 100-s means): "
-                  f"check it on a power-on before trusting it at start-up (hdrg report on a start-up log)")
     print_identifiability(model.fit)
     offs = model.fit.get("run_offsets")
     if offs and "why" in offs:

@@ -42,7 +42,11 @@ def run(args) -> int:
     if args.json not in (None, "-") and args.json.lower().endswith((".csv", ".npz")):
         raise UserError(f"--json {args.json}: refusing to write JSON over a run-log name (.csv/.npz); "
                          f"put --json after the RUN paths or use --json -")
-    runs = [run_metrics(load(p), taus=args.tau, combiner=args.combiner) for p in args.runs]
+    from host_tools.golden.checks import warn_mode_swaps
+
+    logs = [load(p) for p in args.runs]
+    warn_mode_swaps(logs)           # modes 1 and 2 swapped: against the other runs, or the model's bias
+    runs = [run_metrics(log, taus=args.tau, combiner=args.combiner) for log in logs]
     rep = repeatability(runs) if len(runs) >= 2 else None
     if args.json == "-":
         sys.stdout.write(to_json(runs, rep) + "\n")

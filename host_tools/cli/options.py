@@ -149,6 +149,15 @@ def positive_seconds(text, option: str, upper: float) -> float:
     return value
 
 
+def check_settle(settle) -> None:
+    """UserError unless ``--settle`` (add_model_options; None: the default) is a finite number of
+    seconds >= 0."""
+    import math
+    from host_tools.errors import UserError
+    if settle is not None and not (math.isfinite(settle) and settle >= 0):
+        raise UserError(f"--settle {settle:g}: must be a finite number of seconds >= 0")
+
+
 def seconds_type(option: str, upper: float, zero: str | None = None):
     """An argparse ``type`` for a duration option: seconds in (0, upper], or also 0 when ``zero``
     (its meaning, e.g. "never") is given; argparse turns the ValueError into a usage error that names

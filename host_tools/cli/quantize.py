@@ -1,14 +1,24 @@
 """`hdrg quantize`: a bias model -> the fixed-point coefficient table (host_tools.api.quantize over
-host_tools.fixed.quantize)."""
+host_tools.fixed.quantize).
+
+The options are checked before anything is quantized (one-line errors naming the option): the
+times [s] must be finite and >= 0 (``--dwell-s`` > 0), and a time > 0 must be at least one sample
+and at most the timing fields' 2^31 - 2 samples at the model's sample rate (a time that rounds to
+0 samples would silently switch the blanking off); ``--max-error`` [deg/h] must be finite and >= 0.
+"""
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 from firmware_ref import formats as F
 from host_tools import api
 from host_tools.cli.options import (distinct_outputs, example, file_argument, file_value, out_option, regular_input,
                                     writable_output)
+from host_tools.errors import UserError
+
+TIMER_LIMIT_N = F.TIMER_MAX - 1     # largest sequencer time in samples (the table's timing fields)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -35,7 +45,14 @@ def run(args) -> int:
     regular_input(args.model, "model")
     for opt, path in outputs.items():
         writable_output(path, opt)
-    q = api.quantize(args.model, args.output, exchange_s=args.exchange_s, dwell_s=args.dwell_s,
+    check_number("--max-error", args.max_error, "deg/h")
+    from host_tools.golden.model import BiasModel
+    model = BiasModel.from_json(args.model)
+    fs = model.config.rate.fs
+    check_samples("--power-on-s", args.power_on_s, fs)
+    check_samples("--exchange-s", args.exchange_s, fs)
+    check_samples("--dwell-s", args.dwell_s, fs, zero=False)
+    q = api.quantize(model, args.output, exchange_s=args.exchange_s, dwell_s=args.dwell_s,
                      power_on_s=args.power_on_s, max_error_dph=args.max_error)
     t = q.table
     if args.memh:
@@ -65,3 +82,26 @@ def run(args) -> int:
     for w in q.report["warnings"]:
         print(f"hdrg quantize: warning: {w}", file=sys.stderr)
     return 0
+
+
+def check_number(option: str, value, unit: str) -> None:
+    """UserError naming ``option`` unless ``value`` (None: not given) is a finite number >= 0 [``unit``]."""
+    if value is not None and not (math.isfinite(value) and value >= 0):
+        raise UserError(f"{option} {value:g}: must be a finite number of {unit} >= 0")
+
+
+def check_samples(option: str, value_s: float, fs: float, zero: bool = True) -> None:
+    """UserError naming ``option`` unless the time ``value_s`` [s] is finite, >= 0 (> 0 unless
+    ``zero``) and, when > 0, rounds to 1 .. TIMER_LIMIT_N samples at the sample rate ``fs`` [Hz]."""
+    if not (math.isfinite(value_s) and (value_s > 0 or (zero and value_s == 0))):
+        raise UserError(f"{option} {value_s:g}: must be a finite number of seconds " + (">= 0" if zero else "> 0"))
+    if value_s == 0:
+        return
+    n = round(value_s * fs)
+    if n < 1:
+        raise UserError(f"{option} {value_s:g}: rounds to 0 samples at the model's sample rate {fs:g} Hz "
+                        f"(one sample is {1 / fs:g} s); give at least {1 / fs:g} s"
+                        + (" or 0 for none" if zero else ""))
+    if n > TIMER_LIMIT_N:
+        raise UserError(f"{option} {value_s:g}: more than the {TIMER_LIMIT_N} samples the table's timing fields "
+                        f"hold at the model's sample rate {fs:g} Hz (at most {TIMER_LIMIT_N / fs:.6g} s)")

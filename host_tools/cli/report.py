@@ -20,6 +20,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     from host_tools.golden import runlog
     from host_tools.atomic import refuse_overwrite
+    from host_tools.golden.checks import check_raw_logs, warn_mode_swaps
     from host_tools.golden.model import BiasModel
 
     refuse_overwrite([os.path.join(args.out, f) for f in REPORT_FILES], list(args.runs) + [args.model]
@@ -43,6 +44,8 @@ def run(args) -> int:
         regular_input(path, "training run log")
     logs = [runlog.read(p) for p in args.runs]
     train_logs = [runlog.read(p) for p in train] if train else None
+    check_raw_logs(logs + (train_logs or []), "hdrg report (it applies the model to the raw output)")
+    warn_mode_swaps(logs + (train_logs or []))
     doc = report(logs, model, args.out, train_logs, plots=not args.no_plots, notes=notes,
                  model_name=os.path.basename(args.model))
     print(markdown_table(doc["rows"]))

@@ -26,7 +26,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--off", action="append", default=[], metavar="NAME", help="switch an effect off; repeatable")
     parser.add_argument("--set", action="append", default=[], metavar="PARAM=VALUE",
                         help="set a base parameter (e.g. tau_pkg_s=900, device=hdrg-02); repeatable")
-    parser.add_argument("--list", action="store_true", help="list scenarios and effects, then exit")
+    parser.add_argument("--list", action="store_true",
+                        help="list scenarios and effects, and which runs identify the 17-term model, then exit")
     add_random_family_options(parser)
     parser.add_argument("--lot", type=int, default=None, metavar="N",
                         help="a lot of N devices of the random (foreign) family, seeds --seed .. --seed+N-1: in DIR "
@@ -37,7 +38,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="--lot: chamber rate of the held-out runs [degC/min] (default 2)")
     parser.add_argument("--no-holdout", action="store_true", help="--lot: training runs only")
     parser.epilog = ("examples:\n  hdrg simulate --scenario paper-mr-cycle-4dpm --seed 1 -o run.csv\n"
+                     "  hdrg simulate --scenario mr-one-cycle-2dpm --seed 2 -o run_2dpm.csv\n"
                      "  hdrg simulate --list")
+
+
+LIST_NOTE = """training runs for the 17-term model: both signs of dT/dt (two cooling and two heating legs) at two
+  chamber rates, e.g. mr-one-cycle-4dpm --seed 2 and mr-one-cycle-2dpm --seed 3 (check on mr-one-cycle-4dpm --seed 4);
+  one of them alone, or runs of one sign (a paper-* cycle cut before it heats again), give the cubic in the proxy.
+  --reversal on/off switches mode reversal in any scenario."""
 
 
 def _set_overrides(items) -> dict:
@@ -78,6 +86,7 @@ def run(args) -> int:
 
     if args.list:
         print(format_list())
+        print(LIST_NOTE)
         return 0
     if not args.scenario:
         raise ValueError("--scenario is required (see --list)")

@@ -35,8 +35,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         "answers, at least 1 MiB)")
 
 
-def _names(text):
-    return None if text is None else [s.strip() for s in text.split(",") if s.strip()]
+def _names(text, option: str):
+    """The comma list ``text`` of ``option`` (None: not given); UserError when it names nothing
+    (e.g. an unset shell variable: ``--fields ""``)."""
+    if text is None:
+        return None
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    if not names:
+        raise UserError(f"{option} {text!r}: names nothing; give a comma list, or leave {option} out for all")
+    return names
 
 
 def run(args) -> int:
@@ -52,14 +59,15 @@ def run(args) -> int:
               f"(format {FORMAT_VERSION}, generator {GENERATOR_VERSION})")
         return 0
     if args.action == "verify":
-        problems = verify(args.directory, _names(args.sets))
+        problems = verify(args.directory, _names(args.sets, "--sets"))
         for p in problems:
             print(f"MISMATCH: {p}")
         print("vectors OK" if not problems else f"{len(problems)} problem(s)")
         return 0 if not problems else 1
     if args.max_output is not None and args.max_output <= 0:
         raise UserError(f"--max-output {args.max_output}: must be a positive number of bytes")
-    rep = check_impl(args.cmd, args.directory, _names(args.sets), _names(args.fields), args.timeout,
+    rep = check_impl(args.cmd, args.directory, _names(args.sets, "--sets"), _names(args.fields, "--fields"),
+                     args.timeout,
                      max_output=args.max_output)
     total = sum(s["rows"] for s in rep["sets"].values())
     if rep["mismatches"]:

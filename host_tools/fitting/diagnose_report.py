@@ -160,8 +160,8 @@ TABLE_HEADER = ("iteration", "effect", "params", *(STAT_HEADERS[k] for k in STAT
 
 
 def _cell(text) -> str:
-    """A table cell: one line, Markdown and HTML escaped (host_tools.fitting.report.md_text: a
-    parameter or status text cannot split the row)."""
+    """A table cell or a run name: one line, escaped for Markdown (host_tools.fitting.report.md_text:
+    a parameter or status text cannot split the row, a run name cannot start HTML)."""
     from host_tools.fitting.report import md_text
     return md_text(" ".join(str(text).split()))
 
@@ -205,7 +205,9 @@ def markdown(doc, model) -> str:
              "| " + " | ".join(TABLE_HEADER) + " |",
              "|---|---|---|" + "---:|" * (len(STAT_KEYS) + 2) + "---|"]
     first = doc["baseline"][on]
-    lines.append(_row(0, "(base model)", f"terms {doc['settings']['terms']}", first, None, None, ""))
+    terms = doc["settings"]["terms"]
+    terms = ", ".join(f"k{k}" for k in terms) if isinstance(terms, (list, tuple)) else terms
+    lines.append(_row(0, "(base model)", f"terms {terms}", first, None, None, ""))
     for k, it in enumerate(doc["iterations"], 1):
         params = ", ".join(f"{a}={fmt_value(b) if isinstance(b, float) else b}" for a, b in it["params"].items())
         lines.append(_row(k, it["effect"], params, it["after"], it.get("cv_gain"), it.get("threshold"), it["status"]))
@@ -259,7 +261,7 @@ def markdown(doc, model) -> str:
     ch = doc.get("characterization") or {}
     for which in ("train", "holdout"):
         for c in ch.get(which, []) or []:
-            lines += [f"### Residual of the base model: {os.path.basename(c['source'])} ({which})", "",
+            lines += [f"### Residual of the base model: {_cell(os.path.basename(c['source']))} ({which})", "",
                       f"rms {fmt_value(c['rms_dph'])} deg/h; Allan deviation above 2x the white-noise line at "
                       f"tau = {', '.join(fmt_value(t) for t in c['allan']['structure_taus_s']) or 'none'} s; "
                       f"spectrum lines: {', '.join(fmt_value(ln['period_s']) + ' s' for ln in c['lines']) or 'none'}.", ""]
@@ -295,11 +297,14 @@ def _plots(k, plot_info, train, evals, out_dir) -> list:
             x = residual(prepare(log, after_model), after_model)[0] - r
             xlabel = f"{best['label']}: change of the residual [deg/h]"
         v = pr.valid
-        ax.plot(x[v], r[v], ",", alpha=0.4, label=os.path.basename(log.source))
+        ax.plot(x[v], r[v], ".", ms=1, alpha=0.4, label=f"training run {os.path.basename(log.source)}")
     ax.set_xlabel(xlabel)
     ax.set_ylabel("residual before [deg/h]")
     ax.set_title(f"iteration {k}: residual vs {best['label']}", fontsize=9)
     ax.grid(True, alpha=0.3)
+    leg = ax.legend(fontsize=7, markerscale=8, loc="best")
+    for h in getattr(leg, "legend_handles", getattr(leg, "legendHandles", [])):
+        h.set_alpha(1.0)
     fig.tight_layout()
     files.append(f"iter{k}_candidate.png")
     with atomic_path(os.path.join(out_dir, files[-1])) as tmp:

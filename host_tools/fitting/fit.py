@@ -297,6 +297,25 @@ def heldout_error(train: Accumulator, test: Accumulator, terms, *, rcond=RCOND) 
     return _fold_sse(_factor(train) if train.n else None, test.system(), tuple(sorted(terms)), rcond)
 
 
+def heldout_errors(train: Accumulator, test: Accumulator, terms, *, rcond=RCOND) -> tuple:
+    """(:func:`heldout_error`, the same about the held-out samples' own mean residual): the second
+    leaves out the held-out part's level (its offset), as a std of its output does."""
+    if test.n == 0:
+        return 0.0, 0.0
+    from host_tools.fitting.cv import heldout_sse
+    fac = _factor(train) if train.n else None
+    terms = tuple(sorted(terms))
+    coef = np.zeros(N_TERMS) if fac is None else _solve_terms(fac, terms, rcond, explain=False)["coef"]
+    G, b, yy = test.system()
+    one = np.zeros(N_TERMS)
+    one[0] = 1.0                      # k0: the constant regressor
+    sse = heldout_sse(TERM_BASIS @ coef, yy, b, G)
+    moved = heldout_sse(TERM_BASIS @ (coef + one), yy, b, G)    # sse - 2 sum(w r) + sum(w)
+    sw = test.sum_w
+    level = (sse + sw - moved) / 2.0                             # sum(w r)
+    return max(sse, 0.0), max(sse - level * level / sw, 0.0) if sw > 0 else 0.0
+
+
 def _fold_sse(fac, test, terms, rcond) -> float:
     """Held-out sum of squared errors on the system ``test`` = (G, b, yy) of ``terms`` (sorted)
     fitted through the training factor ``fac`` (None: no training sample, all coefficients 0)."""

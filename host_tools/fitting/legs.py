@@ -1,8 +1,11 @@
 """What training runs can identify: their chamber legs (the sign of dT/dt) and, per term group,
 whether the runs identify it, and leg-respecting cross-validation.
 
-A temperature chamber run is a sequence of *legs*: stretches where the temperature proxy rises
-(heating, dT/dt > 0), falls (cooling) or holds.  The rate terms of the 17-term model (every term
+A temperature chamber run is a sequence of *legs*: stretches where the temperature proxy rises,
+falls or holds.  Whether a rising proxy means heating or cooling is the proxy's sign convention
+(:data:`HEATING_SIGN`): the drive frequency falls as the temperature rises (-20.9 ppm/degC), so a
+rising frequency proxy is a cooling leg; a rising temperature sensor is a heating leg.  The rate
+terms of the 17-term model (every term
 with a power of the normalized rate v: k4..k6, k8..k16) and the lag-state block describe how the
 bias depends on dT/dt; fitted on legs of one sign they are applied to the other sign by
 extrapolation, so the fit only offers them when the training runs hold legs of both signs.
@@ -40,6 +43,8 @@ MIN_SIGN_SHARE = 0.15    # each sign of dT/dt on at least this share of the samp
 CV_LEGS_PER_SIGN = 2     # fewer legs of a sign: a leg held out leaves none of its sign (see "extrapolated")
 MIN_RATE_RATIO = 1.5     # p75 / p25 of |dT/dt| on the moving samples: more than one chamber rate
 MIN_PROXY_SHARE = 0.5    # training proxy range below this share of the model's range: warned
+
+HEATING_SIGN = {"freq": -1, "temp": 1}   # sign of the proxy's change when the device heats
 
 RATE_TERMS = (4, 5, 6, 8, 9, 10, 11, 12, 13, 14, 15, 16)   # every term with a power of v
 PROXY_TERMS = (0, 1, 2, 3)                                 # k0 and the cubic in u
@@ -106,6 +111,20 @@ def _sign(x) -> int:
     return int(np.sign(x)) if np.isfinite(x) else 0
 
 
+def proxy_kind_of(logs, kind: str | None = None) -> str:
+    """The proxy kind ('freq' or 'temp') ``logs`` use for ``kind`` None (freq_hz when logged)."""
+    if kind is not None:
+        return kind
+    return "freq" if logs and all("freq_hz" in log for log in logs) else "temp"
+
+
+def temperature_change(proxy_sign: int, kind: str) -> str:
+    """'heating', 'cooling' or 'hold' for a leg whose proxy changes with ``proxy_sign`` (+1, -1, 0)."""
+    if proxy_sign == 0:
+        return "hold"
+    return "heating" if proxy_sign == HEATING_SIGN[kind] else "cooling"
+
+
 def leg_ids(logs, proxy_kind: str | None = None) -> list:
     """Per log, int64[n]: the leg index of each sample, numbered over all logs in order
     (log 0's legs first); and the list of (log index, start, stop, sign) of every leg."""
@@ -124,10 +143,17 @@ def identifiability(logs, config=None) -> dict:
     """Per term group, whether ``logs`` (training RunLogs) identify it, and what run would.
 
     ``config``: the ModelConfig the model will use (its proxy range is the range the model will
-    meet), or None (the logs' own proxy).  Returns {"legs": [{"run", "sign", "t0_s", "t1_s",
-    "proxy": [first, last]}], "groups": {"proxy" | "rate" | "rate_curvature": {"identified":
-    bool, "why": str, "record": str (empty when identified)}}, "rate_terms_identified": bool}."""
+    meet), or None (the logs' own proxy).  Returns {"legs": [{"run", "sign" (of the proxy's
+    change), "temperature" ('heating', 'cooling', 'hold'), "t0_s", "t1_s", "proxy": [first,
+    last]}], "legs_per_sign" (rising / falling / hold proxy), "legs_per_temperature" (heating /
+    cooling / hold), "proxy" (the kind), "proxy_rises_when" ('cooling' for the drive frequency),
+    "groups": {"proxy" | "rate" | "rate_curvature": {"identified": bool, "why": str, "record":
+    str (empty when identified or when another group's record comes first)}},
+    "rate_terms_identified": bool}.  Legs are named by the sign of the temperature change
+    (:data:`HEATING_SIGN`), not by the proxy's."""
     kind = None if config is None else config.proxy.kind
+    resolved = proxy_kind_of(logs, kind)
+    heat = HEATING_SIGN[resolved]
     n_sign = {1: 0, -1: 0, 0: 0}
     n_legs = {1: 0, -1: 0, 0: 0}
     slopes, lo, hi = [], math.inf, -math.inf
@@ -139,6 +165,7 @@ def identifiability(logs, config=None) -> dict:
             n_sign[s] += b - a
             n_legs[s] += 1
             legs.append({"run": log.source, "sign": {1: "rising", -1: "falling", 0: "hold"}[s],
+                         "temperature": temperature_change(s, resolved),
                          "t0_s": float(log.t_s[a]), "t1_s": float(log.t_s[b - 1]),
                          "proxy": [float(p[a]), float(p[b - 1])]})
         lo, hi = min(lo, float(np.min(p))), max(hi, float(np.max(p)))
@@ -148,17 +175,17 @@ def identifiability(logs, config=None) -> dict:
     total = sum(n_sign.values()) or 1
     share_up, share_down = n_sign[1] / total, n_sign[-1] / total
     rate_ok = share_up >= MIN_SIGN_SHARE and share_down >= MIN_SIGN_SHARE   # so a leg of each sign
-    seen = (f"{n_legs[1]} rising leg(s) on {100 * share_up:.0f} % and {n_legs[-1]} falling leg(s) on "
-            f"{100 * share_down:.0f} % of the samples")
+    share = {"heating": n_sign[heat] / total, "cooling": n_sign[-heat] / total}
+    seen = (f"{n_legs[heat]} heating leg(s) on {100 * share['heating']:.0f} % and {n_legs[-heat]} cooling leg(s) "
+            f"on {100 * share['cooling']:.0f} % of the samples")
     if rate_ok:
         rate = {"identified": True, "record": "", "why": f"both signs of dT/dt: {seen}"}
     else:
-        short = [name for sgn, name in ((1, "heating"), (-1, "cooling"))
-                 if n_sign[sgn] / total < MIN_SIGN_SHARE]
+        short = [name for name in ("heating", "cooling") if share[name] < MIN_SIGN_SHARE]
         rate = {"identified": False,
                 "why": f"{seen} (needs >= {100 * MIN_SIGN_SHARE:.0f} % of the samples "
                        f"of each sign): the rate terms and the lag block are left out",
-                "record": f"more {' and '.join(short)} legs over the same temperature range (e.g. two full chamber cycles)"}
+                "record": f"{' and '.join(short)} legs over the same temperature range (e.g. two full chamber cycles)"}
     moving = np.concatenate(slopes) if slopes else np.zeros(0)
     if moving.size >= 10 and np.percentile(moving, 25) > 0:
         ratio = float(np.percentile(moving, 75) / np.percentile(moving, 25))
@@ -166,7 +193,7 @@ def identifiability(logs, config=None) -> dict:
         ratio = 1.0
     curv_ok = rate_ok and ratio >= MIN_RATE_RATIO
     if not rate_ok:
-        curvature = {"identified": False, "record": rate["record"], "why": "needs the rate terms first"}
+        curvature = {"identified": False, "record": "", "why": "needs the rate terms first"}
     else:
         curvature = {"identified": curv_ok, "record": "" if curv_ok else "a second run at another chamber rate (e.g. half or twice the rate)",
                      "why": f"|dT/dt| p75/p25 = {ratio:.2f} on the moving samples (more than one chamber rate: >= {MIN_RATE_RATIO:g})"}
@@ -179,15 +206,33 @@ def identifiability(logs, config=None) -> dict:
     # one leg of each sign: every leave-one-leg-out fold trains on one sign and scores the other
     extrapolated = rate_ok and max(n_legs[1], n_legs[-1]) < CV_LEGS_PER_SIGN
     if rate_ok and min(n_legs[1], n_legs[-1]) < CV_LEGS_PER_SIGN:
-        rate["why"] += (f"; the cross-validation scores them on a sign they were not fitted on when it holds out the "
-                        f"single leg of a sign" + (" (every fold)" if extrapolated else ""))
+        rate["why"] += ("; the cross-validation scores them on a sign they were not fitted on when it holds out the "
+                        "single leg of a sign" + (" (every fold)" if extrapolated else ""))
         rate["record"] = "another full chamber cycle (two legs of each sign let the cross-validation check the rate terms)"
     return {"legs": legs, "rate_cv_extrapolated": extrapolated, "legs_per_sign": {"rising": n_legs[1], "falling": n_legs[-1], "hold": n_legs[0]},
+            "legs_per_temperature": {"heating": n_legs[heat], "cooling": n_legs[-heat], "hold": n_legs[0]},
+            "proxy": resolved, "proxy_rises_when": temperature_change(1, resolved),
             "groups": {"proxy": proxy, "rate": rate, "rate_curvature": curvature},
             "rate_terms_identified": rate_ok}
 
 
-def leg_cv(logs, candidates, proxy_kind: str | None = None) -> dict | None:
+def block_ids(logs, n_blocks: int) -> tuple:
+    """As :func:`leg_ids`, with each log cut into ``n_blocks`` contiguous time blocks instead of
+    its legs (sign 0): the folds of a cross-validation on a single leg."""
+    ids, table = [], []
+    for i, log in enumerate(logs):
+        n = len(log)
+        edges = np.linspace(0, n, min(n_blocks, n) + 1).astype(int)
+        lid = np.zeros(n, np.int64)
+        for a, b in zip(edges[:-1], edges[1:]):
+            if b > a:
+                lid[a:b] = len(table)
+                table.append((i, int(a), int(b), 0))
+        ids.append(lid)
+    return ids, table
+
+
+def leg_cv(logs, candidates, proxy_kind: str | None = None, folds=None) -> dict | None:
     """Leave-one-leg-out cross-validation of fixed term sets, all scored on the same samples.
 
     ``candidates``: {label: (ModelConfig, terms)}.  The folds are the legs of the training runs
@@ -197,14 +242,20 @@ def leg_cv(logs, candidates, proxy_kind: str | None = None) -> dict | None:
     never does beyond its clamp and which rejects every term when legs cover different ranges;
     such samples are counted, not scored).  The held-out leg's mean residual is scored too: a
     rate effect (hysteresis between heating and cooling) is mostly a per-leg offset.  Returns None with fewer than 2 legs holding scored samples; else
-    {"folds", "scored" (samples), "out_of_range" (samples), "cv_rms": {label: deg/h}}."""
-    from host_tools.fitting.fit import Accumulator, heldout_error
+    {"folds", "scored" (samples), "out_of_range" (samples), "cv_rms": {label: deg/h}, "cv_std":
+    {label: deg/h, each held-out leg's (and bank's) own mean residual left out: its std}}.
+    ``folds``: other folds in the form of :func:`leg_ids` (e.g. :func:`block_ids`)."""
+    from host_tools.fitting.fit import Accumulator, heldout_errors
     from host_tools.golden.compensate import prepare
 
-    ids, table = leg_ids(logs, proxy_kind)
+    ids, table = leg_ids(logs, proxy_kind) if folds is None else folds
     if len(table) < 2:
         return None
-    preps = {label: [prepare(log, cfg) for log in logs] for label, (cfg, _) in candidates.items()}
+    preps, done = {}, []
+    for label, (cfg, _) in candidates.items():     # candidates sharing one config share its preparation
+        same = [lb for lb, c in done if c is cfg]
+        preps[label] = preps[same[0]] if same else [prepare(log, cfg) for log in logs]
+        done.append((label, cfg))
     used = [np.logical_and.reduce([preps[lb][i].used for lb in candidates]) for i in range(len(logs))]
     p = [np.asarray(log.proxy(proxy_kind)[1], np.float64) for log in logs]
     rng = []
@@ -225,7 +276,7 @@ def leg_cv(logs, candidates, proxy_kind: str | None = None) -> dict | None:
         n_out += int(np.count_nonzero(used[i][a:b])) - int(np.count_nonzero(inside))
         scored_masks[f] = inside
     out = {"folds": len(live), "scored": int(sum(np.count_nonzero(m) for m in scored_masks.values())),
-           "out_of_range": n_out, "cv_rms": {}}
+           "out_of_range": n_out, "cv_rms": {}, "cv_std": {}}
     for label, (cfg, terms) in candidates.items():
         two = cfg.reversal is not None and cfg.reversal.order == "regress_first"
         banks = (1, 2) if two else (None,)
@@ -241,10 +292,11 @@ def leg_cv(logs, candidates, proxy_kind: str | None = None) -> dict | None:
                 tsel = scored_masks[f] if bk is None else scored_masks[f] & (pr.mode == bk)
                 test_acc[f, bk] = Accumulator().add(pr.u, pr.v, pr.z, pr.y, tsel)
         total = {bk: sum(leg_acc[f, bk] for f in live) for bk in banks}
-        sse = sw = 0.0
+        sse = free = sw = 0.0
         for f in live:
             for bk in banks:
-                sse += heldout_error(total[bk] - leg_acc[f, bk], test_acc[f, bk], terms)
-                sw += test_acc[f, bk].sum_w
+                e, e_free = heldout_errors(total[bk] - leg_acc[f, bk], test_acc[f, bk], terms)
+                sse, free, sw = sse + e, free + e_free, sw + test_acc[f, bk].sum_w
         out["cv_rms"][label] = math.sqrt(sse / sw) if sw > 0 else math.nan
+        out["cv_std"][label] = math.sqrt(free / sw) if sw > 0 else math.nan
     return out

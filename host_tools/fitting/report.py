@@ -19,9 +19,10 @@ saturation (host_tools.golden.flags) are in the notes.
 
 Figures: timeseries.png (per run: every output at full scale; a zoomed panel whose y-range is set
 by the model's output and mode reversal alone; the temperature, temp_c or the proxy), loops.png
-(output vs proxy: the hysteresis the rate terms remove) and allan.png (overlapping Allan
-deviation with 68 % confidence intervals; see :func:`allan_curve` for how gaps are handled; no
-tau beyond a tenth of the run).
+(output vs proxy, :func:`loops_figure`: the raw output, and the model's output beside what it is
+compared with, mode reversal alone: the hysteresis the rate terms remove) and allan.png
+(:func:`allan_figure`: overlapping Allan deviation with 68 % confidence intervals; see
+:func:`allan_curve` for how gaps are handled; no tau beyond a tenth of the run).
 Writes DIR/report.md, DIR/report.json and DIR/*.png.
 """
 from __future__ import annotations
@@ -103,16 +104,17 @@ def _fmt(x):
     return "   n/a" if x is None else f"{x:9.4f}"
 
 
-_MD_SPECIAL = re.compile(r"([\\`|\[\]])")
+_MD_SPECIAL = re.compile(r"([\\|\[\]])")
 
 
 def md_text(text) -> str:
-    """``text`` as inline Markdown text that renders as itself: one line (control characters,
-    newlines included, become spaces), HTML special characters as entities (``&lt;`` ...: no tag
-    or comment can start), ``\\ ` | [ ]`` backslash-escaped (``\\|`` cannot end a table cell,
-    ``\\[`` cannot start a link, a backtick cannot open code)."""
+    """``text`` as inline Markdown text that renders as itself and reads as itself in the file: one
+    line (control characters, newlines included, become spaces), ``<`` and ``>`` as the single angle
+    quotation marks U+2039 and U+203A (no HTML tag, comment or autolink can start, and no entity is
+    left to read), ``\\ | [ ]`` backslash-escaped (``\\|`` cannot end a table cell, ``\\[``
+    cannot start a link).  Backticks are kept: a pair of them is code, as the text means it."""
     s = re.sub(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]", " ", str(text))
-    s = s.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;").replace('"', "&quot;")
+    s = s.replace("<", "\u2039").replace(">", "\u203a")
     return _MD_SPECIAL.sub(r"\\\1", s)
 
 
@@ -260,7 +262,7 @@ def _broken(t, *ys):
 
 def _save(fig, path):
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90, format="png")
+        fig.savefig(tmp, dpi=90, format="png", bbox_inches="tight")   # legends beside the axes included
 
 
 def _legend(ax, **kw):
@@ -341,28 +343,60 @@ def _plot(results, baseline_results, out_dir, proxy_unit, label, context):
     _save(fig, files[-1])
     plt.close(fig)
 
-    # -- output vs proxy
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    rev = any(r["reversal"] for r in results)
-    for r in results:
-        name = os.path.basename(r["source"])
-        y, v = (r["raw"], r["raw_valid"]) if r["reversal"] else (r["before"], r["before_valid"])
-        axes[0].plot(r["p"][v], y[v], ".", ms=1, alpha=0.5, label=name)
-        axes[1].plot(r["p"][r["after_valid"]], r["after"][r["after_valid"]], ".", ms=1, alpha=0.5, label=name)
-    loop_titles = ((RAW_PER_MODE if rev else "raw output") + " vs proxy", f"{label} output vs proxy")
-    for ax, title in zip(axes, loop_titles):
-        ax.set_title(title, fontsize=9)
-        ax.set_xlabel(f"proxy [{proxy_unit}]")
-        ax.set_ylabel("rate output [deg/h]")
-        ax.grid(True, alpha=0.3)
-        _legend(ax, markerscale=8)
-    fig.tight_layout()
+    fig = loops_figure(results, proxy_unit, label)
     files.append(os.path.join(out_dir, "loops.png"))
     _save(fig, files[-1])
     plt.close(fig)
 
-    # -- Allan deviation with confidence intervals
-    fig, ax = plt.subplots(figsize=(7, 5))
+    fig, titles["allan"] = allan_figure(results, baseline_results, label, context)
+    files.append(os.path.join(out_dir, "allan.png"))
+    _save(fig, files[-1])
+    plt.close(fig)
+    return files, titles
+
+
+def loops_figure(results, proxy_unit, label):
+    """loops.png: the output against the proxy.  Left: the raw output (per mode, sign-corrected, for
+    mode reversal), one colour per run; right: what the model is compared with, mode reversal alone
+    (the raw output for an FTR run: it is on the left), and the model's output, one colour per
+    output.  Returns the Figure."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rev = any(r["reversal"] for r in results)
+    several = len(results) > 1
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.8))
+    for r in results:
+        name = os.path.basename(r["source"])
+        y, v = (r["raw"], r["raw_valid"]) if r["reversal"] else (r["before"], r["before_valid"])
+        axes[0].plot(r["p"][v], y[v], ".", ms=1, alpha=0.5, label=name)
+        pairs = [("before", r["before"], r["before_valid"], r["before_label"])] if r["reversal"] else []
+        pairs.append(("model", r["after"], r["after_valid"], f"{label} output"))
+        for key, y, v, lab in pairs:
+            axes[1].plot(r["p"][v], y[v], ".", ms=1, alpha=0.5, color=COLORS[key],
+                         label=f"{name}: {lab}" if several else lab)
+    right = (f"mode reversal alone and the {label}" if rev else f"the {label}") + " vs proxy"
+    for ax, title in zip(axes, ((RAW_PER_MODE if rev else "raw output") + " vs proxy", right)):
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel(f"proxy [{proxy_unit}]")
+        ax.set_ylabel("rate output [deg/h]")
+        ax.grid(True, alpha=0.3)
+        _legend(ax, markerscale=8, loc="upper center", bbox_to_anchor=(0.5, -0.16))   # below: it hides no point
+    fig.tight_layout()
+    return fig
+
+
+def allan_figure(results, baseline_results, label, context):
+    """allan.png: the overlapping Allan deviation of every output with its confidence bars, the
+    legend beside the axes (it hides no point).  Stores each curve in ``r["allan"]``.  Returns
+    (Figure, title)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(results)
+    fig, ax = plt.subplots(figsize=(10, 5))
     bridged_any = False
     for r, b in zip(results, baseline_results):
         name = os.path.basename(r["source"]) if n > 1 else ""
@@ -386,20 +420,17 @@ def _plot(results, baseline_results, out_dir, proxy_unit, label, context):
     ax.set_yscale("log")
     ax.set_xlabel("averaging time tau [s]")
     ax.set_ylabel("Allan deviation [deg/h]")
-    titles["allan"] = "Allan deviation" + (f": {md_plain(context[0]['name'])} ({context[0]['status']})" if n == 1 else "")
-    ax.set_title(titles["allan"], fontsize=9)
+    title = "Allan deviation" + (f": {md_plain(context[0]['name'])} ({context[0]['status']})" if n == 1 else "")
+    ax.set_title(title, fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
-    _legend(ax, loc="best")
+    _legend(ax, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
     caption = (f"overlapping ADEV (allantools), gap-free stretches of valid samples; bars: {ALLAN_CI:.0%} "
                f"confidence (Greenhall edf, white FM); tau <= run length / {1 / ALLAN_MAX_FRACTION:g}")
     if bridged_any:
         caption += "\ndotted: taus beyond the longest gap-free stretch, invalid samples (exchanges) bridged linearly"
     fig.text(0.01, 0.005, caption, fontsize=6.5, va="bottom")
     fig.tight_layout(rect=(0, 0.06, 1, 1))
-    files.append(os.path.join(out_dir, "allan.png"))
-    _save(fig, files[-1])
-    plt.close(fig)
-    return files, titles
+    return fig, title
 
 
 def md_plain(text) -> str:
@@ -481,9 +512,9 @@ def report(logs, model: BiasModel, out_dir, train_logs=None, plots: bool = True,
         files, doc["titles"] = _plot(results, base_results, out_dir, unit, label, context)
         doc["figures"] = [os.path.basename(f) for f in files]
         doc["allan"] = {os.path.basename(r["source"]): r.get("allan", {}) for r in results}
-    with atomic_open(os.path.join(out_dir, "report.json"), "w") as fh:
+    with atomic_open(os.path.join(out_dir, "report.json"), "w", encoding="utf-8") as fh:
         json.dump(doc, fh, indent=1, default=float)
-    with atomic_open(os.path.join(out_dir, "report.md"), "w") as fh:
+    with atomic_open(os.path.join(out_dir, "report.md"), "w", encoding="utf-8") as fh:
         fh.write(markdown(doc, label))
     return doc
 

@@ -475,8 +475,7 @@ def add_turn_on(logs, model, res, refit):
     elif spread < MIN_START_SPREAD:
         info["why"] = (f"the power-ons of the training runs span {100 * spread:.0f} % of the calibrated range (< "
                        f"{100 * MIN_START_SPREAD:g} %): a turn-on learned at one temperature cannot be told from the "
-                       f"self-heating's temperature-dependent bias; record one run from a power-on soaked at each end "
-                       f"of the range to learn it")
+                       f"self-heating's temperature-dependent bias")
     elif not taus:
         info["why"] = f"the shortest run is shorter than {TAU_GRID_S[0] / MAX_TAU_FRACTION:g} s"
     info["start_spread"] = round(spread, 4)

@@ -15,15 +15,20 @@ endian bytes last.  Every export holds exactly these words:
   (model, ``coef_dph``) and the quantizer's report.
 * ``mem``  ``NAME.memh``: ``$readmemh`` text, one 8-digit hex word per line, address 0 first.
 
-Layout version 3 (version 2's words; the iir starts at power-on): the words carry ``order``, ``n_banks`` and bank 2's
+Layout version 4 (version 3's words with the drive-frequency word at 2^-15 Hz; the iir starts at power-on): the words carry ``order``, ``n_banks`` and bank 2's
 exponents and mantissas (words 47..71; the C header comments bank 2's coefficients in deg/h, the
 JSON adds ``coef_quantized_mode2_dph``).  A version-1 TABLE (``.memh``/``.bin`` of an older
-export) is read as combine_first with one bank and written as version 3; a version-1/2 table with
-the iir rate estimator is refused (quantize its model again).
+export) is read as combine_first with one bank and written as version 4; a version-1/2 table with
+the iir rate estimator, and a version-1..3 table that reads the drive frequency (its centres in the
+old 2^-18 Hz word), are refused (quantize its model again).
 
 TABLE is a table.json (``hdrg quantize``), a binary ``.bin`` or a ``.memh``/``.hex``/``.mem``
 file; it is checked (magic, version, length, CRC, field ranges, the JSON's field types) before
-anything is written.
+anything is written.  A table.json's float originals (its model, ``coef_dph``, the quantizer's
+report) are kept only when quantizing that model again, at the table.json's sequencer timing,
+reproduces the table's words exactly and ``coef_dph`` is the model's (:func:`check_originals`);
+otherwise (words or CRC edited, model or coefficients edited, model unreadable) they are left
+out: the header and the JSON carry a note instead, and :func:`load` warns.
 
 Nothing from a file reaches the header as code: ``--name`` must be a C identifier (a letter, then
 letters, digits, ``_``; at most 63 characters; not a name C or <stdint.h> reserves, e.g. one that
@@ -37,12 +42,13 @@ from __future__ import annotations
 import json
 import os
 import re
+import warnings
 from pathlib import Path
 
 from firmware_ref import formats as F
 from firmware_ref.table import LAYOUT, MAGIC, N_FIXED, VERSION as LAYOUT_VERSION, Table
 from firmware_ref.terms import K_AUX, TERM_NAMES, TERM_POWERS
-from host_tools.fixed.quantize import FORMAT, VERSION, quantized_coef, read_table, read_table_json
+from host_tools.fixed.quantize import FORMAT, VERSION, quantized_coef, read_table_json
 
 FORMATS = ("c", "json", "mem")
 EXTENSIONS = {"c": ".h", "json": ".json", "mem": ".memh"}
@@ -51,8 +57,64 @@ DEFAULT_NAME = "hdrg_table"
 
 def load(path) -> tuple[Table, dict | None]:
     """``(table, table_json_dict)``: the checked table of ``path`` and, for a table.json, its
-    dict (the float originals and the quantizer's report), else None."""
-    return read_table_json(path)
+    dict (the float originals and the quantizer's report, when they reproduce the table:
+    :func:`check_originals`, else a warning and a dict with a ``note`` instead of them), else None."""
+    table, info = read_table_json(path)
+    if info is None:
+        return table, None
+    checked = check_originals(table, info, os.fspath(path))
+    if checked is not info:
+        warnings.warn(checked["note"], stacklevel=2)
+    return table, checked
+
+
+ORIGINAL_KEYS = ("model", "model_source", "coef_dph", "coef_mode2_dph")
+
+
+def check_originals(table: Table, info: dict, source: str = "table.json") -> dict:
+    """``info`` (a table.json dict) when its float originals belong to ``table``: quantizing
+    ``info["model"]`` with ``info["timing"]``'s exchange, dwell and power-on times [s] gives
+    exactly the table's words, and ``coef_dph`` / ``coef_mode2_dph`` are that model's.  Otherwise
+    a new dict without the originals and the quantizer's report (``model``, ``model_source``,
+    ``coef_dph`` None) whose ``note`` says why.  A dict without originals is returned as it is."""
+    if all(info.get(k) is None for k in ORIGINAL_KEYS):
+        return info
+    problem = _originals_problem(table, info)
+    if problem is None:
+        return info
+    note = (f"{source}: the float originals (model, coef_dph, quantizer report) are left out: {problem} "
+            f"(edited after quantization?)")
+    return {"model": None, "model_source": None, "coef_dph": None, "note": note}
+
+
+def _originals_problem(table: Table, info: dict) -> str | None:
+    """Why ``info``'s float originals do not belong to ``table`` (see :func:`check_originals`), or None."""
+    from host_tools.errors import HdrgError
+    from host_tools.fixed.quantize import quantize
+    from host_tools.golden.model import BiasModel
+
+    if not isinstance(info.get("model"), dict):
+        return "the table.json has no model to check them against"
+    timing = info.get("timing")
+    keys = ("exchange_s", "dwell_s", "power_on_s")
+    if not (isinstance(timing, dict) and all(isinstance(timing.get(k), (int, float)) and
+                                             not isinstance(timing.get(k), bool) for k in keys)):
+        return "the table.json has no sequencer timing (timing.exchange_s, dwell_s, power_on_s)"
+    try:
+        model = BiasModel.from_dict(info["model"], "model of the table.json")
+        words = quantize(model, *(float(timing[k]) for k in keys), n_random=16).table.to_words()
+    except (HdrgError, ValueError, OverflowError) as exc:
+        return f"its model does not quantize ({exc})"
+    if words != table.to_words():
+        diff = [i for i, (a, b) in enumerate(zip(words, table.to_words())) if a != b]
+        where = f"word(s) {', '.join(map(str, diff[:8]))}" if diff and len(words) == len(table.to_words()) \
+            else "the word count"
+        return f"quantizing its model gives other words ({where} differ)"
+    for key, coef in (("coef_dph", model.coef), ("coef_mode2_dph", model.coef_mode2)):
+        value = info.get(key)
+        if value is not None and (coef is None or [float(c) for c in value] != [float(c) for c in coef]):
+            return f"'{key}' is not its model's"
+    return None
 
 
 def _group_exponent(table: Table, k: int, bank: int = 1) -> int:
@@ -120,6 +182,7 @@ def c_header(table: Table, name: str = DEFAULT_NAME, info: dict | None = None) -
         f"CRC-32 0x{words[-1]:08x}.",
         " * Generated by `hdrg export`" + (f" from the model {src}" if src else "") + "; do not edit.",
         " *",
+        *([f" * Note: {comment_text(info['note'], limit=1000)}", " *"] if (info or {}).get("note") else []),
         f" * Layout: firmware_ref/FORMATS.md \"Coefficient table layout (version {LAYOUT_VERSION})\": 32-bit words,",
         " * signed fields two's complement, the last word the CRC-32 (IEEE 802.3, zlib.crc32) of all",
         " * preceding words as little-endian bytes.",

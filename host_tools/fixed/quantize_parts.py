@@ -68,7 +68,7 @@ def norm_error(ref: float, n: dict) -> Fraction:
 
 def proxy_part(pc) -> dict:
     frac = F.FREQ_FRAC if pc.kind == "freq" else F.TEMP_FRAC
-    word = "drive-frequency word (0 .. 16384 Hz)" if pc.kind == "freq" else "temperature word (+-32768 degC)"
+    word = f"drive-frequency word (0 .. {F.FREQ_RANGE_HZ:.0f} Hz)" if pc.kind == "freq" else "temperature word (+-32768 degC)"
     n = _norm_part(pc.ref, pc.span, frac, pc.kind == "freq", "proxy", pc.unit, word)
     return {"proxy_kind": 0 if pc.kind == "freq" else 1, "p_ref": n["ref"], "g_u": n["g"], "u_off": n["off"],
             "sh_u": n["sh"], "_span_lsb": n["span_lsb"], "_lsb": n["lsb"], "_norm": n}
@@ -114,7 +114,11 @@ def rate_part(rc, lsb: Fraction) -> dict:
 
 
 def timing_part(value_s: float, fs: float, name: str, minimum: int = 0) -> int:
+    if not math.isfinite(value_s) or value_s < 0:
+        raise QuantizeError(f"{name} = {value_s} s: must be a finite number of seconds >= 0")
     n = int(round(value_s * fs))
+    if value_s > 0 and n == 0:
+        raise QuantizeError(f"{name} = {value_s} s rounds to 0 samples at {fs} Hz (one sample is {1 / fs:g} s)")
     if not minimum <= n <= F.TIMER_MAX - 1:
         raise QuantizeError(f"{name} = {value_s} s at {fs} Hz gives {n} samples; needs {minimum}..{F.TIMER_MAX - 1}")
     return n
@@ -158,7 +162,7 @@ def rate_error(rc, s_span: Fraction, g_v: int, sh_v: int) -> Fraction:
 
 # -- the aux generators (aux_gen 1) ----------------------------------------------------------------------
 
-AUX_CHANNEL_WORDS = {"freq_hz": (F.CH_F, F.FREQ_FRAC, True, "Hz", "drive-frequency word (0 .. 16384 Hz)"),
+AUX_CHANNEL_WORDS = {"freq_hz": (F.CH_F, F.FREQ_FRAC, True, "Hz", f"drive-frequency word (0 .. {F.FREQ_RANGE_HZ:.0f} Hz)"),
                      "temp_c": (F.CH_T, F.TEMP_FRAC, False, "degC", "temperature word (+-32768 degC)")}
 OSC_HORIZON = 1 << 31        # the osc error bound holds for K < 2^31 samples (the golden's float drift grows)
 GOLDEN_OSC_STEP_EPS = Fraction(8, 1 << 53)   # golden rotation: float64 error per step (estimate)

@@ -10,6 +10,13 @@
   range is named (leave-one-run-out term selection can keep only the offset).
 * :func:`check_sample_rate`: a log to compensate (float golden or fixed point) whose sample rate is
   not the model's nominal fs (within ``FS_TOLERANCE``) is refused.
+* :func:`check_raw_logs`: a compensated log given where raw run logs are needed is refused.
+* :func:`mode_swap_warnings` (mode-reversal training or evaluation runs) and
+  :func:`compensated_swap_warning` (a compensated mode-reversal log): modes 1 and 2 swapped in a
+  log's ``mode`` column.  Swapping them flips the sign of the combined output (the true rate and
+  the non-reversing bias) and leaves the damping term unchanged, so one log alone cannot show it;
+  it shows against other runs of the sensor (a combined output of the opposite sign) or against
+  the model (a compensated output near -2x the model's bias).
 
 The run-log reader (host_tools.golden.runlog) refuses metadata that contradicts the data (``reversal:
 on`` without modes, ``sample_rate_hz`` against ``t_s``) and non-positive ``freq_hz``.
@@ -20,6 +27,8 @@ import hashlib
 import warnings
 
 import numpy as np
+
+from host_tools.golden.fields import check_fields  # noqa: F401  (re-exported: the config readers' field check)
 
 FS_TOLERANCE = 0.01  # relative mismatch allowed between the log's sample rate and the model's fs
 
@@ -33,18 +42,6 @@ def is_compensated(log) -> bool:
     or ``flags`` column)."""
     return (str(log.metadata.get("compensated", "")).strip().lower() == "yes"
             or "bias_dph" in log or "flags" in log)
-
-
-def check_fields(what: str, d: dict, required, optional=()) -> None:
-    """ValueError naming every missing key of ``required`` and every key of ``d`` in neither
-    ``required`` nor ``optional`` (a hand-edited config must not fall back to a default behind the
-    user's back, nor have a misspelled key ignored)."""
-    missing = [k for k in required if k not in d]
-    unknown = sorted(set(d) - set(required) - set(optional))
-    if missing or unknown:
-        raise ValueError(f"{what}: " + "; ".join(([f"missing {', '.join(missing)}"] if missing else [])
-                                                + ([f"unknown {', '.join(unknown)}"] if unknown else []))
-                         + f" (fields: {', '.join(list(required) + list(optional))})")
 
 
 def _fingerprint(log) -> bytes:
@@ -76,7 +73,8 @@ def check_distinct_runs(logs) -> None:
 def check_fit_inputs(logs, proxy: str | None) -> None:
     """ValueError for a compensated training log, a run given twice (:func:`check_distinct_runs`)
     or a mix of logs with and without ``freq_hz`` when ``proxy`` is None; ProxyWarning when no log
-    has ``freq_hz`` (temp_c is used)."""
+    has ``freq_hz`` (temp_c is used); ModeSwapWarning for a mode-reversal run whose modes 1 and 2
+    look swapped against the other runs (:func:`mode_swap_warnings`)."""
     for log in logs:
         if is_compensated(log):
             raise ValueError(f"{log.source}: this is a compensated log (output of hdrg compensate: metadata "
@@ -86,6 +84,8 @@ def check_fit_inputs(logs, proxy: str | None) -> None:
         raise ValueError(f"no 'freq_hz' column in {', '.join(lacking)} while the other logs have one: the proxy "
                          f"would switch to temp_c for all; fix the column names or pass --proxy temp")
     check_distinct_runs(logs)
+    for text in mode_swap_warnings(logs):
+        warnings.warn(text, ModeSwapWarning, stacklevel=2)
     if lacking:
         warnings.warn(f"no 'freq_hz' column in {', '.join(lacking)}: the temperature proxy is 'temp_c' "
                       f"(pass --proxy temp to choose it explicitly)", ProxyWarning, stacklevel=2)
@@ -123,3 +123,86 @@ def check_sample_rate(log, fs: float) -> None:
     if np.isfinite(fs_log) and abs(fs_log / fs - 1.0) > FS_TOLERANCE:
         raise ValueError(f"{log.source}: sample rate {fs_log:.6g} Hz does not match the model's "
                          f"nominal fs {fs:.6g} Hz (the rate estimator assumes the nominal period)")
+
+
+# -- compensated logs where raw ones are needed, modes 1 and 2 swapped ------------------------------
+
+class ModeSwapWarning(UserWarning):
+    """A mode-reversal log whose modes 1 and 2 look swapped (the text says against what)."""
+
+
+def check_raw_logs(logs, command: str) -> None:
+    """ValueError for a compensated log (output of `hdrg compensate`, :func:`is_compensated`) among
+    ``logs``, which ``command`` needs raw: its ``rate_dph`` is already the compensated output."""
+    for log in logs:
+        if is_compensated(log):
+            raise ValueError(f"{log.source}: this is a compensated log (output of hdrg compensate: metadata "
+                             f"'compensated: yes' or a bias_dph/flags column; its rate_dph is the compensated "
+                             f"output, not the raw loop output); {command} needs the raw run log it was made from"
+                             + (f" (compensation_model: {log.metadata['compensation_model']})"
+                                if log.metadata.get("compensation_model") else "")
+                             + "; `hdrg metrics` reads a compensated log")
+
+
+SWAP_NOISE = 10.0   # a sign disagreement counts when the run means differ by this many output std
+
+
+def _combined(log):
+    """(mean, std) [deg/h] of the pair-combined output of a raw mode-reversal log over its valid
+    samples, or None (an FTR log, a compensated one, fewer than 10 valid samples)."""
+    if not log.reversal or is_compensated(log) or np.any(log.mode == 0):
+        return None
+    from host_tools.golden import reversal
+    comb = reversal.combine(log)
+    out = comb.out_dph[comb.valid & np.isfinite(comb.out_dph)]
+    return (float(np.mean(out)), float(np.std(out))) if len(out) >= 10 else None
+
+
+def mode_swap_warnings(logs) -> list:
+    """Sentences naming the raw mode-reversal runs (of two or more) whose combined output [deg/h]
+    has the sign opposite to the median of the other runs' while its magnitude matches: ``|m_k -
+    M| > SWAP_NOISE * sd`` and ``|m_k + M| < |m_k - M| / SWAP_NOISE`` (m_k the run's mean, M the
+    others' median, sd the largest output std of the runs).  That is what modes 1 and 2 swapped in
+    one run do (the combined output is the true rate plus the non-reversing bias, sign flipped);
+    runs near zero, or of a sensor whose bias really changes sign, are not named."""
+    stats = [(log, _combined(log)) for log in logs]
+    stats = [(log, st) for log, st in stats if st is not None]
+    if len(stats) < 2:
+        return []
+    sd = max(st[1] for _, st in stats)
+    out = []
+    for k, (log, (mk, _)) in enumerate(stats):
+        med = float(np.median([st[0] for j, (_, st) in enumerate(stats) if j != k]))
+        if abs(mk - med) > SWAP_NOISE * sd and abs(mk + med) < abs(mk - med) / SWAP_NOISE:
+            out.append(f"{log.source}: its combined mode-reversal output averages {mk:.4g} deg/h, the other "
+                       f"runs' {med:.4g} deg/h: the same size, the opposite sign, as when modes 1 and 2 are "
+                       f"swapped in its mode column (that flips the true rate and the non-reversing bias); "
+                       f"check its mode column")
+    return out
+
+
+def compensated_swap_warning(log) -> str | None:
+    """A sentence when a compensated mode-reversal log (`hdrg compensate`'s output) looks compensated
+    with modes 1 and 2 swapped: its valid output averages about -2x the model's bias (``|mean(out) +
+    2 mean(bias)| < |mean(out)| / 4`` and ``|mean(out)| > 4 std(out)``): the raw combined output came
+    in with its sign flipped, so the model's bias was added instead of removed.  None otherwise."""
+    if not is_compensated(log) or "bias_dph" not in log or "valid" not in log or not log.reversal:
+        return None
+    v = (np.asarray(log["valid"]) == 1) & np.isin(log.mode, (1, 2))
+    out, bias = log.rate_dph[v], log["bias_dph"][v]
+    ok = np.isfinite(out) & np.isfinite(bias)
+    if ok.sum() < 10:
+        return None
+    mo, mb, so = float(np.mean(out[ok])), float(np.mean(bias[ok])), float(np.std(out[ok]))
+    if abs(mo + 2.0 * mb) < abs(mo) / 4.0 and abs(mo) > 4.0 * so:
+        return (f"{log.source}: the compensated output averages {mo:.4g} deg/h, about -2x the model's bias "
+                f"({mb:.4g} deg/h): the raw output came in with its sign flipped, as when modes 1 and 2 are "
+                f"swapped in the mode column; check the input's mode column")
+    return None
+
+
+def warn_mode_swaps(logs) -> None:
+    """Warn (ModeSwapWarning) every sentence of :func:`mode_swap_warnings` and
+    :func:`compensated_swap_warning` for ``logs``."""
+    for text in mode_swap_warnings(logs) + [t for t in map(compensated_swap_warning, logs) if t]:
+        warnings.warn(text, ModeSwapWarning, stacklevel=2)

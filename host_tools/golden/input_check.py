@@ -13,14 +13,13 @@ copy (host_tools.fixed.fixed_point.dequantized_log) flag the same samples:
   ``rate_full_scale_dps: X`` in deg/s), at most 2^31 - 1.  A loop output at its rail is a clipped
   reading, so a sample AT the full scale is flagged.  Default: the word's own rail, 2^31 - 1 LSB
   = 2^21 - 2^-10 deg/h (582.5 deg/s): any value the word cannot hold.
-* ``freq_hz`` (drive frequency): the F word (LSB 2^-18 Hz) outside ``[word(LO), word(HI)]`` of the
-  declared plausible range (metadata ``freq_range_hz: LO..HI`` in Hz), or 0 (below 2^-19 Hz).
+* ``freq_hz`` (drive frequency): the F word (LSB 2^-15 Hz) outside ``[word(LO), word(HI)]`` of the
+  declared plausible range (metadata ``freq_range_hz: LO..HI`` in Hz), or 0 (below 2^-16 Hz).
   Default: any positive frequency (the reader refuses <= 0) - the float model serves drive
-  frequencies beyond the word's 16384 Hz (the simulated foreign family reaches 30 kHz; such a
-  device is refused at quantize, not here).  With ``word_range`` (the fixed-point path, whose F
+  frequencies beyond the word's 131072 Hz (such a device is refused at quantize, not here).  With ``word_range`` (the fixed-point path, whose F
   word cannot hold more, and the dequantized log that the golden reference is fed in the
   |fixed - golden| comparison, host_tools.fixed.fixed_point.dequantized_log) the word's upper rail
-  2^32 - 1 is flagged too: the default range is then the word's, 0 .. 16384 Hz.
+  2^32 - 1 is flagged too: the default range is then the word's, 0 .. 131072 Hz.
 * ``temp_c``: the T word (LSB 2^-16 degC) outside ``[word(LO), word(HI)]`` of ``temp_range_c:
   LO..HI`` (degC), or at a rail (+-(2^31 - 1)).  Default: the word's range +-32768 degC.
 
@@ -203,7 +202,7 @@ def column_flags(log, col: str, limits: dict | None = None, word_range: bool = F
     (``limits``: :func:`declared_limits`; ``word_range`` as there)."""
     lim = declared_limits(log, word_range) if limits is None else limits
     if col == "freq_hz" and not word_range:
-        # the float path serves any positive frequency: compare in Hz (the word saturates at 16384 Hz)
+        # the float path serves any positive frequency: compare in Hz (the word saturates at 131072 Hz)
         x = np.asarray(log[col], np.float64)
         lo, hi = (_range(log.metadata[RANGE_KEYS[col]], RANGE_KEYS[col], log.source)
                   if str(log.metadata.get(RANGE_KEYS[col], "")).strip() else (0.0, np.inf))

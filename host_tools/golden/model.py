@@ -44,7 +44,11 @@ Reading refuses (:class:`ModelError`, a ValueError whose message names the file 
 a non-JSON file, a file that is not a regular file or is over 16 MiB, a key repeated in one
 object, nesting over 32 levels (host_tools.jsonread), another ``format``, a missing or unknown
 ``version``, a missing field, a wrong type or an out-of-range value, a non-zero coefficient of a
-disabled term, a missing or unexpected second bank, a ``fit.train`` that is not a list of paths.
+disabled term, a missing or unexpected second bank, a ``fit.train`` that is not a list of paths;
+also, naming the field: a number in ``config`` or a coefficient that is not finite (``1e999``,
+``NaN``) or is an integer too large for a float, a coefficient with |k| above :data:`COEF_LIMIT_DPH`
+(what the output word holds), and a ``settle_s`` or ``max_stale_s`` over :data:`TIMER_LIMIT_N`
+samples at the model's sample rate (what the firmware's timing fields hold).
 """
 from __future__ import annotations
 
@@ -55,6 +59,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from firmware_ref import formats as F
 from firmware_ref.terms import N_TERMS, TERM_NAMES
 from host_tools.golden.proxy import ProxyConfig
 from host_tools.golden.rate import RateConfig
@@ -67,6 +72,10 @@ VERSION = 2
 READ_VERSIONS = (1, 2)
 MAX_BYTES = 16 << 20        # a model file is a few kB; larger is refused before it is parsed
 MAX_DEPTH = 32              # a model nests 4 deep (its fit info a few more); deeper is refused
+# largest |coefficient| a model file may hold [deg/h]: the range of the output and bias words (int32,
+# LSB 2^-OUT_FRAC deg/h: +-2^21 deg/h); one term alone at |u| = |v| = |z| = 1 would saturate them
+COEF_LIMIT_DPH = F.INT32_SYM * 2.0 ** -F.OUT_FRAC
+TIMER_LIMIT_N = F.TIMER_MAX - 1     # largest settle/staleness time in samples (the table's timing fields)
 
 
 class ModelError(HdrgError, ValueError):
@@ -115,7 +124,7 @@ class ModelConfig:
                 parts[name] = make(value)
             except KeyError as exc:
                 raise ModelError(source, f"config.{name}.{exc.args[0]}", "missing") from None
-            except (TypeError, ValueError) as exc:
+            except (TypeError, ValueError, OverflowError) as exc:
                 raise ModelError(source, f"config.{name}", str(exc)) from None
         return cls(**parts)
 
@@ -212,7 +221,12 @@ class BiasModel:
                 raise ModelError(source, "config.reversal.order", "missing")
         if version == 1 and "coef_mode2_dph" in d:
             raise ModelError(source, "coef_mode2_dph", "not a field of model format version 1")
+        _check_numbers(d["config"], "config", source)
         config = ModelConfig.from_dict(d["config"], source)
+        _check_timing(config, source)
+        for name in ("coef_dph", "coef_mode2_dph"):
+            if d.get(name) is not None:
+                _check_coef_range(d[name], source, name)
         fit = d.get("fit", {})
         train = fit.get("train") if isinstance(fit, dict) else None
         if train is not None and not (isinstance(train, list) and all(isinstance(p, str) for p in train)):
@@ -245,11 +259,67 @@ def _check_terms(terms, source) -> tuple:
     return tuple(sorted(out))
 
 
+def _check_numbers(node, path: str, source) -> None:
+    """ModelError naming the field of the first number under ``node`` (a parsed JSON value) that is
+    not finite or is an integer too large for a float."""
+    stack = [(node, path)]
+    while stack:
+        node, path = stack.pop()
+        if isinstance(node, dict):
+            stack.extend((v, f"{path}.{k}") for k, v in reversed(list(node.items())))
+        elif isinstance(node, list):
+            stack.extend((v, f"{path}[{i}]") for i, v in reversed(list(enumerate(node))))
+        elif isinstance(node, int) and not isinstance(node, bool):
+            try:
+                float(node)
+            except OverflowError:
+                raise ModelError(source, path, f"an integer of {len(str(abs(node)))} digits: too large "
+                                               f"for a number") from None
+        elif isinstance(node, float) and not math.isfinite(node):
+            raise ModelError(source, path, f"must be a finite number, not {node}")
+
+
+def _check_timing(config: ModelConfig, source) -> None:
+    """ModelError when the settling or staleness time [s] is more samples than the firmware's timing
+    fields hold (TIMER_LIMIT_N) at the model's sample rate config.rate.fs [Hz]."""
+    rev, fs = config.reversal, config.rate.fs
+    if rev is None:
+        return
+    for name in ("settle_s", "max_stale_s"):
+        value = float(getattr(rev, name))
+        if not math.isfinite(value) or value * fs > TIMER_LIMIT_N:
+            raise ModelError(source, f"config.reversal.{name}",
+                             f"{value:g} s is more than {TIMER_LIMIT_N} samples at {fs:g} Hz "
+                             f"(at most {TIMER_LIMIT_N / fs:.6g} s)")
+
+
+def _check_coef_range(coef, source, name) -> None:
+    """ModelError naming the coefficient (kN) of a list read from a file whose value is not finite,
+    is an integer too large for a float, or has |k| > COEF_LIMIT_DPH [deg/h]."""
+    if not isinstance(coef, list):
+        return          # its type is refused by _check_coef
+    for k, c in enumerate(coef):
+        if isinstance(c, bool) or not isinstance(c, (int, float)):
+            continue
+        try:
+            value = float(c)
+        except OverflowError:
+            value = math.inf
+        if not abs(value) <= COEF_LIMIT_DPH:
+            shown = f"is a {len(str(abs(c)))}-digit integer" if math.isinf(value) and isinstance(c, int) \
+                else f"= {value:g} deg/h"
+            kname = f"k{k} (term {TERM_NAMES[k]})" if k < N_TERMS else f"k{k}"
+            raise ModelError(source, name, f"{kname} {shown}: |k| must be at most {COEF_LIMIT_DPH:.7g} deg/h "
+                                           f"(the output word: int32, LSB 2^-{F.OUT_FRAC} deg/h)")
+
+
 def _check_coef(coef, terms, source, name="coef_dph") -> np.ndarray:
     try:
         if isinstance(coef, (str, bytes)) or any(isinstance(c, (bool, str, bytes)) for c in coef):
             raise TypeError
         values = [float(c) for c in coef]
+    except OverflowError:
+        raise ModelError(source, name, "holds an integer too large for a float") from None
     except (TypeError, ValueError):
         raise ModelError(source, name, f"must be a list of {N_TERMS} numbers, not {coef!r}") from None
     if len(values) != N_TERMS:

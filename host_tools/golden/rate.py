@@ -109,7 +109,7 @@ import numba
 import numpy as np
 
 from firmware_ref.vocabulary import ESTIMATORS
-from host_tools.golden.checks import check_fields
+from host_tools.golden.fields import check_fields
 _CODE = {name: i for i, name in enumerate(ESTIMATORS)}
 MAX_SHIFT = 24
 IIR_WARMUP = 1   # W of the iir: only k = 0 (no difference yet); see "Start-up of the iir"

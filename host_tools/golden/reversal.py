@@ -87,7 +87,7 @@ import numba
 import numpy as np
 
 from firmware_ref.vocabulary import ORDERS, REVERSAL_COMBINERS as COMBINERS
-from host_tools.golden.checks import check_fields
+from host_tools.golden.fields import check_fields
 DEFAULT_MAX_STALE_S = 300.0
 # the defaults of new models (host_tools.golden.compensate.fit_config_from_logs, the CLI of hdrg fit / diagnose)
 # and of the raw-log combination of hdrg metrics: chosen on the foreign benchmark (docs/REGRESS_THEN_REVERSE.md)

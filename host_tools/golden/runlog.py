@@ -22,8 +22,10 @@ Bad input (each case is tested in tests/test_runlog.py):
   non-increasing or duplicated ``t_s``, a ``mode`` code that is not 0, 1, 2 or 3, a ``freq_hz``
   that is not positive, metadata that contradicts the data (``reversal: on`` without a ``mode``
   column or with every sample in mode 0, ``reversal: off`` with modes 1/2/3, a
-  ``sample_rate_hz`` more than 2 % away from 1 / the median ``t_s`` step) - these last checks are
-  made by the readers (:func:`check_metadata`), not for logs built in memory;
+  ``sample_rate_hz`` more than 2 % away from 1 / the median ``t_s`` step, ``exchange_s`` > 0 with
+  mode 1 going straight to mode 2 (no mode 3 between), ``mode`` 1 where capture's ``state`` is
+  mode 2 or the reverse) - these last checks are made by the readers (:func:`check_metadata`), not
+  for logs built in memory;
 * warnings (:class:`RunLogWarning`, and the same text in ``RunLog.notes``) with a documented
   repair:
 
@@ -36,6 +38,12 @@ Bad input (each case is tested in tests/test_runlog.py):
     gap. The warning gives the count, the nominal step and the largest gap with its line.
   - **unfinished capture** (metadata ``capture: in progress``, written by `hdrg capture` until it
     closes the file): the rows are kept; the warning says the capture was interrupted.
+  - **first dwell in mode 2** after power-on (the sequencer runs mode 1 first): modes 1 and 2 are
+    probably swapped; the rows are kept.
+
+Both readers make the same column checks (runlog_csv.check_columns), conversion (``rate_dps``),
+repairs and warnings (:func:`_finish`); a computed column (:meth:`RunLog.with_columns`) with NaN/inf
+where the log's own values are finite is refused naming the computation, not a line of the log.
 
 Only regular files are read (a FIFO, a device, a directory: RunLogError before opening).  The CSV
 reader streams the file in blocks (host_tools.golden.runlog_csv): its memory is about the final
@@ -54,14 +62,15 @@ import re
 import warnings
 import zipfile
 import zlib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from host_tools.atomic import atomic_open
 from host_tools.golden.runlog_csv import (BLANK_WHERE_INVALID, FORMAT_COLUMNS, HDRG_COLUMNS, INT_COLUMNS,  # noqa: F401
-                                          RunLogError, RunLogWarning, is_compensated_output, meta_line,
-                                          open_regular, read_table)
+                                          RunLogError, RunLogWarning, check_columns, is_compensated_output,
+                                          meta_line, open_regular, read_table)
 
 FORMAT_VERSION = 1
 MODES = (0, 1, 2, 3)
@@ -182,15 +191,76 @@ class RunLog:
         return RunLog(cols, dict(self.metadata), self.source, list(self.notes))
 
     def with_columns(self, **new) -> "RunLog":
-        """A copy with columns added or replaced (arrays of the same length)."""
+        """A copy with columns added or replaced (arrays of the same length).  A new column with
+        NaN/inf where the log's own columns are finite is refused naming the computation (for a
+        compensated log the bias model), never the file's line."""
         cols = dict(self.columns)
         cols.update(new)
+        _check_computed(self, new, cols)
         return RunLog(cols, dict(self.metadata), self.source, list(self.notes),
                       self.first_data_line, self.segments)
 
     @classmethod
-    def from_arrays(cls, metadata: dict | None = None, source: str = "<memory>", **columns) -> "RunLog":
-        return cls(dict(columns), dict(metadata or {}), source)
+    def from_arrays(cls, *args, metadata: dict | None = None, source: str = "<memory>", **columns) -> "RunLog":
+        """A RunLog built in memory (validated by :func:`_validate`, not by the readers' metadata checks).
+
+        Columns (1-D, one length; units): ``t_s`` [s since power-on, increasing, required],
+        ``rate_dph`` [deg/h, raw loop output, required], ``freq_hz`` [Hz] and/or ``temp_c`` [degC]
+        (at least one: the temperature proxy), ``mode`` [0 FTR, 1, 2, 3 exchange; default 0],
+        ``aux_*`` [any], and the columns hdrg writes (``bias_dph`` [deg/h], ``valid``, ``flags``).
+
+        The columns are given as keywords (``from_arrays(t_s=t, rate_dph=r, temp_c=T)``) or as one
+        mapping, positionally (``from_arrays({"t_s": t, ...})``, recognised by its ``t_s``; keywords
+        may add columns to it).  ``metadata`` (key -> text) and ``source`` (a name
+        for messages) are keywords, or the positional arguments after the mapping, in that order:
+        ``from_arrays(metadata, source, **columns)`` and ``from_arrays(columns, metadata, source)``."""
+        rest, given = list(args), {}
+        if rest and isinstance(rest[0], Mapping) and "t_s" in rest[0]:
+            given = dict(rest.pop(0))
+        if len(rest) > 2:
+            raise TypeError(f"from_arrays: at most a column mapping, metadata and source positionally, "
+                            f"got {len(args)} arguments")
+        if rest:
+            if metadata is not None:
+                raise TypeError("from_arrays: metadata given twice (positionally and as a keyword)")
+            metadata = rest.pop(0)
+        if rest:
+            source = rest.pop(0)
+        twice = sorted(set(given) & set(columns))
+        if twice:
+            raise TypeError(f"from_arrays: column(s) {', '.join(twice)} given twice (in the mapping and as keywords)")
+        given.update(columns)
+        return cls(given, dict(metadata or {}), source)
+
+
+def _check_computed(log: RunLog, new: dict, cols: dict) -> None:
+    """Refuse (RunLogError without a file line) a column of ``new`` with NaN/inf at a sample where
+    it must hold a number (NaN is allowed only in a compensated log's BLANK_WHERE_INVALID column
+    where ``valid`` is 0) while the log's own columns are finite there: the value was computed
+    (by a bias model, an estimator), so the message names the computation, not the log's line."""
+    blank_ok = _is_compensated_output(cols)
+    for name, values in new.items():
+        arr = np.asarray(values)
+        if arr.dtype.kind != "f" or arr.ndim != 1 or len(arr) != len(log):
+            continue
+        bad = ~np.isfinite(arr)
+        if blank_ok and name in BLANK_WHERE_INVALID:
+            bad &= ~(np.isnan(arr) & (np.asarray(cols["valid"]) == 0))
+        if not bad.any():
+            continue
+        row = int(np.argmax(bad))
+        inputs = [k for k, a in log.columns.items() if a.dtype.kind == "f"
+                  and not (k in BLANK_WHERE_INVALID and _is_compensated_output(log.columns))]
+        if not all(np.isfinite(log.columns[k][row]) for k in inputs):
+            continue                             # a non-finite input: _validate names it
+        model = log.metadata.get("compensation_model")
+        line = log.line_of(row)
+        at = f"row {row}" + (f" (line {line} of the log)" if line is not None else "")
+        who = (f"the bias model {model}" if model else
+               "the bias model" if "bias_dph" in cols else "the computation that made it")
+        raise RunLogError(log.source, None, f"{at}: the computed column '{name}' is {float(arr[row])!r} "
+                                            f"({int(bad.sum())} sample(s)) while the log's inputs there are finite: "
+                                            f"the fault is in {who} (e.g. coefficients too large), not in the log")
 
 
 # -- validation shared by the readers and the in-memory constructor ------------------------------
@@ -256,8 +326,9 @@ def _metadata_flag(value) -> bool | None:
 
 
 def check_metadata(log: RunLog, header_line: int | None = None) -> None:
-    """Refuse a non-positive ``freq_hz`` and metadata that contradicts the data (RunLogError; see
-    the module doc) and warn on an unfinished capture.  Called by the readers (files), not for
+    """Refuse a non-positive ``freq_hz`` and metadata or columns that contradict the data
+    (RunLogError; see the module doc: ``reversal``, ``sample_rate_hz``, ``exchange_s``, ``state``)
+    and warn on an unfinished capture and a first dwell in mode 2.  Called by the readers (files), not for
     logs built in memory (tests and tools may use synthetic columns there)."""
     src = log.source
     if "freq_hz" in log.columns:
@@ -289,11 +360,95 @@ def check_metadata(log: RunLog, header_line: int | None = None) -> None:
             raise RunLogError(src, None, f"metadata 'sample_rate_hz: {log.metadata['sample_rate_hz']}' does not "
                                          f"match t_s (median step {log.nominal_step_s:.6g} s = {data:.6g} Hz); "
                                          f"fix or remove the metadata line")
+    _check_exchanges(log)
+    _check_state_column(log)
+    _check_first_mode(log)
     if str(log.metadata.get(CAPTURE_KEY, "")).strip().lower() == CAPTURE_OPEN:
         msg = (f"{src}: unfinished capture (metadata '{CAPTURE_KEY}: {CAPTURE_OPEN}'): the recording was "
                f"interrupted or is still running; the {len(log)} rows written so far are used")
         log.notes.append(msg)
         warnings.warn(msg, RunLogWarning, stacklevel=3)
+
+
+def _metadata_number(value) -> float | None:
+    """The number a metadata value starts with (``30``, ``30 s``), or None."""
+    m = re.match(r"\s*([0-9.eE+-]+)", str(value))
+    try:
+        x = float(m.group(1)) if m else float("nan")
+    except ValueError:
+        return None
+    return x if math.isfinite(x) else None
+
+
+def _where(log: RunLog, row: int) -> tuple:
+    """(file line or None, the text naming the row in a message: '' when the line is named)."""
+    line = log.line_of(row)
+    return line, "" if line is not None else f"row {row}: "
+
+
+def _check_exchanges(log: RunLog) -> None:
+    """Refuse a mode-reversal log whose metadata declares exchanges (``exchange_s`` > 0, at least two
+    sample steps) while its mode column goes from mode 1 straight to mode 2 (or back) between two
+    samples with no gap between them: the exchange samples (output invalid) would be read as
+    mode-1/2 data."""
+    ex = _metadata_number(log.metadata.get("exchange_s", ""))
+    if not log.reversal or ex is None or ex <= 0 or len(log) < 3 or ex < 2.0 * log.nominal_step_s:
+        return
+    m = log.mode
+    straight = np.isin(m[1:], (MODE_1, MODE_2)) & np.isin(m[:-1], (MODE_1, MODE_2)) & (m[1:] != m[:-1])
+    straight &= np.diff(log.t_s) <= GAP_FACTOR * log.nominal_step_s
+    if not straight.any():
+        return
+    row = int(np.argmax(straight)) + 1
+    line, rowtxt = _where(log, row)
+    none = " and no sample has mode 3" if not np.any(m == MODE_EXCHANGE) else ""
+    raise RunLogError(log.source, line, f"{rowtxt}metadata 'exchange_s: {log.metadata['exchange_s']}' declares "
+                                        f"{ex:g} s of mode exchange (mode 3) between the modes, but the mode column "
+                                        f"goes from mode {m[row - 1]} straight to mode {m[row]} here "
+                                        f"({int(straight.sum())} such switch(es){none}): the exchange samples, whose "
+                                        f"output is invalid, would be used as mode-1/2 data; write mode 3 during "
+                                        f"the exchanges, or fix the metadata")
+
+
+def _check_state_column(log: RunLog) -> None:
+    """Refuse a log with hdrg capture's ``state`` column (the device's sequencer state 0..5,
+    firmware_ref.formats.STATE_MODE) whose ``mode`` says 1 where the state is mode 2 or the reverse
+    (modes 1 and 2 swapped).  A ``state`` column of other values is not checked."""
+    if "state" not in log.columns or not log.has_mode_column:
+        return
+    from firmware_ref.formats import STATE_MODE, STATE_NAMES
+    state = log.columns["state"]
+    if not np.all(np.isin(state, np.arange(len(STATE_MODE)))):
+        return
+    expect = np.asarray(STATE_MODE)[state.astype(np.int64)]
+    bad = np.isin(expect, (MODE_1, MODE_2)) & np.isin(log.mode, (MODE_1, MODE_2)) & (expect != log.mode)
+    if bad.any():
+        row = int(np.argmax(bad))
+        line, rowtxt = _where(log, row)
+        raise RunLogError(log.source, line, f"{rowtxt}mode {log.mode[row]} but state {int(state[row])} "
+                                            f"({STATE_NAMES[int(state[row])]}) is mode {expect[row]} "
+                                            f"({int(bad.sum())} samples disagree): the mode column contradicts the "
+                                            f"device's sequencer state (modes 1 and 2 swapped?); fix the mode column")
+
+
+def _check_first_mode(log: RunLog) -> None:
+    """Warn when a mode-reversal log recorded from its power-on (first ``t_s`` within 1 s or two
+    steps of 0, first sample mode 3) starts its first dwell in mode 2: the sequencer runs power-on,
+    exchange, mode 1 first (firmware_ref/FORMATS.md), so modes 1 and 2 are probably swapped."""
+    if (not log.reversal or len(log) < 3 or log.mode[0] != MODE_EXCHANGE
+            or log.t_s[0] > max(1.0, 2.0 * log.nominal_step_s)):
+        return
+    dwell = np.flatnonzero(np.isin(log.mode, (MODE_1, MODE_2)))
+    if len(dwell) == 0 or log.mode[dwell[0]] != MODE_2:
+        return
+    row = int(dwell[0])
+    line = log.line_of(row)
+    msg = (f"{log.source}{f':{line}' if line is not None else ''}: the first dwell after power-on is mode 2 "
+           f"(row {row}, t_s {float(log.t_s[row])!r}); the sequencer runs mode 1 first (power-on, exchange, mode 1, "
+           f"exchange, mode 2), so modes 1 and 2 are probably swapped: that flips the sign of the combined "
+           f"output (true rate and non-reversing bias); fix the mode column if so")
+    log.notes.append(msg)
+    warnings.warn(msg, RunLogWarning, stacklevel=4)
 
 
 def _find_segments(log: RunLog, report: bool) -> np.ndarray:
@@ -306,8 +461,9 @@ def _find_segments(log: RunLog, report: bool) -> np.ndarray:
     if report and len(gaps):
         big = int(gaps[np.argmax(d[gaps])])
         line = log.line_of(big + 1)
+        where = f"line {line}" if line is not None else f"row {big + 1}"
         msg = (f"{log.source}: {len(gaps)} gap(s) in time (nominal step {step:.6g} s); largest "
-               f"{d[big]:.6g} s before line {line}. Repair: all samples kept; the log is split into "
+               f"{d[big]:.6g} s before {where}. Repair: all samples kept; the log is split into "
                f"{len(gaps) + 1} segments at the gaps (RunLog.segments) and causal estimators restart "
                f"at each segment")
         log.notes.append(msg)
@@ -335,20 +491,30 @@ def parse_csv_text(text: str, source: str = "<text>") -> RunLog:
 
 
 def _from_table(table, source: str) -> RunLog:
-    """The RunLog of what runlog_csv.read_table read: ``rate_dps`` converted, ``mode`` defaulted,
-    validated (:func:`_validate`, :func:`check_metadata`), segmented at gaps."""
-    columns, notes = table.columns, table.notes
+    """The RunLog of what runlog_csv.read_table read (see :func:`_finish`)."""
+    return _finish(table.columns, table.metadata, source, table.notes, table.first_data_line, table.header_line)
+
+
+def _finish(columns: dict, metadata: dict, source: str, notes: list, first_data_line: int | None = None,
+            header_line: int | None = None) -> RunLog:
+    """The RunLog of the columns a reader read (CSV or NPZ, after runlog_csv.check_columns):
+    ``rate_dps`` converted to ``rate_dph``, ``mode`` defaulted to 0, types made float64 (int64
+    for INT_COLUMNS), validated (:func:`_validate`, :func:`check_metadata`), segmented at gaps
+    with the gap warning.  The same steps for both formats, so that they accept, warn about and
+    refuse the same logs."""
+    columns = {k: (np.asarray(v).astype(np.int64, copy=False) if k in INT_COLUMNS
+                   else np.asarray(v).astype(np.float64, copy=False)) for k, v in columns.items()}
     if "rate_dps" in columns and "rate_dph" not in columns:
         columns["rate_dph"] = columns.pop("rate_dps") * 3600.0
         notes.append(f"{source}: 'rate_dps' converted to 'rate_dph' (x 3600)")
     log = RunLog.__new__(RunLog)
     log.columns = columns
-    if "mode" not in columns:
+    if "mode" not in columns and "t_s" in columns:
         columns["mode"] = np.zeros(len(columns["t_s"]), np.int64)
         log._mode_given = False
-    log.metadata, log.source, log.notes, log.first_data_line = table.metadata, source, notes, table.first_data_line
+    log.metadata, log.source, log.notes, log.first_data_line = metadata, source, notes, first_data_line
     _validate(log)
-    check_metadata(log, table.header_line)
+    check_metadata(log, header_line)
     log.segments = _find_segments(log, report=True)
     return log
 
@@ -475,6 +641,7 @@ def read_npz(path) -> RunLog:
                 names, metadata, notes = _npz_header(parse_json(str(text), source, "NPZ header"), source)
             except InputFileError as exc:
                 raise RunLogError(source, None, str(exc).removeprefix(f"{source}: ")) from None
+            check_columns(names, source, None, notes, 5)
             cols = {}
             for i, name in enumerate(names):
                 if f"col_{i}.npy" not in infos:
@@ -492,9 +659,7 @@ def read_npz(path) -> RunLog:
         raise
     except _NPZ_ERRORS as exc:
         raise RunLogError(source, None, f"unreadable NPZ run log: {exc}") from None
-    log = RunLog(cols, metadata, source, notes)
-    check_metadata(log)
-    return log
+    return _finish(cols, metadata, source, notes)
 
 
 def read(path) -> RunLog:

@@ -343,17 +343,21 @@ def unknown_columns(names) -> list:
     return [c for c in names if c not in FORMAT_COLUMNS and c not in HDRG_COLUMNS and not c.startswith("aux_")]
 
 
-def _check_header(names, source: str, header_line: int, header_text: str, notes: list) -> None:
-    """Refuse an empty or repeated name, a missing required column, and a column that is not a
-    format column but equals one the header lacks once case, spaces, '_' and '-' are ignored
-    (``Mode``, ``Freq Hz``: names are matched exactly, so the log would be read without it;
-    ``rate_dph`` and ``rate_dps`` stand for each other); warn about a column not in the format."""
+def check_columns(names, source: str, line: int | None, notes: list, depth: int = 6,
+                  header_text: str | None = None) -> None:
+    """The column checks of every run-log reader (CSV header, NPZ ``columns``): refuse an empty or
+    repeated name, a missing required column, and a column that is not a format column but equals
+    one the log lacks once case, spaces, '_' and '-' are ignored (``Mode``, ``Freq Hz``: names are
+    matched exactly, so the log would be read without it; ``rate_dph`` and ``rate_dps`` stand for
+    each other); warn (RunLogWarning, noted in ``notes``) about a column not in the format.
+    ``line``: the header's file line (None for an NPZ); ``depth``: the warning's stack level."""
+    where = f"{source}:{line}" if line is not None else source
     if any(not c for c in names):
-        raise RunLogError(source, header_line, f"empty column name in header {header_text!r}")
+        raise RunLogError(source, line, f"empty column name in header {header_text or ','.join(names)!r}")
     seen = set()
     for c in names:
         if c in seen:
-            raise RunLogError(source, header_line, f"column '{c}' appears twice in the header")
+            raise RunLogError(source, line, f"column '{c}' appears twice in the header")
         seen.add(c)
     present = {_squash(c) for c in names if c in FORMAT_COLUMNS}
     if "ratedph" in present or "ratedps" in present:
@@ -361,21 +365,21 @@ def _check_header(names, source: str, header_line: int, header_text: str, notes:
     for c in unknown_columns(names):
         near = next((k for k in FORMAT_COLUMNS if _squash(k) == _squash(c) and _squash(k) not in present), None)
         if near is not None:
-            raise RunLogError(source, header_line, f"column '{c}' is not '{near}' (column names are matched "
-                                                   f"exactly, shared/formats/run-log.md): as it stands the log would "
-                                                   f"be read without '{near}'; rename the column")
+            raise RunLogError(source, line, f"column '{c}' is not '{near}' (column names are matched "
+                                            f"exactly, shared/formats/run-log.md): as it stands the log would "
+                                            f"be read without '{near}'; rename the column")
     for req, alt in (("t_s", None), ("rate_dph", "rate_dps")):
         if req not in names and (alt is None or alt not in names):
             need = f"'{req}'" + (f" (or '{alt}')" if alt else "")
-            raise RunLogError(source, header_line, f"missing required column {need}; header has {names}")
+            raise RunLogError(source, line, f"missing required column {need}; header has {list(names)}")
     if "freq_hz" not in names and "temp_c" not in names:
-        raise RunLogError(source, header_line, f"missing temperature proxy: one of the columns 'freq_hz', "
-                                               f"'temp_c' is required; header has {names}")
+        raise RunLogError(source, line, f"missing temperature proxy: one of the columns 'freq_hz', "
+                                        f"'temp_c' is required; header has {list(names)}")
     unknown = unknown_columns(names)
     if unknown:
-        _warn(f"{source}:{header_line}: column(s) {', '.join(repr(c) for c in unknown)} not in the run-log format "
+        _warn(f"{where}: column(s) {', '.join(repr(c) for c in unknown)} not in the run-log format "
               f"(t_s, rate_dph or rate_dps, mode, freq_hz, temp_c, aux_*): kept in the log but used by no tool; "
-              f"rename a logged channel to aux_<name> to offer it to the fit and the loop", notes, 6)
+              f"rename a logged channel to aux_<name> to offer it to the fit and the loop", notes, depth)
 
 
 def _read_head(fh, source: str):
@@ -538,7 +542,7 @@ def read_table(fh, size: int, source: str) -> CsvTable:
     """Read the CSV run log in the binary file ``fh`` up to byte ``size`` (see the module doc)."""
     notes = []
     metadata, names, header_text, header_line = _read_head(fh, source)
-    _check_header(names, source, header_line, header_text, notes)
+    check_columns(names, source, header_line, notes, 6, header_text)
     first_line, start, ncol = header_line + 1, fh.tell(), len(names)
     tail = _tail(fh, start, size) if start < size else None
     if tail is None:

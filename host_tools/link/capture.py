@@ -1,7 +1,10 @@
 """Run-log capture over the serial link (`hdrg capture`, docs/PROTOCOL.md): :func:`capture` reads
 the device's SAMPLE and INFO frames through a :class:`~host_tools.link.host.HostLink` and writes
 them with :class:`RunLogWriter` (incremental, fsync'ed, ``# capture: in progress`` until closed)
-as a run log of CAPTURE_COLUMNS (shared/formats/run-log.md).
+as a run log of CAPTURE_COLUMNS (shared/formats/run-log.md).  The output's format follows its
+name (OUTPUT_SUFFIXES): ``.csv`` is written incrementally; ``.npz`` is recorded incrementally into
+``<name>.part.csv`` next to it and converted when the capture ends (the CSV is then removed; a
+killed capture leaves it, a valid run log).
 """
 from __future__ import annotations
 
@@ -9,10 +12,12 @@ import math
 import os
 import re
 import time
+import warnings
 from dataclasses import dataclass
 
 from host_tools.link.codec import ST_RUN_ENDED, DeviceInfo, unpack_sample
-from host_tools.link.frame import T_GET_INFO, T_INFO, T_SAMPLE, ProtocolError, ProtocolVersionError
+from host_tools.link.frame import PROTO_MAJOR, T_ACK, T_GET_INFO, T_INFO, T_NACK, T_SAMPLE, T_TABLE, ProtocolError, \
+    ProtocolVersionError
 from host_tools.link.host import HostLink, open_port
 from host_tools.golden.runlog import CAPTURE_DONE, CAPTURE_KEY, CAPTURE_OPEN
 
@@ -21,13 +26,27 @@ class CaptureOutputError(ValueError):
     """The capture's output file cannot be written (missing directory, a directory, no permission)."""
 
 
+OUTPUT_SUFFIXES = (".csv", ".npz")     # the run-log formats capture writes (golden.runlog reads both)
+
+
+def output_format(path) -> str:
+    """``"csv"`` or ``"npz"`` from the suffix of ``path`` (any case); CaptureOutputError naming the
+    supported suffixes for any other name."""
+    suffix = os.path.splitext(os.fspath(path))[1].lower()
+    if suffix not in OUTPUT_SUFFIXES:
+        raise CaptureOutputError(f"{os.fspath(path)}: the run-log format follows the file name: give a name ending "
+                                 f"in {' or '.join(OUTPUT_SUFFIXES)} (not {suffix or 'no suffix'!r})")
+    return suffix[1:]
+
+
 def check_output_path(path) -> None:
     """CaptureOutputError unless ``path`` names a file that can be created: its directory exists
-    and is writable, and ``path`` is not a directory."""
+    and is writable, ``path`` is not a directory, and its suffix is one of OUTPUT_SUFFIXES."""
     path = os.fspath(path)
     directory = os.path.dirname(os.path.abspath(path))
     if os.path.isdir(path):
         raise CaptureOutputError(f"{path}: is a directory (-o names the run-log file to write)")
+    output_format(path)
     if not os.path.isdir(directory):
         raise CaptureOutputError(f"{path}: the directory {directory} does not exist")
     if not os.access(directory, os.W_OK):
@@ -152,6 +171,7 @@ class CaptureResult:
     bad_payload: int = 0
     out_of_order: int = 0
     unknown_type: int = 0
+    ignored_replies: int = 0
     dropped_no_info: int = 0
     table_changes: int = 0
     first_t_s: float | None = None
@@ -178,7 +198,8 @@ class CaptureResult:
                      f"{self.header_errors} (header); resyncs {self.resyncs} ({self.garbage_bytes} bytes discarded); "
                      f"sequence gaps {self.seq_gaps} frame(s) in {self.gap_events} place(s)")
         extra = [(n, getattr(self, n)) for n in ("truncated", "duplicates", "bad_payload", "out_of_order",
-                                                   "unknown_type", "dropped_no_info", "table_changes")
+                                                   "unknown_type", "ignored_replies", "dropped_no_info",
+                                                   "table_changes")
                  if getattr(self, n)]
         if extra:
             lines.append("  " + ", ".join(f"{n.replace('_', ' ')} {v}" for n, v in extra))
@@ -233,10 +254,14 @@ def capture(port, path, duration_s: float | None = None, idle_timeout_s: float |
             max_samples: int | None = None, flush_every: int = 256, flush_interval_s: float = 1.0,
             progress=None, extra_metadata: dict | None = None, stop=None) -> CaptureResult:
     """Record the device's SAMPLE frames on ``port`` (an open port or a URL/path) into the run log
-    ``path`` (CSV: CAPTURE_COLUMNS, see docs/PROTOCOL.md) until ``duration_s`` of device time
-    [s from the first sample], ``max_samples``, no frame for ``idle_timeout_s`` [s wall time; None:
-    wait forever], the device reports the end of its run or restarts, ``stop()`` returns True,
-    Ctrl-C, or a port error (disconnect).  The file is written incrementally (see RunLogWriter)
+    ``path`` (CAPTURE_COLUMNS, see docs/PROTOCOL.md; CSV or NPZ by its suffix, see the module doc)
+    until ``duration_s`` of device time [s from the first sample], ``max_samples``, the device
+    reports the end of its run or restarts, ``stop()`` returns True, Ctrl-C, a port error
+    (disconnect), or a stall, whatever else the device sends (garbage, partial frames, NACKs, INFO
+    without samples): no usable INFO frame within the shorter of ``idle_timeout_s`` and
+    ``duration_s`` [s wall time], then no new sample for ``idle_timeout_s`` [s wall time] (None:
+    never stop for silence; then ``duration_s`` bounds the stall); both None: wait until stopped.
+    The file is written incrementally (see RunLogWriter)
     and only once an INFO frame gave the sample rate and formats; samples before it are kept in
     memory (up to 100000).  ``progress(result)`` is called after every read.  Returns the
     :class:`CaptureResult`; ProtocolVersionError for a device of another protocol major."""
@@ -244,6 +269,11 @@ def capture(port, path, duration_s: float | None = None, idle_timeout_s: float |
 
     check_output_path(path)
     check_limits(duration_s, idle_timeout_s, max_samples)
+    npz = output_format(path) == "npz"
+    record_path = os.fspath(path) + ".part.csv" if npz else path
+    limits = [v for v in (idle_timeout_s, duration_s) if v is not None]
+    info_wait_s = min(limits) if limits else None           # for the first usable INFO [s]
+    stall_s = idle_timeout_s if idle_timeout_s is not None else duration_s
     own = isinstance(port, (str, os.PathLike))
     if own:
         port = open_port(os.fspath(port))
@@ -255,6 +285,8 @@ def capture(port, path, duration_s: float | None = None, idle_timeout_s: float |
     last_counter = None
     first_counter = None
     t0 = time.monotonic()
+    last_progress = t0          # wall time of the last new sample or of the first usable INFO
+    frames_at_progress = 0      # decoded frames then
     last_info_request = -1e9
 
     def sync_stats():
@@ -273,12 +305,12 @@ def capture(port, path, duration_s: float | None = None, idle_timeout_s: float |
                 "capture_started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                 "table_crc": f"0x{info.table_crc:08x}", "boot_id": f"0x{info.boot_id:08x}"}
         meta.update(extra_metadata or {})
-        writer = RunLogWriter(path, meta, flush_every=flush_every, flush_interval_s=flush_interval_s)
+        writer = RunLogWriter(record_path, meta, flush_every=flush_every, flush_interval_s=flush_interval_s)
         fmt = _SampleFormatter(info)
 
     def take(s: tuple, seq: int) -> bool:
         """Write one sample; False when the capture should end."""
-        nonlocal last_counter, first_counter
+        nonlocal last_counter, first_counter, last_progress, frames_at_progress
         c = fmt.counter(s[0])
         if last_counter is not None and c <= last_counter:
             res.out_of_order += 1
@@ -292,6 +324,7 @@ def capture(port, path, duration_s: float | None = None, idle_timeout_s: float |
         writer.append(line)
         last_counter = c
         res.samples += 1
+        last_progress, frames_at_progress = time.monotonic(), link.decoder.stats.frames
         if res.first_t_s is None:
             res.first_t_s = t
         res.last_t_s = t
@@ -302,8 +335,11 @@ def capture(port, path, duration_s: float | None = None, idle_timeout_s: float |
 
     def handle(frames) -> bool:
         """Process device frames; False when the data says the capture ends."""
-        nonlocal pending
+        nonlocal pending, last_progress, frames_at_progress
         for fr in frames:
+            if fr.type in (T_ACK, T_NACK, T_TABLE):
+                res.ignored_replies += 1        # capture sends only GET_INFO, answered by INFO
+                continue
             if fr.type == T_SAMPLE:
                 try:
                     s = unpack_sample(fr.payload)
@@ -328,6 +364,7 @@ def capture(port, path, duration_s: float | None = None, idle_timeout_s: float |
                     continue
                 if res.info is None:
                     res.info = info
+                    last_progress, frames_at_progress = time.monotonic(), link.decoder.stats.frames
                     start_writer(info)
                     queued, pending = pending, []
                     for s, seq in queued:
@@ -345,6 +382,17 @@ def capture(port, path, duration_s: float | None = None, idle_timeout_s: float |
                     res.reason = "the device reports the end of its run"
                     return False
         return True
+
+    def stall_reason(limit: float) -> str:
+        got = (f"{res.frames} frame(s) received ({res.bad_payload} with a bad payload, {res.ignored_replies} "
+               f"ACK/NACK/TABLE, {res.unknown_type} of unknown type, {res.duplicates} repeated), "
+               f"{res.garbage_bytes} garbage byte(s), {res.crc_errors + res.header_errors} CRC error(s)")
+        if res.info is None:
+            return (f"no usable INFO frame from the device within {limit:g} s ({got}; {len(pending)} sample(s) "
+                    f"without INFO): is a device of serial protocol {PROTO_MAJOR}.x on this port, at this baud rate?")
+        if link.decoder.stats.frames == frames_at_progress:
+            return f"no frame from the device for {limit:g} s ({res.garbage_bytes} garbage byte(s) in all)"
+        return f"no new sample from the device for {limit:g} s ({got}; {res.out_of_order} sample(s) out of order)"
 
     data_ended = False
     try:
@@ -364,8 +412,9 @@ def capture(port, path, duration_s: float | None = None, idle_timeout_s: float |
             if stop is not None and stop():
                 res.reason = "stopped"
                 break
-            if idle_timeout_s is not None and time.monotonic() - link.last_rx > idle_timeout_s:
-                res.reason = f"no frame from the device for {idle_timeout_s:g} s"
+            limit = stall_s if res.info is not None else info_wait_s
+            if limit is not None and time.monotonic() - last_progress > limit:
+                res.reason = stall_reason(limit)
                 break
     except KeyboardInterrupt:
         res.reason = "interrupted (Ctrl-C)"
@@ -389,4 +438,23 @@ def capture(port, path, duration_s: float | None = None, idle_timeout_s: float |
                     port.close()
                 except Exception:  # pragma: no cover
                     pass
+    if npz and res.written:
+        _convert_to_npz(record_path, os.fspath(path))
     return res
+
+
+def _convert_to_npz(csv_path: str, npz_path: str) -> None:
+    """The recorded CSV run log ``csv_path`` written as the NPZ run log ``npz_path`` (atomically),
+    then removed; CaptureOutputError (the CSV kept) when that fails.  The reader's warnings (gaps,
+    ...) are not repeated here: the capture's summary counts them."""
+    from host_tools.golden import runlog as rl
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            log = rl.read_csv(csv_path)
+        rl.write_npz(log, npz_path)
+    except (OSError, ValueError) as exc:
+        raise CaptureOutputError(f"{npz_path}: cannot write the NPZ run log ({exc}); the capture is kept as "
+                                 f"{csv_path}") from None
+    os.remove(csv_path)

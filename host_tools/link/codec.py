@@ -67,6 +67,16 @@ _REPLY = struct.Struct("<BBHII")           # req type, code, req seq, detail, sa
 _INFO = struct.Struct("<BBHIBBBBIHBBII")   # 28 bytes, then the device name (name_len bytes, UTF-8)
 
 
+# -- device text -------------------------------------------------------------------------------------
+
+def printable(text) -> str:
+    """``text`` from the device (its name, a NACK's message) made safe to print on one line:
+    every character that is not printable (ESC, CR, LF, other controls, bidi and zero-width marks)
+    and the backslash written as a Python escape (``\\x1b``, ``\\n``, ``\\u202e``, ``\\\\``), so
+    a device cannot move the cursor, start a line or forge a message of the host."""
+    return "".join(repr(ch)[1:-1] if ch == "\\" or not ch.isprintable() else ch for ch in str(text))
+
+
 # -- payloads ------------------------------------------------------------------------------------------
 
 def pack_sample(counter, freq, rate, temp, out, bias, state, mode, flags, valid) -> bytes:
@@ -137,6 +147,23 @@ class DeviceInfo:
 
     def capability_names(self) -> list:
         return [n for bit, n in CAP_NAMES.items() if self.capabilities & bit]
+
+    def format_differences(self) -> list:
+        """The word formats (fractional bits) in which the device differs from this host's
+        firmware_ref.formats, as ``"freq_frac 18 (this hdrg: 15)"`` texts; [] when they agree."""
+        host = {"freq_frac": F.FREQ_FRAC, "temp_frac": F.TEMP_FRAC, "rate_frac": F.RATE_FRAC, "out_frac": F.OUT_FRAC}
+        return [f"{k} {getattr(self, k)} (this hdrg: {v})" for k, v in host.items() if getattr(self, k) != v]
+
+
+def rate_mismatch(table, fs_q16: int, who: str = "the device"):
+    """Why ``table`` (firmware_ref.table.Table) cannot run at the sample rate ``fs_q16`` [Hz x 2^16]
+    of ``who``, or None: the table's timing (sample counts) and rate gain hold its own rate, so a
+    table quantized at another rate would run with its times and its rate term off by the ratio."""
+    if table.fs_q16 == fs_q16:
+        return None
+    t_hz, d_hz = table.fs_q16 / 65536.0, fs_q16 / 65536.0
+    return (f"the table is quantized for {t_hz:g} Hz but {who} samples at {d_hz:g} Hz (its timing and rate gain "
+            f"would be {t_hz / d_hz:g}x off): quantize a model fitted on runs at {d_hz:g} Hz, the device's rate")
 
 
 @dataclass

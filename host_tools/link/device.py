@@ -36,15 +36,18 @@ wait is bounded, so :meth:`VirtualDevice.stop` always returns.
 """
 from __future__ import annotations
 
+import math
 import os
 import threading
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from firmware_ref import formats as F
 from firmware_ref import inputs
+from host_tools.errors import UserError
 from host_tools.link import codec as C
 from host_tools.link import frame as FR
 from host_tools.link.host import HostLink, open_port
@@ -150,8 +153,8 @@ class VirtualDevice:
 
     def __init__(self, link, run: DeviceRun, table, speed: float = 1.0, name: str = "hdrg-virtual",
                  info_period_s: float = 1.0, batch: int = 64, boot_id: int | None = None):
-        if speed < 0:
-            raise ValueError(f"speed must be >= 0 (0: as fast as possible), not {speed}")
+        if not (math.isfinite(speed) and speed >= 0):
+            raise ValueError(f"speed must be a finite number >= 0 (0: as fast as possible), not {speed}")
         self.link = link
         self.run = run
         self.speed = float(speed)
@@ -246,6 +249,10 @@ class VirtualDevice:
                     text = C.table_mode_problem(table, bool(np.any(self.run.mode != 0)))
                     if text is not None:
                         table, code = None, C.R_TABLE_MODE
+                if table is not None:
+                    text = C.rate_mismatch(table, self.fs_q16, "this device")
+                    if text is not None:
+                        table, code = None, C.R_TABLE_RANGE
                 if table is None:
                     self.stats.uploads_refused += 1
                     self._reply(FR.T_NACK, fr, code, text=text)
@@ -337,13 +344,59 @@ class VirtualDevice:
         return False
 
 
+def _power_on_samples(mode) -> int:
+    """Samples of the exchange (mode 3) that a mode-reversal run starts with (its power-on)."""
+    mode = np.asarray(mode)
+    other = np.flatnonzero(mode != 3)
+    return int(other[0]) if other.size else len(mode)
+
+
+def short_run_problem(log, table, valid) -> str | None:
+    """Why no sample of ``log`` run with ``table`` has a valid compensated output (``valid``: the
+    device's valid bits), with the numbers of the run and of the table's schedule; None when
+    some sample has one."""
+    if np.any(valid):
+        return None
+    fs = float(log.sample_rate_hz)
+    n = len(log)
+    head = f"none of the run's {n} samples ({n / fs:g} s at {fs:g} Hz) has a valid compensated output " \
+           f"(OUT and BIAS stay held at 0)"
+    if table.combiner != 0:
+        lead, dwell, exch = _power_on_samples(log.mode), table.dwell_n, table.exchange_n
+        need = lead + dwell + exch
+        return (f"{head}: the mode-reversal schedule needs the power-on exchange ({lead / fs:g} s), one mode-1 "
+                f"window ({dwell / fs:g} s) and one exchange ({exch / fs:g} s), {need / fs:g} s, before its first "
+                f"output: give a duration above {need / fs:g} s")
+    need = table.power_on_n + max(table.rate_warmup, 1)
+    return (f"{head}: the table's power-on ({table.power_on_n} samples) and rate warm-up ({table.rate_warmup} "
+            f"samples) cover the whole run: give a duration above {need / fs:g} s")
+
+
 def make_device(scenario: str = "paper-mr-cycle-4dpm", seed: int = 0, duration_s: float | None = None,
                 sample_rate_hz: float = 1.0, table=None, link=None, **kw):
     """A VirtualDevice on a new pty (``link`` None) or on ``link``: ``(device, port_name, log)``.
-    ``table`` None: the identity table of the run."""
+    ``duration_s`` [s] (None: the scenario's), ``sample_rate_hz`` [Hz].  ``table`` None: the
+    identity table of the run; a table of the other mode (FTR / mode reversal) or quantized at
+    another sample rate is refused (UserError).  A mode-reversal run that is all power-on exchange
+    is refused (nothing to compensate, no data for the identity table); a run too short for any
+    valid compensated output is run with a warning that says why."""
     from host_tools.simulation import sim
 
+    fs_q16 = int(round(sample_rate_hz * 65536))
+    if table is not None:
+        problem = C.rate_mismatch(table, fs_q16, "the device")
+        if problem is not None:
+            raise UserError(f"--table: {problem} (or run the device at --rate {table.fs_q16 / 65536:g})")
     log = sim.simulate(scenario, seed=seed, duration_s=duration_s, sample_rate_hz=sample_rate_hz)
+    fs = float(log.sample_rate_hz)
+    if log.reversal and _power_on_samples(log.mode) == len(log):
+        ex = float(log.metadata.get("exchange_s", 30.0))
+        dw = float(log.metadata.get("dwell_s", 120.0))
+        raise UserError(f"the run of {len(log)} samples ({len(log) / fs:g} s) is all the power-on exchange "
+                        f"(mode 3, the first {ex:g} s of a mode-reversal run of scenario {scenario}): nothing to "
+                        f"compensate and no data for the identity table; give a duration above {2 * ex + dw:g} s "
+                        f"(power-on exchange {ex:g} s, one {dw:g} s window, one {ex:g} s exchange) for a first "
+                        f"compensated output")
     if table is None:
         table = identity_table(log)
     problem = C.table_mode_problem(table, log.reversal)
@@ -353,7 +406,11 @@ def make_device(scenario: str = "paper-mr-cycle-4dpm", seed: int = 0, duration_s
         master, slave, name = open_pty()
         link = FdLink(master, keep=(slave,), name=name)
     kw.setdefault("name", f"hdrg-virtual ({scenario}, seed {seed})")
-    return VirtualDevice(link, DeviceRun.from_log(log), table, **kw), link.name, log
+    dev = VirtualDevice(link, DeviceRun.from_log(log), table, **kw)
+    problem = short_run_problem(log, table, dev._res[4] if dev._res is not None else ())
+    if problem is not None:
+        warnings.warn(problem, stacklevel=2)
+    return dev, link.name, log
 
 
 # -- benchmark --------------------------------------------------------------------------------------

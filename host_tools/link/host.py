@@ -7,11 +7,14 @@ host_tools.link.capture and the commands (host_tools.cli.capture, host_tools.cli
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
 from firmware_ref import table as T
-from host_tools.link.codec import CAP_TABLE_READ, CAP_TABLE_UPLOAD, R_OK, REASONS, DeviceInfo, Reply, table_problems
+from host_tools.errors import UserError
+from host_tools.link.codec import CAP_TABLE_READ, CAP_TABLE_UPLOAD, R_OK, REASONS, DeviceInfo, Reply, printable, \
+    rate_mismatch, table_problems
 from host_tools.link.frame import PROTO_MAJOR, T_ACK, T_GET_INFO, T_INFO, T_NACK, T_READ_TABLE, T_SAMPLE, \
     T_TABLE, Decoder, Frame, ProtocolError, ProtocolVersionError, encode_frame, version_message
 
@@ -20,11 +23,55 @@ class UploadError(ValueError):
     """A table upload that did not succeed (refused, no answer, or read-back mismatch)."""
 
 
-def open_port(port: str, baud: int = 115200, timeout: float = 0.05, write_timeout: float = 2.0):
-    """Open a serial port or a pyserial URL (``loop://``, ``/dev/ttyUSB0``, ``/dev/pts/5``, ...)."""
+class PortError(UserError):
+    """A port that cannot be opened (no such device, busy, an unknown URL scheme, a bad baud rate)."""
+
+
+MAX_TIMEOUT_S = 60.0        # a longer answer timeout is a typo (a device answers within a second)
+MAX_RETRIES = 100
+
+
+def check_retries(value, name: str = "retries") -> int:
+    """``value`` as a number of attempts in 1 .. MAX_RETRIES; UserError naming ``name`` otherwise."""
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_RETRIES:
+        raise UserError(f"{name} {value!r}: must be an integer in 1 .. {MAX_RETRIES}")
+    return value
+
+
+def check_timeout(value, name: str = "timeout") -> float:
+    """``value`` as an answer timeout [s] in (0, MAX_TIMEOUT_S]; UserError naming ``name`` for
+    anything else (zero, negative, NaN, inf, too long)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or not 0 < value <= MAX_TIMEOUT_S:
+        raise UserError(f"{name} {value!r}: must be a number of seconds in (0, {MAX_TIMEOUT_S:g}]")
+    return float(value)
+
+
+def check_baud(value, name: str = "baud rate") -> int:
+    """``value`` as a baud rate [bit/s]: a positive integer; UserError naming ``name`` otherwise."""
+    if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
+        raise UserError(f"{name} {value!r}: must be a positive integer (bit/s, e.g. 115200)")
+    return value
+
+
+def open_port(port: str, baud: int = 115200, timeout: float = 0.05, write_timeout: float = 2.0,
+              option: str = "port"):
+    """Open a serial port or a pyserial URL (``loop://``, ``/dev/ttyUSB0``, ``/dev/pts/5``, ...);
+    ``timeout`` and ``write_timeout`` [s].  PortError naming ``option`` (and pyserial's reason)
+    when it cannot be opened: a missing or busy device, an unknown URL scheme, a baud rate the
+    port refuses."""
     import serial
 
-    return serial.serial_for_url(port, baudrate=baud, timeout=timeout, write_timeout=write_timeout)
+    try:
+        check_baud(baud)
+    except UserError as exc:
+        raise PortError(f"{option} {port}: cannot open: {exc}") from None
+    try:
+        return serial.serial_for_url(port, baudrate=baud, timeout=timeout, write_timeout=write_timeout)
+    except (serial.SerialException, ValueError) as exc:
+        hint = " (pyserial knows a device path or loop://, socket://, rfc2217://, spy://, alt://, hwgrep://)" \
+            if "protocol" in str(exc) and "not known" in str(exc) else ""
+        raise PortError(f"{option} {port}: cannot open: {exc}{hint}") from None
 
 
 @dataclass
@@ -131,7 +178,9 @@ class HostLink:
         return None
 
     def get_info(self, timeout_s: float = 2.0, on_frame=None) -> DeviceInfo:
-        """Ask for INFO (any INFO frame answers); ProtocolError on timeout."""
+        """Ask for INFO (any INFO frame answers) and wait up to ``timeout_s`` [s]; ProtocolError on
+        timeout."""
+        check_timeout(timeout_s)
         fr = self.request(T_GET_INFO, b"", lambda f, s: f.type == T_INFO, timeout_s, on_frame)
         if fr is None:
             raise ProtocolError(f"no INFO frame from the device within {timeout_s:g} s (is the device on this port?)")
@@ -144,7 +193,7 @@ class HostLink:
             raise UploadError(f"no answer to READ_TABLE within {timeout_s:g} s")
         if fr.type != T_TABLE:
             r = Reply.unpack(fr.payload)
-            raise UploadError(f"the device refused READ_TABLE: {REASONS.get(r.code, r.code)}: {r.text}")
+            raise UploadError(f"the device refused READ_TABLE: {REASONS.get(r.code, r.code)}: {printable(r.text)}")
         return fr.payload
 
 
@@ -174,22 +223,36 @@ class UploadResult:
 
 def upload(link: HostLink, table, timeout_s: float = 2.0, retries: int = 3, on_frame=None) -> UploadResult:
     """Upload ``table`` (firmware_ref.table.Table): refuse it before sending if it fails its own
-    checks or the output-word bound (codec.table_problems), check the device's version and capabilities
-    (INFO), send TABLE until ACK/NACK (``retries`` attempts of ``timeout_s``), then READ_TABLE and
-    compare the bytes.  Raises UploadError (NACK with its reason, no answer, read-back differs),
-    T.TableError (pre-check), ProtocolError."""
+    checks or the output-word bound (codec.table_problems), check the device's INFO (capabilities,
+    table layout version, word formats against firmware_ref.formats, sample rate against the
+    table's fs_q16), send TABLE until ACK/NACK (``retries`` attempts of ``timeout_s`` [s] each), then
+    READ_TABLE and compare the bytes.  Raises UploadError (a device that does not fit the table,
+    NACK with its reason, no answer, read-back differs), T.TableError (pre-check), ProtocolError,
+    UserError (``timeout_s`` or ``retries`` out of range).  Device texts in messages pass through
+    codec.printable."""
+    check_timeout(timeout_s)
+    check_retries(retries)
     probs = table_problems(table)
     if probs:
         raise T.TableError("table refused before sending: " + "; ".join(probs))
     data = table.to_bytes()
     info = link.get_info(timeout_s, on_frame)
+    who = f"device '{printable(info.name)}'"
     need = CAP_TABLE_UPLOAD | CAP_TABLE_READ
     if info.capabilities & need != need:
-        raise UploadError(f"device {info.name!r} does not accept table uploads (capabilities: "
+        raise UploadError(f"{who} does not accept table uploads (capabilities: "
                           f"{', '.join(info.capability_names()) or 'none'})")
     if info.table_version != T.VERSION:
-        raise UploadError(f"device {info.name!r} reads table layout version {info.table_version}, this table is "
+        raise UploadError(f"{who} reads table layout version {info.table_version}, this table is "
                           f"version {T.VERSION}")
+    diffs = info.format_differences()
+    if diffs:
+        raise UploadError(f"{who} uses other word formats than this hdrg (firmware_ref.formats): "
+                          f"{', '.join(diffs)}; its table would be read with the wrong scales: use an hdrg "
+                          f"and a firmware of the same formats")
+    problem = rate_mismatch(table, info.fs_q16, who)
+    if problem is not None:
+        raise UploadError(f"not sent: {problem}")
     reply = None
     for attempt in range(1, retries + 1):
         fr = link.request(T_TABLE, data, lambda f, s: is_reply_to(f, T_TABLE, s), timeout_s, on_frame)
@@ -199,7 +262,8 @@ def upload(link: HostLink, table, timeout_s: float = 2.0, retries: int = 3, on_f
     if reply is None:
         raise UploadError(f"no ACK/NACK for the table after {retries} attempt(s) of {timeout_s:g} s")
     if fr.type == T_NACK or reply.code != R_OK:
-        raise UploadError(f"the device refused the table ({REASONS.get(reply.code, reply.code)}): {reply.text}")
+        raise UploadError(f"the device refused the table ({REASONS.get(reply.code, reply.code)}): "
+                          f"{printable(reply.text)}")
     if reply.detail != table.crc:
         raise UploadError(f"the device acknowledged CRC-32 0x{reply.detail:08x}, the table has 0x{table.crc:08x}")
     back = link.read_table(timeout_s, on_frame)

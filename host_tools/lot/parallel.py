@@ -30,12 +30,21 @@ started pays no compile or import cost per worker; a cold one pays it once per w
 parallel.  The objects of this process are frozen (``gc.freeze``) while the pool runs, so that
 the workers' garbage collections do not copy the pages they inherit.
 
-**Crashes.**  A pool process that dies (killed, out of memory) breaks the pool: a new pool takes
-over, and the jobs that were submitted to the broken one run again, each alone, so that the job
-that kills its process is the only one lost: ``crashed(job, exc)`` gives its result (None: it
-raises RuntimeError).  On Dask a task whose worker dies is retried by the scheduler before it
-fails (``KilledWorker``).  An exception raised by ``fn`` in a pool process or a Dask task goes
-to ``crashed`` too when it is given, else it is raised here as it is.
+**Crashes.**  A pool process that dies (killed, out of memory) breaks the pool: its other
+processes are stopped (SIGTERM, then SIGKILL after STOP_WAIT_S; the workers take SIGTERM's
+default action, not the command's handler they inherit), a new pool takes over, and the jobs
+that were submitted to the broken one run again, each alone, so that the job that kills its
+process is the only one lost: ``crashed(job, exc)`` gives its result (None: it raises
+RuntimeError).  A process that died while it wrote its result would leave the pool waiting for
+the rest of the message for ever: the engine checks the processes every POLL_S seconds while no
+job finishes, and takes a pool with a dead process and no progress for broken.  Nothing waits
+without a bound: a stop (Ctrl-C, an error) ends the pool the same way.  On Dask a task whose
+worker dies is retried by the scheduler before it fails (``KilledWorker``); each Dask future is
+released as soon as its result is collected, so that the cluster's memory does not grow with the
+number of jobs and a worker lost later never recomputes a collected job.  An exception raised by
+``fn`` in a pool process or a Dask task goes to ``crashed`` too when it is given, else it is
+raised here as it is.  ``--scheduler`` must read as an address (:func:`check_scheduler`), and a
+scheduler that does not answer within CONNECT_TIMEOUT_S seconds is an error.
 """
 from __future__ import annotations
 
@@ -161,7 +170,9 @@ def _worker_init() -> None:
     """In each pool process: one thread for good (module doc), and die with the command.  A
     killed command (SIGKILL) would otherwise leave its workers blocked on the task queue for ever
     (Linux: PR_SET_PDEATHSIG); Ctrl-C goes to the whole process group: the command stops the
-    pool, the workers do not raise."""
+    pool, the workers do not raise.  SIGTERM gets its default action back (a forked worker
+    inherits the command's handler, which would unwind the worker into a queue nobody reads
+    instead of ending it when the pool stops it)."""
     import signal
 
     os.environ.update({k: "1" for k in THREAD_VARIABLES})
@@ -170,6 +181,7 @@ def _worker_init() -> None:
     with contextlib.suppress(Exception):
         ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))     # 1 = PR_SET_PDEATHSIG
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _lost(job, exc, crashed):
@@ -178,16 +190,47 @@ def _lost(job, exc, crashed):
     return crashed(job, exc)
 
 
-def _terminate(ex) -> None:
-    """Stop the processes of the pool ``ex`` now, without waiting for their jobs."""
-    stop = getattr(ex, "terminate_workers", None)       # Python 3.14
-    if stop is not None:
-        with contextlib.suppress(Exception):
-            stop()
-        return
-    for proc in list((getattr(ex, "_processes", None) or {}).values()):
+STOP_WAIT_S = 5.0       # how long stopped pool processes get to end before they are killed [s]
+POLL_S = 1.0            # how often the pool's processes are checked while no job finishes [s]
+
+
+def _terminate(ex, wait_s: float = STOP_WAIT_S) -> None:
+    """Stop the processes of the pool ``ex`` now, without waiting for their jobs: SIGTERM, then
+    SIGKILL for those still alive after ``wait_s`` seconds in all."""
+    import time
+
+    procs = list((getattr(ex, "_processes", None) or {}).values())
+    for proc in procs:
         with contextlib.suppress(Exception):
             proc.terminate()
+    end = time.monotonic() + wait_s
+    for proc in procs:
+        with contextlib.suppress(Exception):
+            proc.join(max(0.0, end - time.monotonic()))
+            if proc.is_alive():
+                proc.kill()
+                proc.join(1.0)
+    if all(not proc.is_alive() for proc in procs):
+        # a process stopped while it wrote its result leaves half a message in the result pipe, and
+        # the pool's manager thread waits for the rest for ever: this process holds the pipe's
+        # last write end, closed here so that the thread reads the end of the pipe and stops
+        with contextlib.suppress(Exception):
+            ex._result_queue._writer.close()
+
+
+def _a_process_died(ex) -> bool:
+    """True when a process of the pool ``ex`` has ended (they live as long as the pool)."""
+    with contextlib.suppress(Exception):
+        return any(p.exitcode is not None for p in list((ex._processes or {}).values()))
+    return False
+
+
+def _shutdown(ex, wait_s: float = STOP_WAIT_S) -> None:
+    """Shut the pool ``ex`` down, waiting at most ``wait_s`` seconds for its manager thread."""
+    ex.shutdown(wait=False, cancel_futures=True)
+    thread = getattr(ex, "_executor_manager_thread", None)
+    if thread is not None:
+        thread.join(wait_s)
 
 
 def _run_pool(fn, jobs, workers: int, crashed):
@@ -205,21 +248,35 @@ def _run_pool(fn, jobs, workers: int, crashed):
 
 
 def _pool_passes(fn, queue, alone, workers, crashed):
+    """Run ``queue`` (popped from the end) through pools of ``workers`` processes; after a pool
+    breaks, the jobs it held run again each alone (``alone``) in a new pool: one that breaks a
+    pool again is given to ``crashed``."""
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
     while queue or alone:
         ex = ProcessPoolExecutor(max_workers=workers, initializer=_worker_init)
-        running, lost = {}, []
+        running, lost, broken = {}, [], False
         try:
             while queue or alone or running:
-                if alone and not running:
-                    job = alone.pop()
-                    running[ex.submit(fn, job)] = (job, True)
-                while queue and not alone and len(running) < 2 * workers:
-                    job = queue.pop()
-                    running[ex.submit(fn, job)] = (job, False)
-                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                try:
+                    if alone and not running:
+                        job, solo = alone.pop(), True
+                        running[ex.submit(fn, job)] = (job, True)
+                    while queue and not alone and len(running) < 2 * workers:
+                        job, solo = queue.pop(), False
+                        running[ex.submit(fn, job)] = (job, False)
+                except BrokenProcessPool:   # broke since the last wait: this job never started
+                    (alone if solo else queue).append(job)
+                    broken = True
+                done = set()
+                if running and not broken:
+                    done = wait(running, timeout=POLL_S, return_when=FIRST_COMPLETED)[0]
+                    if not done and _a_process_died(ex):
+                        # the pool notices a dead process by itself, unless the process died while it
+                        # wrote its result: then the pool waits for the rest of it for ever
+                        done = wait(running, timeout=POLL_S, return_when=FIRST_COMPLETED)[0]
+                        broken = not done
                 for fut in done:
                     job, solo = running.pop(fut)
                     try:
@@ -232,16 +289,23 @@ def _pool_passes(fn, queue, alone, workers, crashed):
                             raise
                         result = crashed(job, exc)
                     yield job, result
-                if lost:
-                    for job, solo in running.values():
-                        lost.append((job, solo, BrokenProcessPool("the pool broke")))
+                if lost or broken:
+                    held = list(running.items())
                     running.clear()
+                    for fut, (job, solo) in held:
+                        if fut.done() and not fut.cancelled() and fut.exception() is None:
+                            yield job, fut.result()     # finished just before the break
+                        else:
+                            lost.append((job, solo, BrokenProcessPool("the pool broke")))
+                    broken = True
                     break
         except BaseException:       # the caller stopped (an error, Ctrl-C, close()): drop the running jobs
             _terminate(ex)
             raise
         finally:
-            ex.shutdown(wait=True, cancel_futures=True)
+            if broken:              # a broken pool: its other processes are stopped, not awaited
+                _terminate(ex)
+            _shutdown(ex)
         for job, solo, exc in lost:
             if solo:
                 yield job, _lost(job, exc, crashed)
@@ -249,27 +313,71 @@ def _pool_passes(fn, queue, alone, workers, crashed):
                 alone.append(job)
 
 
+CONNECT_TIMEOUT_S = 30.0     # how long to try to reach a Dask scheduler [s]
+_SCHEMES = ("tcp", "tls", "inproc", "ucx", "ws", "wss")
+
+
+def check_scheduler(address: str) -> str:
+    """``address`` when it reads as a Dask scheduler address (``[tcp|tls|inproc|ucx|ws|wss://]HOST:PORT``,
+    PORT 1..65535; ``inproc://`` takes any name), else UserError naming it."""
+    import re
+
+    from host_tools.errors import UserError
+
+    text = str(address).strip()
+    m = re.fullmatch(r"(?:([a-z]+)://)?(.+)", text)
+    scheme, rest = ((m.group(1) or "tcp"), m.group(2)) if m else ("", "")
+    ok = False
+    if scheme in _SCHEMES:
+        if scheme == "inproc":
+            ok = bool(rest)
+        else:
+            hp = re.fullmatch(r"(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(\d{1,5})", rest)
+            ok = bool(hp) and 1 <= int(hp.group(2)) <= 65535
+    if not ok:
+        raise UserError(f"--scheduler {address!r}: not a Dask scheduler address (expected [tcp://]HOST:PORT, "
+                        f"e.g. tcp://10.0.0.5:8786; schemes: {', '.join(_SCHEMES)})")
+    return text
+
+
 def _run_dask(fn, jobs, scheduler: str, crashed):
+    """Submit every job to the cluster, yield the results as they complete and release each future
+    as soon as its result is here: the cluster holds only the results not yet collected (its memory
+    does not grow with the lot), and a worker lost later has nothing of the collected jobs to
+    recompute."""
     try:
         from distributed import Client, as_completed
     except ImportError:     # pragma: no cover - a dependency of hdrg
         raise ValueError("--scheduler needs Dask distributed (pip install 'dask[distributed]')") from None
-    client = Client(scheduler)
-    futures = []
+    from host_tools.errors import UserError
+
+    scheduler = check_scheduler(scheduler)
+    try:
+        client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
+    except (OSError, TimeoutError) as exc:
+        raise UserError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({type(exc).__name__}: "
+                        f"{str(exc).splitlines()[0] if str(exc) else 'no answer'})") from None
+    pending = {}        # key -> (future, job) of the jobs whose result is not collected yet
     try:
         futures = client.map(functools.partial(run_call, fn), jobs, pure=False)
-        owner = {f.key: job for f, job in zip(futures, jobs)}
-        for fut in as_completed(futures):
+        pending.update((f.key, (f, job)) for f, job in zip(futures, jobs))
+        done = as_completed(futures)
+        del futures
+        for fut in done:
+            _, job = pending.pop(fut.key)
             try:
                 result = fut.result()
             except Exception as exc:    # a worker died (KilledWorker) or the task raised
                 if crashed is None:
                     raise
-                result = crashed(owner[fut.key], exc)
-            yield owner[fut.key], result
+                result = crashed(job, exc)
+            fut.release()
+            del fut
+            yield job, result
     finally:
         with contextlib.suppress(Exception):
-            client.cancel(futures)
+            client.cancel([f for f, _ in pending.values()])
+        pending.clear()
         client.close()
 
 

@@ -130,6 +130,21 @@ SCENARIOS: dict = {
     "paper-mr-cycle-4dpm": Scenario(
         "mode reversal 30/120/30/120 s, -20..20 degC cycles at 4 degC/min (paper 4.4: 2.57, 6.12 deg/h)",
         lambda: cycle_profile(4.0), reversal=True),
+    "paper-mr-cycle-2dpm": Scenario(
+        "mode reversal 30/120/30/120 s, -20..20 degC cycles at 2 degC/min, 2-h holds (a second chamber rate)",
+        lambda: cycle_profile(2.0), reversal=True),
+    "mr-one-cycle-4dpm": Scenario(
+        "mode reversal, one -20..20 degC cycle at 4 degC/min, 1-h holds: a cooling and a heating leg, 2.3 h",
+        lambda: cycle_profile(4.0, hold_s=3600.0, n_cycles=1), reversal=True),
+    "mr-one-cycle-2dpm": Scenario(
+        "mode reversal, one -20..20 degC cycle at 2 degC/min, 1-h holds: a cooling and a heating leg, 2.7 h",
+        lambda: cycle_profile(2.0, hold_s=3600.0, n_cycles=1), reversal=True),
+    "ftr-one-cycle-4dpm": Scenario(
+        "FTR, one -20..20 degC cycle at 4 degC/min, 1-h holds: a cooling and a heating leg, 2.3 h",
+        lambda: cycle_profile(4.0, hold_s=3600.0, n_cycles=1)),
+    "ftr-one-cycle-2dpm": Scenario(
+        "FTR, one -20..20 degC cycle at 2 degC/min, 1-h holds: a cooling and a heating leg, 2.7 h",
+        lambda: cycle_profile(2.0, hold_s=3600.0, n_cycles=1)),
     "paper-startup-mr": Scenario(
         "mode reversal, power-on at constant 25 degC ambient, 45 min: self-heating + turn-on (paper 4.4, Table 4)",
         lambda: constant_profile(25.0, 2700.0), reversal=True),

@@ -22,11 +22,13 @@ Physics of a device (ranges are the randomization, uniform unless said otherwise
    resonator, one (another) carries the temperature sensor, one the damping-asymmetry bias (the
    resonator with p = 0.5), one the common-mode (electronics) bias.
 3. **Drive frequency** ``freq_hz`` = ``f0 (1 + a1 x + a2 x^2 + a3 x^3)`` with x = T_res - 25 degC,
-   f0 6..30 kHz, a1 = -20.9 ppm/degC x (1 + N(0, 3 %)), a2 ~ N(0, 0.02 ppm/degC^2), a3 ~
-   N(0, 2e-4 ppm/degC^3); plus white PLL noise (0.05..0.2 mHz) and quantization to the NCO step
+   f0 3..40 kHz (the paper's HDRG 6.2 kHz, disk and hemispherical resonators from a few kHz,
+   ADXRS45x 15..18 kHz, MPU-6000/6050 24..36 kHz), a1 = -20.9 ppm/degC x (1 + N(0, 3 %)), a2 ~
+   N(0, 0.02 ppm/degC^2), a3 ~ N(0, 2e-4 ppm/degC^3); plus white PLL noise (0.05..0.2 mHz) and quantization to the NCO step
    ``f_clk / 2**N`` (f_clk 10..50 MHz, N 35..40: 0.01..1.5 mHz).
 4. **Temperature sensor** ``temp_c`` = gain x T_sensor_node + offset (gain 1 +- 1 %, offset +- 1
-   degC), white noise 0.01..0.05 degC, quantized to 2**-4..2**-8 degC.
+   degC), white noise 0.01..0.05 degC, quantized to 2**-4..2**-8 degC.  The sensor node is not the
+   resonator's (a board or package sensor), except on a temperature-only device (below).
 5. **Raw loop output** ``rate_dph`` with s = +1 (mode 0, 1), -1 (mode 2), 0 (mode 3)::
 
        rate = s * (Omega + B_E + flipping effects) + (1 + d_scale) * B_D + d_offset
@@ -52,6 +54,17 @@ Physics of a device (ranges are the randomization, uniform unless said otherwise
    wander (5..20 mV, tau 300..3000 s) + 1 mV white noise; ``aux_acc_x/y/z`` [m/s^2] accelerometer:
    gravity in a frame tilting slowly (two Gauss-Markov tilt angles, 3..12 deg, tau 600..3000 s)
    plus 0.02 m/s^2 white noise.  The gyro responds to them only under the ``aux`` effect.
+
+**Temperature-only devices** (``ForeignDevice.logs_freq`` False; about TEMP_ONLY_SHARE = 1 in 8
+seeds, chosen by ``default_rng([seed, 4])`` so that every other draw of the seed is that of a
+device that logs its drive frequency): the drive frequency is not logged, as on a gyroscope whose
+interface gives a die temperature and no drive-frequency output.  Such a device's log holds
+``t_s``, ``rate_dph``, ``mode``, ``temp_c`` and the aux columns, no ``freq_hz``; its temperature
+sensor sits on the resonator's node (an on-die sensor: ``sensor_node`` = ``resonator_node``, the
+sensor's gain, offset, noise and quantization as drawn in 4), so that ``temp_c`` tracks the
+resonator and serves as the temperature proxy (``hdrg fit`` takes ``temp_c`` as the proxy when a log
+has no ``freq_hz``).  The ``board_temp`` effect then follows the resonator's node, and
+``proxy_high_order`` remains a function of the resonator temperature that ``temp_c`` measures.
 
 Effects (``EFFECT_KINDS``; undeclared: a run's metadata never names them).  Each has device-drawn
 parameters (``ForeignDevice.effects``) and a dimensionless ``strength`` that multiplies its bias
@@ -85,7 +98,12 @@ the power-on change, ringing, settling tail and the effects).
 
 Determinism: device structure from ``default_rng([seed, 0])``, effect parameters from
 ``default_rng([seed, 1, k])``, the power-on change from ``default_rng([seed, 2, power_on])``, the
-noise from ``default_rng([seed, 3, noise_seed])`` (fixed draw order, independent of thermal/effect).
+noise from ``default_rng([seed, 3, noise_seed])`` (fixed draw order, independent of thermal/effect,
+the same whether or not ``freq_hz`` is logged), whether the drive frequency is logged from
+``default_rng([seed, 4])``.
+
+Version 2 (``foreign_version`` in the metadata): f0 3..40 kHz (version 1: 6..30 kHz, from the same
+random number, so every other parameter of a seed is unchanged) and the temperature-only devices.
 """
 from __future__ import annotations
 
@@ -99,7 +117,8 @@ from scipy.signal import lfilter
 from host_tools.golden.runlog import RunLog
 from host_tools.simulation.sim_physics import mode_sequence
 
-FOREIGN_VERSION = 1
+FOREIGN_VERSION = 2
+TEMP_ONLY_SHARE = 0.125   # probability that a device logs no drive frequency (its temp_c is the proxy)
 EXCHANGE_S = 30.0
 DWELL_S = 120.0
 T_REF_C = 0.0           # reference of the normalized temperatures y = (T - T_REF_C) / T_SCALE_C
@@ -158,6 +177,7 @@ class ForeignDevice:
     noise: dict            # white_dph, flicker_b_dph, rrw_k
     aux: dict              # vdd_nom_v, vdd_wander_v, vdd_tau_s, tilt_deg, tilt_tau_s
     effects: dict = field(default_factory=dict)   # kind -> parameters at strength 1
+    logs_freq: bool = True  # False: a temperature-only device (no freq_hz; temp_c on the resonator's node)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -171,7 +191,8 @@ class ForeignDevice:
                          for i, nd in enumerate(self.nodes))
         return (f"foreign device {self.seed}: {nodes}; resonator n{self.resonator_node}, sensor "
                 f"n{self.sensor_node}, damping n{self.damping_node}, common n{self.common_node}; "
-                f"f0 {self.drive['f0_hz']:.0f} Hz; damping c1 {self.damping['c1']:+.1f} deg/h, common "
+                f"f0 {self.drive['f0_hz']:.0f} Hz{'' if self.logs_freq else ' (not logged: temp_c proxy)'}; "
+                f"damping c1 {self.damping['c1']:+.1f} deg/h, common "
                 f"tanh {self.common['e3']:+.1f} deg/h; white {self.noise['white_dph']:.2f} deg/h; "
                 f"self-heating n{self.self_heating['node']} {self.self_heating['rise_c']:.1f} degC")
 
@@ -206,13 +227,16 @@ def foreign_device(seed: int) -> ForeignDevice:
     sensor = int(r.choice([j for j in range(n_nodes) if j != res]))
     damping = res if r.random() < 0.5 else int(r.integers(0, n_nodes))
     common = int(r.integers(0, n_nodes))
+    logs_freq = bool(np.random.default_rng([seed, 4]).random() >= TEMP_ONLY_SHARE)
+    if not logs_freq:
+        sensor = res            # an on-die sensor: temp_c tracks the resonator (module doc)
     dev = ForeignDevice(
         seed=seed, nodes=nodes, resonator_node=res, sensor_node=sensor, damping_node=damping, common_node=common,
         self_heating={"node": int(r.integers(0, n_nodes)), "rise_c": float(r.uniform(0.5, 3.0)),
                       "tau_s": float(r.uniform(100.0, 900.0))},
         chamber={"high_c": float(r.uniform(18.0, 25.0)), "low_c": float(r.uniform(-25.0, -15.0)),
                  "hold_s": float(60.0 * r.uniform(5.0, 30.0)), "n_cycles": int(r.integers(2, 4))},
-        drive={"f0_hz": float(r.uniform(6e3, 30e3)), "a1_per_c": -20.9e-6 * (1.0 + r.normal(0.0, 0.03)),
+        drive={"f0_hz": float(r.uniform(3e3, 40e3)), "a1_per_c": -20.9e-6 * (1.0 + r.normal(0.0, 0.03)),
                "a2_per_c2": float(r.normal(0.0, 0.02e-6)), "a3_per_c3": float(r.normal(0.0, 2e-10)),
                "pll_noise_hz": float(r.uniform(0.05e-3, 0.2e-3)),
                "nco_step_hz": float(r.uniform(10e6, 50e6) / 2.0 ** int(r.integers(35, 41)))},
@@ -232,6 +256,7 @@ def foreign_device(seed: int) -> ForeignDevice:
         aux={"vdd_nom_v": float(r.choice((3.3, 5.0))), "vdd_wander_v": float(r.uniform(0.005, 0.02)),
              "vdd_tau_s": float(r.uniform(300.0, 3000.0)), "tilt_deg": float(r.uniform(3.0, 12.0)),
              "tilt_tau_s": float(r.uniform(600.0, 3000.0))},
+        logs_freq=logs_freq,
     )
     for k, name in enumerate(EFFECT_KINDS):
         e = np.random.default_rng([seed, 1, k])
@@ -368,7 +393,9 @@ def simulate_foreign(device, rate_c_per_min: float, reversal: bool, power_on: in
     ``ambient_c`` [degC]: a power-on at constant ambient instead of the chamber profile (the
     chamber air held at ``ambient_c``, every node soaked at it; ``rate_c_per_min`` then only names
     the run; ``duration_s`` None = STARTUP_S): the start-up of the paper's Table 4.  ``start_low``:
-    the chamber cycles start soaked at the low end (the power-on at the cold end of the range)."""
+    the chamber cycles start soaked at the low end (the power-on at the cold end of the range).
+    The log has no ``freq_hz`` column when the device is temperature-only (``dev.logs_freq`` False;
+    module doc)."""
     dev = device if isinstance(device, ForeignDevice) else foreign_device(device)
     power_on = _check_int(power_on, "power_on")
     noise_seed = _check_int(noise_seed, "noise_seed")
@@ -465,7 +492,8 @@ def simulate_foreign(device, rate_c_per_min: float, reversal: bool, power_on: in
     where = (f"{rate_c_per_min:g}cpm" + (" cold" if start_low else "")) if ambient_c is None else f"ambient {ambient_c:g}C"
     src = (f"<foreign {dev.seed} {where} {'MR' if reversal else 'FTR'} p{power_on} "
            f"n{noise_seed}{'' if thermal else ' floor'}>")
-    return RunLog.from_arrays(metadata=meta, source=src, t_s=t, freq_hz=freq, rate_dph=rate, mode=mode,
+    cols = {"t_s": t, "freq_hz": freq} if dev.logs_freq else {"t_s": t}
+    return RunLog.from_arrays(metadata=meta, source=src, **cols, rate_dph=rate, mode=mode,
                               temp_c=temp_c, aux_vdd=vdd, aux_acc_x=acc[0], aux_acc_y=acc[1], aux_acc_z=acc[2])
 
 

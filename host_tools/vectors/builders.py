@@ -70,6 +70,8 @@ def random_model(rng: np.random.Generator, reversal: bool = True, estimator: str
     else:
         ref, span = float(rng.uniform(-50.0, 80.0)), float(10 ** rng.uniform(-0.5, 2))
     rate_span = span * float(10 ** rng.uniform(-4, -1.5))
+    # at least 4 word LSB per sample: a slower rate span has no rate gain in int32 (quantize refuses)
+    rate_span = max(rate_span, 4.0 * 2.0 ** -(F.FREQ_FRAC if kind == "freq" else F.TEMP_FRAC))
     two = reversal and order == "regress_first"
     comb = str(rng.choice(["pair", "trend", "none"] if two else ["pair", "trend"])) if reversal else None
     coef = random_coef(rng, scale=float(10 ** rng.uniform(-1, 3)))

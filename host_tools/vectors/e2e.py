@@ -22,7 +22,11 @@ E2E_RUNS = (
      ("regress_first", "none")),
     ("regress_first_trend", "paper-mr-cycle-4dpm", 12, 2400.0, "mode reversal, regress_first trend (two banks)",
      ("regress_first", "trend")),
-)
+) + tuple(
+    # the same chamber cycle at other drive frequencies (the F word holds 0 .. 131072 Hz)
+    (f"regress_first_pair_{f0 / 1e3:g}khz", "paper-mr-cycle-4dpm", 13, 900.0,
+     f"mode reversal, regress_first pair, drive frequency {f0:g} Hz", ("regress_first", "pair"), {"f0_hz": f0})
+    for f0 in (3.0e3, 24.0e3, 36.0e3, 65.0e3))
 
 
 def round_sig(x: float, digits: int = 7) -> float:
@@ -74,14 +78,16 @@ def e2e_set() -> tuple:
 
     cs = Cases()
     config = {}
-    for name, scenario, seed, duration, desc, reversal in E2E_RUNS:
-        log = simulate(scenario, seed=seed, duration_s=duration)
+    for name, scenario, seed, duration, desc, reversal, *extra in E2E_RUNS:
+        overrides = extra[0] if extra else {}
+        log = simulate(scenario, seed=seed, duration_s=duration, **overrides)
         model, table = e2e_model(log, reversal)
         w = log_words(log, model.config)
         other = (inputs.temp_words(log["temp_c"]) if table.proxy_kind == 0 else inputs.freq_words(log["freq_hz"]))[0]
-        cs.add(name, f"{desc}: host_tools.simulation.sim.simulate({scenario!r}, seed={seed}, duration_s={duration:g}), "
-               f"fitted, quantized; log-driven", table, w, t_words=other)
-        config[name] = {"scenario": scenario, "seed": seed, "duration_s": repr(duration),
+        args = "".join(f", {k}={v!r}" for k, v in overrides.items())
+        cs.add(name, f"{desc}: host_tools.simulation.sim.simulate({scenario!r}, seed={seed}, duration_s={duration:g}"
+               f"{args}), fitted, quantized; log-driven", table, w, t_words=other)
+        config[name] = {"scenario": scenario, "seed": seed, "duration_s": repr(duration), **overrides,
                         "model": {"config": model.config.to_dict(), "terms": list(model.terms),
                                   "coef": list(model.coef),
                                   **({"coef_mode2": list(model.coef_mode2)} if model.coef_mode2 is not None

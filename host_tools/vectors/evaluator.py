@@ -43,17 +43,21 @@ def reference_rows(table, u, v, z, bank=None) -> dict:
 # -- tables -----------------------------------------------------------------------------------------
 
 def qtable(est="diff", combiner="pair", n=5, shift=2, settle_s=2.0, max_stale_s=25.0, coef=None, kind=None,
-            order="combine_first", coef2=None, **timing) -> Table:
+            order="combine_first", coef2=None, ref=None, span=None, rate_span=None, **timing) -> Table:
     """A quantized table of host_tools.vectors.builders.make_model (as tests/test_c_twin.py's table_of);
-    ``order`` "regress_first": two banks (``coef2``: make_model's default)."""
+    ``order`` "regress_first": two banks (``coef2``: make_model's default).  ``ref``, ``span``,
+    ``rate_span``: the proxy centre and span and the rate span (default: a 6227-Hz drive or 20 degC)."""
     from host_tools.vectors.builders import make_model
     from host_tools.fixed.quantize import quantize
 
     if coef is None:
         coef = [3e3, -2e3, 1e3, -5e2, 7e2, -3e2, 1e2, 5e2, -4e2, 3e2, -2e2, 1e2, -9e1, 8e1, -7e1, 6e1, -5e1]
     temp = (kind or ("temp" if est == "lsq" else "freq")) == "temp"
-    model = make_model("temp" if temp else "freq", ref=20.0 if temp else 6227.0, span=30.0 if temp else 3.0,
-                       estimator=est, n=n, shift=shift, rate_span=0.5 if temp else 0.003, combiner=combiner,
+    ref = (20.0 if temp else 6227.0) if ref is None else ref
+    span = (30.0 if temp else 3.0) if span is None else span
+    rate_span = (0.5 if temp else 0.003) if rate_span is None else rate_span
+    model = make_model("temp" if temp else "freq", ref=ref, span=span,
+                       estimator=est, n=n, shift=shift, rate_span=rate_span, combiner=combiner,
                        settle_s=settle_s, max_stale_s=max_stale_s, coef=coef, order=order, coef2=coef2)
     return quantize(model, n_random=10, **timing).table
 

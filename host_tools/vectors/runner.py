@@ -59,6 +59,9 @@ def requests(vs: VectorSet, fields) -> list:
 MAX_TIMEOUT_S = 86400.0           # one day: a longer --timeout is a typo
 DEFAULT_TIMEOUT_S = 60.0          # per set; the C twin answers every set in well under a second
 STDERR_KEEP = 64 << 10            # bytes of the child's stderr kept (its end) for the report
+POLL_S = 0.1                      # s between checks that the program is still running
+EXIT_GRACE_S = 1.0                # s of reading after the program exited (a process it forked may keep
+#                                   stdout open: EOF would come only when that one ends)
 
 
 def exit_text(returncode: int) -> str:
@@ -85,7 +88,9 @@ def output_cap(reqs) -> int:
 def run_bounded(argv, data: bytes, timeout_s: float, max_bytes: int) -> tuple:
     """Run ``argv`` (in its own process group) with ``data`` on stdin; ``(stdout, stderr_tail,
     returncode, problem)``.  It is killed (its whole group, SIGKILL) when ``timeout_s`` seconds pass
-    or its stdout exceeds ``max_bytes``; ``problem`` then says which (else None).  stdout holds at
+    or its stdout exceeds ``max_bytes``; ``problem`` then says which (else None).  Once the program
+    has exited, stdout is read for at most EXIT_GRACE_S more seconds, then its group is killed (a
+    process it forked that keeps stdout open does not hold the run until the timeout).  stdout holds at
     most ``max_bytes``, stderr its last STDERR_KEEP bytes: memory stays bounded whatever it writes."""
     proc = subprocess.Popen(argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             start_new_session=True)
@@ -115,14 +120,22 @@ def run_bounded(argv, data: bytes, timeout_s: float, max_bytes: int) -> tuple:
     out = bytearray()
     problem = None
     deadline = time.monotonic() + timeout_s
+    exited_at = None          # when the program itself exited (a child of it may still hold stdout)
     fd = proc.stdout.fileno()
     try:
         while True:
-            left = deadline - time.monotonic()
+            now = time.monotonic()
+            left = deadline - now
             if left <= 0:
                 problem = f"did not finish within {timeout_s:g} s"
                 break
-            ready, _, _ = select.select([fd], [], [], min(left, 1.0))
+            if exited_at is None and proc.poll() is not None:
+                exited_at = now
+            if exited_at is not None:
+                left = min(left, exited_at + EXIT_GRACE_S - now)
+                if left <= 0:         # what it wrote before exiting is read; stop waiting for EOF
+                    break
+            ready, _, _ = select.select([fd], [], [], min(left, POLL_S))
             if not ready:
                 continue
             chunk = os.read(fd, 65536)
@@ -168,7 +181,10 @@ def check_impl(cmd, directory=DEFAULT_DIR, names=None, fields=None, timeout: flo
     ``{"sets": {name: {"requests", "rows", "mismatches", "first"}}, "mismatches": total,
     "first": text of the first mismatch or None}``."""
     directory = Path(directory)
-    argv = shlex.split(cmd) if isinstance(cmd, str) else list(cmd)
+    try:
+        argv = shlex.split(cmd) if isinstance(cmd, str) else list(cmd)
+    except ValueError as exc:       # an unbalanced quote or a trailing backslash
+        raise VectorsError(f"--cmd {cmd!r}: cannot be split like a shell command line ({exc})") from None
     if not argv:
         raise ValueError("--cmd is empty")
     if not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and 0 < timeout <= MAX_TIMEOUT_S):
@@ -176,6 +192,9 @@ def check_impl(cmd, directory=DEFAULT_DIR, names=None, fields=None, timeout: flo
     if max_output is not None and not (isinstance(max_output, int) and max_output > 0):
         raise ValueError(f"max_output {max_output!r}: must be a positive number of bytes")
     if fields is not None:
+        if not list(fields):
+            raise VectorsError(f"--fields is empty: name at least one of {', '.join(O_NAMES)} (or leave it out "
+                               f"to compare all)")
         bad = [f for f in fields if f not in O_NAMES]
         if bad:
             raise ValueError(f"--fields: unknown field(s) {', '.join(bad)}; fields: {', '.join(O_NAMES)}")

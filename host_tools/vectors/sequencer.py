@@ -33,6 +33,14 @@ def _extreme_stream(t) -> dict:
     return {"p": np.full(len(modes), t.p_ref, np.int64), "r": np.array(r), "mode": np.array(modes)}
 
 
+# (drive frequency [Hz], rate estimator, combiner) of the drive-frequency cases
+DRIVE_FREQ_CASES = ((3.0e3, "diff", "pair"), (24.0e3, "diffn", "trend"), (36.0e3, "iir", "pair"),
+                    (65.0e3, "diff", None))
+# (name, proxy centre [Hz], span [Hz]): the proxy range touching each end of the F word
+WORD_END_CASES = (("word_low_end_log", 8.0, 4.0),
+                  ("word_high_end_log", F.FREQ_RANGE_HZ - 12.0, 8.0))
+
+
 def sequencer_set(rng) -> VectorSet:
     from host_tools.vectors.builders import corner_stream, random_model, random_stream
     from host_tools.fixed.quantize import quantize
@@ -155,6 +163,19 @@ def sequencer_set(rng) -> VectorSet:
     s["restart"][[0, 2000]] = 1
     cs.add("iir_gear_log", "log-driven, iir shift 10: the start-up gear 0..10 (k = 1, 2, 4, .., 1024), k saturating "
            "at 2^10, a restart at 2000 and a second 1200-sample segment", t, s)
+    # drive frequencies across the F word (uint32, LSB 2^-FREQ_FRAC Hz): the proxy centre at a
+    # 3, 24, 36 and 65 kHz gyroscope (span and rate span of -20..20 degC and 4 degC/min at
+    # -20.9 ppm/degC), and tables whose range touches each end of the word
+    for f0, est, comb in DRIVE_FREQ_CASES:
+        t = qtable(est, comb, ref=f0, span=f0 * 20.9e-6 * 20.0, rate_span=f0 * 20.9e-6 * 4.0 / 60.0)
+        cs.add(f"drive_{f0 / 1e3:g}khz_log", f"log-driven, frequency proxy centred at {f0:g} Hz ({est}, "
+               f"{comb or 'ftr'}): ramp through the range", t, _ramp(t, 300, rng))
+        cs.add(f"drive_{f0 / 1e3:g}khz_random", f"frequency proxy centred at {f0:g} Hz ({est}, {comb or 'ftr'}): "
+               "random_stream (word rails included)", t, random_stream(rng, t, 300, reversal=comb is not None))
+    for name, ref, span in WORD_END_CASES:
+        t = qtable("diff", "pair", ref=ref, span=span, rate_span=span * 1e-3)
+        cs.add(name, f"frequency proxy centred at {ref:g} Hz, span {span:g} Hz: the range reaches the F word's "
+               "end; corner_stream (log-driven)", t, corner_stream(t))
     vs = VectorSet("sequencer", "the whole pipeline (sequencer, combiner, proxy, rate, evaluator, outputs): inputs "
                    "F T R MODE RESTART Z (MODE -1: self-timed), outputs the 16 fields of the protocol's O line",
                    cs.columns(), SEQ_INPUTS, SEQ_FIELDS, cs.cases, cs.tables)
