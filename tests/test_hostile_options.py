@@ -285,3 +285,12 @@ def test_fit_settle_must_be_finite_seconds(tmp_path, capsys, value):
     assert hdrg("fit", tmp_path / "run.csv", "-o", tmp_path / "m.json", "--settle", value) == 2
     one_line_error(capsys.readouterr().err, f"--settle {value}")
     assert not (tmp_path / "m.json").exists()
+
+
+@pytest.mark.parametrize("value", ["100", "nan", "inf"])
+def test_demo_refuses_a_run_too_short_to_fit(tmp_path, capsys, value):
+    """`hdrg demo --duration 100` names the real cause (the runs are shorter than two mode-reversal
+    periods), not a missing mode-2 bank; NaN and inf are refused the same way."""
+    assert hdrg("demo", "-o", tmp_path / "d", "--duration", value) == 2
+    one_line_error(capsys.readouterr().err, f"--duration {value}", "at least 600 s")
+    assert not (tmp_path / "d").exists()
