@@ -158,3 +158,18 @@ def test_a_model_worse_than_no_compensation_held_out_is_never_shipped_silently(t
     for key in ("cv_rms", "cv_std"):
         assert f"{f[key]['model']:.4g} > {f[key]['no compensation']:.4g} deg/h" in line[0]
     assert "4 terms ['k0', 'k1', 'k2', 'k3']" in out
+
+
+def test_measured_bench_names_legs_by_the_temperature_change():
+    """hdrg bench measured's pieces: a chamber run that first cools is 'cool...' first whether its
+    proxy is the drive frequency (which rises) or the temperature (which falls)."""
+    from host_tools.bench.measured import pieces
+    from host_tools.golden.runlog import RunLog
+    from host_tools.simulation.sim import simulate
+    log = simulate("mr-one-cycle-4dpm", seed=2)                     # cools, then heats
+    f = np.asarray(log["freq_hz"])
+    assert f.max() - f[0] > f[-1] - f.min()                          # the frequency first rises
+    assert [n for n, _ in pieces(log)] == ["cool", "heat"]
+    temp_only = RunLog.from_arrays(metadata=dict(log.metadata), t_s=log.t_s, rate_dph=log.rate_dph, mode=log.mode,
+                                   temp_c=log["temp_c"])
+    assert [n for n, _ in pieces(temp_only)] == ["cool", "heat"]

@@ -42,14 +42,17 @@ def stats_100s(out_dph, t_s, valid) -> dict:
 
 def pieces(log) -> list:
     """[(name, RunLog)]: the chamber legs of ``log`` ('cool1', 'heat', 'cool2', ... in time
-    order, numbered per kind), or its two halves ('half1', 'half2') when it has one leg."""
-    from host_tools.fitting.legs import find_legs
-    _, p = log.proxy()
+    order, numbered per kind; named by the temperature change, which a drive-frequency proxy
+    shows with the opposite sign), or its two halves ('half1', 'half2') when it has one leg."""
+    from host_tools.fitting.legs import find_legs, temperature_change
+    column, p = log.proxy()
     legs = find_legs(log.t_s, p)
     if len(legs) < 2:
         h = len(log) // 2
         return [("half1", log.select(np.arange(h))), ("half2", log.select(np.arange(h, len(log))))]
-    kinds = [{1: "heat", -1: "cool", 0: "hold"}[s] for _, _, s in legs]
+    kind_of = "freq" if column == "freq_hz" else "temp"
+    kinds = [{"heating": "heat", "cooling": "cool", "hold": "hold"}[temperature_change(s, kind_of)]
+             for _, _, s in legs]
     total, seen, out = Counter(kinds), Counter(), []
     for kind, (a, b, _) in zip(kinds, legs):
         seen[kind] += 1
