@@ -138,8 +138,7 @@ def fit_with_result(runs, output=None, *, terms=None, proxy=None, rate_estimator
     from host_tools.fitting.fit import fit_logs
     from host_tools.fitting.fit_pipeline import fit_default, fit_without_run_offsets
     from host_tools.fitting.fit_rate import fit_auto_rate
-    from host_tools.fitting.fit_pipeline import coverage_advice
-    from host_tools.golden.checks import check_fit_inputs
+    from host_tools.golden.checks import check_fit_inputs, coverage_advice
     from host_tools.golden.compensate import checked as _checked
     from host_tools.golden.compensate import fit_config_from_logs
     from host_tools.golden.flags import problems

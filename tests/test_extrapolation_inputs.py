@@ -16,7 +16,7 @@ from host_tools.fitting.diagnose_confirm import error_stats
 from host_tools.fitting.diagnose_report import extrapolation
 from host_tools.fitting.fit import fit_logs
 from host_tools.golden import flags as hflags, runlog
-from host_tools.golden.checks import coverage_warnings
+from host_tools.golden.checks import coverage_advice
 from host_tools.golden.compensate import compensate, fit_config_from_logs
 from host_tools.golden.regressors import AuxConfig, aux_inputs_clamped
 from host_tools.simulation import sim
@@ -93,9 +93,9 @@ def test_diagnose_reports_a_held_out_run_outside_the_models_range(vdd):
 def test_fit_names_a_training_run_that_covers_a_sliver_of_the_range(tmp_path, capsys):
     wide = sim.simulate("paper-mr-cycle-4dpm", seed=1, duration_s=6000)
     hold = sim.simulate("paper-mr-cycle-4dpm", seed=2, duration_s=6000).select(slice(0, 900))  # the 20 degC hold
-    msgs = coverage_warnings([wide, hold])
-    assert len(msgs) == 1 and msgs[0].startswith(hold.source) and "joint proxy range" in msgs[0]
-    assert coverage_warnings([wide]) == [] and coverage_warnings([wide, wide]) == []
+    msgs = coverage_advice([wide, hold])
+    assert len(msgs) == 1 and msgs[0].startswith(f"without {wide.source}") and "joint proxy range" in msgs[0]
+    assert coverage_advice([wide]) == [] and coverage_advice([wide, wide]) == []
     runlog.write(wide, tmp_path / "wide.csv")
     runlog.write(hold, tmp_path / "hold.csv")
     assert cli.main(["fit", str(tmp_path / "wide.csv"), str(tmp_path / "hold.csv"), "-o", str(tmp_path / "m.json"),

@@ -105,37 +105,6 @@ SEVERAL_RUNS_NOTE = (
     "of the damping scale is not modelled (docs/ACCURACY.md)")
 
 
-def coverage_advice(logs, proxy: str | None = None) -> list:
-    """One sentence per training run without which the other runs together cover less than
-    host_tools.golden.checks.COVERAGE_MIN of the joint proxy range (0.5 .. 99.5 percentiles):
-    the cross-validation that leaves that run out must predict it from a sliver, and term
-    selection can keep only the offset.  The union of the others counts, so short power-ons at
-    room temperature beside chamber runs that cover the range (the power-on term's runs) draw
-    nothing."""
-    from host_tools.golden.checks import COVERAGE_MIN
-    if len(logs) < 2:
-        return []
-    rng = []
-    for log in logs:
-        p = np.asarray(log.proxy(proxy)[1], np.float64)
-        p = p[np.isfinite(p)]
-        rng.append((float(np.percentile(p, 0.5)), float(np.percentile(p, 99.5))) if len(p) else None)
-    if any(r is None for r in rng):
-        return []
-    joint = max(h for _, h in rng) - min(lo for lo, _ in rng)
-    if not joint > 0:
-        return []
-    out = []
-    for i, log in enumerate(logs):
-        others = [r for j, r in enumerate(rng) if j != i]
-        share = (max(h for _, h in others) - min(lo for lo, _ in others)) / joint
-        if share < COVERAGE_MIN:
-            out.append(f"without {log.source} the other training runs cover {100 * share:.0f} % of the joint proxy "
-                       f"range: the cross-validation that leaves it out extrapolates and term selection can keep "
-                       f"only the offset; record a second run over the whole range")
-    return out
-
-
 class FitRefused(UserError):
     """A fit whose coefficients the data cannot support (the message says why and what to do)."""
 

@@ -6,8 +6,8 @@
   (never a silent switch from the drive frequency to a temperature sensor); a run given twice (the
   same data under one or two names; `hdrg diagnose`: also a held-out run that is a training run) is
   refused.
-* :func:`coverage_warnings`: a training run (of several) that covers a sliver of the joint proxy
-  range is named (leave-one-run-out term selection can keep only the offset).
+* :func:`coverage_advice`: a training run (of several) without which the others cover a sliver of
+  the joint proxy range is named (leave-one-run-out term selection can keep only the offset).
 * :func:`check_sample_rate`: a log to compensate (float golden or fixed point) whose sample rate is
   not the model's nominal fs (within ``FS_TOLERANCE``) is refused.
 * :func:`check_raw_logs`: a compensated log given where raw run logs are needed is refused.
@@ -75,10 +75,7 @@ def check_fit_inputs(logs, proxy: str | None) -> None:
     or a mix of logs with and without ``freq_hz`` when ``proxy`` is None; ProxyWarning when no log
     has ``freq_hz`` (temp_c is used); ModeSwapWarning for a mode-reversal run whose modes 1 and 2
     look swapped against the other runs (:func:`mode_swap_warnings`)."""
-    for log in logs:
-        if is_compensated(log):
-            raise ValueError(f"{log.source}: this is a compensated log (output of hdrg compensate: metadata "
-                             f"'compensated: yes' or a bias_dph/flags column); fit needs raw run logs")
+    check_raw_logs(logs, "the fit")
     lacking = [log.source for log in logs if "freq_hz" not in log] if proxy is None else []
     if lacking and len(lacking) < len(logs):
         raise ValueError(f"no 'freq_hz' column in {', '.join(lacking)} while the other logs have one: the proxy "
@@ -91,29 +88,37 @@ def check_fit_inputs(logs, proxy: str | None) -> None:
                       f"(pass --proxy temp to choose it explicitly)", ProxyWarning, stacklevel=2)
 
 
-COVERAGE_MIN = 0.25   # a training run covering less than this share of the runs' joint proxy range is named
+COVERAGE_MIN = 0.25   # the other training runs covering less than this share of the joint proxy range: named
 
 
-def coverage_warnings(logs, proxy: str | None = None) -> list:
-    """Sentences for the training runs (several) each of which covers less than COVERAGE_MIN of the
-    proxy range of all of them together (0.5 .. 99.5 percentiles): leave-one-run-out
-    cross-validation must then predict the wide runs from the narrow one, and term selection
-    ('auto') can keep nothing but the offset."""
+def coverage_advice(logs, proxy: str | None = None) -> list:
+    """One sentence per training run without which the other runs together cover less than
+    COVERAGE_MIN of the joint proxy range (0.5 .. 99.5 percentiles):
+    the cross-validation that leaves that run out must predict it from a sliver, and term
+    selection can keep only the offset.  The union of the others counts, so short power-ons at
+    room temperature beside chamber runs that cover the range (the power-on term's runs) draw
+    nothing."""
     if len(logs) < 2:
         return []
-    lo_hi = []
+    rng = []
     for log in logs:
-        _, p = log.proxy(proxy)
-        p = np.asarray(p, np.float64)
+        p = np.asarray(log.proxy(proxy)[1], np.float64)
         p = p[np.isfinite(p)]
-        lo_hi.append((np.percentile(p, 0.5), np.percentile(p, 99.5)) if len(p) else (np.nan, np.nan))
-    joint = max(h for _, h in lo_hi) - min(lo for lo, _ in lo_hi)
-    if not np.isfinite(joint) or joint <= 0:
+        rng.append((float(np.percentile(p, 0.5)), float(np.percentile(p, 99.5))) if len(p) else None)
+    if any(r is None for r in rng):
         return []
-    return [f"{log.source} covers {100.0 * (h - lo) / joint:.0f} % of the training runs' joint proxy range: the "
-            f"cross-validation that leaves it out must predict the other runs from it, and term selection can "
-            f"keep only the offset; train on runs that each cover the temperature range, or fix the terms (--terms)"
-            for log, (lo, h) in zip(logs, lo_hi) if (h - lo) < COVERAGE_MIN * joint]
+    joint = max(h for _, h in rng) - min(lo for lo, _ in rng)
+    if not joint > 0:
+        return []
+    out = []
+    for i, log in enumerate(logs):
+        others = [r for j, r in enumerate(rng) if j != i]
+        share = (max(h for _, h in others) - min(lo for lo, _ in others)) / joint
+        if share < COVERAGE_MIN:
+            out.append(f"without {log.source} the other training runs cover {100 * share:.0f} % of the joint proxy "
+                       f"range: the cross-validation that leaves it out extrapolates and term selection can keep "
+                       f"only the offset; record a second run over the whole range")
+    return out
 
 
 def check_sample_rate(log, fs: float) -> None:

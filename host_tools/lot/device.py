@@ -239,11 +239,6 @@ def spec_violations(r: dict, spec: dict) -> list:
     return why
 
 
-def spec_reasons(r: dict, spec: dict) -> list:
-    """The texts of :func:`spec_violations` (empty: the figures meet the spec)."""
-    return [text for _, text in spec_violations(r, spec)]
-
-
 def _stage_rank(stage: str) -> int:
     """Order of the stages in a device's reasons: a broken pipeline (``memory``, ``internal``,
     ``worker``: not a stage of STAGES) first, then STAGES in order."""

@@ -29,7 +29,7 @@ import sys
 import time
 
 from host_tools.atomic import atomic_open
-from host_tools.lot.device import OUTPUTS, calibrate
+from host_tools.lot.device import OUTPUTS, calibrate, judge
 from host_tools.lot.inputs import (LOT_FORMAT, LOT_VERSION, input_hash, judged_spec, load_spec, manifest_conflicts,
                                    read_manifest, run_digests)
 from host_tools.lot.parallel import check_scheduler, check_workers, run_jobs
@@ -121,20 +121,6 @@ def write_device(folder: str, payload: dict, judged: dict | None = None) -> None
         fh.write("\n")
 
 
-def _judge(result: dict, spec: dict) -> tuple:
-    """(status, stage, reasons) of a finished device's result under ``spec`` (device.judge; where
-    it does not exist, the spec's reasons for a device that reached the spec stage)."""
-    from host_tools.lot import device
-
-    judge = getattr(device, "judge", None)
-    if judge is not None:
-        return tuple(judge(result, spec))
-    if result.get("stage") not in ("spec", "done"):
-        return result["status"], result["stage"], list(result["reasons"])
-    why = device.spec_reasons(result, spec)
-    return ("fail", "spec", why) if why else ("pass", "done", [])
-
-
 def rejudge(folder: str, marker: dict, spec: dict) -> bool:
     """Judge the finished device in ``folder`` (its ``marker``) against ``spec`` again, without a
     refit: rewrite result.json with the new status, stage and reasons, and move its tables into
@@ -146,7 +132,7 @@ def rejudge(folder: str, marker: dict, spec: dict) -> bool:
         with open(os.path.join(folder, name), "rb") as fh:
             files[os.path.basename(name)] = fh.read()
     result = json.loads(files["result.json"])
-    status, stage, reasons = _judge(result, spec)
+    status, stage, reasons = judge(result, spec)
     if status == "pass" and not all(n in files for n in TABLE_FILES):
         return False
     result.update(status=status, stage=stage, reasons=list(reasons))

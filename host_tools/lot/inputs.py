@@ -82,10 +82,6 @@ _POSITIVE = ("stability_tau_s", "dwell_s")
 _SHARES = ("coverage_min", "valid_share_min")
 _NULLABLE = ("heldout_stability_max_dph", "residual_rms_max_dph", "coverage_min", "valid_share_min",
              "fixed_error_max_dph", "min_train_s")
-# the spec keys a finished device is judged against again without a refit when only they change
-# (host_tools.lot.device.JUDGED_KEYS where it exists; these otherwise)
-_JUDGED_FALLBACK = ("heldout_stability_max_dph", "residual_rms_max_dph", "coverage_min", "valid_share_min",
-                    "fixed_error_max_dph", "require_heldout", "allow_repaired_logs")
 MAX_SPEC_BYTES = 1 << 20       # a spec is a few hundred bytes
 
 
@@ -374,10 +370,7 @@ def _short(val) -> str:
 
 def judged_keys(spec: dict) -> tuple:
     """The keys of ``spec`` that only judge a finished device's figures (module doc)."""
-    try:
-        from host_tools.lot.device import JUDGED_KEYS
-    except ImportError:
-        JUDGED_KEYS = _JUDGED_FALLBACK
+    from host_tools.lot.device import JUDGED_KEYS
     return tuple(k for k in spec if k in JUDGED_KEYS)
 
 

@@ -45,10 +45,6 @@ COLUMNS = ("device", "status", "stage", "reason", "train_s", "drive_freq_hz", "p
     f[0] for f in FIGURES) + ("cv_rms_dph", "crc32", "repaired_logs", "warnings")
 FILES = ("lot.csv", "lot.md", "lot.json", "lot_histograms.png")
 PASS_COLOR, FAIL_COLOR, LIMIT_COLOR = "tab:green", "tab:red", "black"
-# unit of each spec key in lot.md's spec table (host_tools.lot.inputs.SPEC_DOC's where it gives one)
-SPEC_UNITS = {"heldout_stability_max_dph": "deg/h", "stability_tau_s": "s", "residual_rms_max_dph": "deg/h",
-              "coverage_min": "share (0..1)", "valid_share_min": "share (0..1)", "fixed_error_max_dph": "deg/h",
-              "min_train_s": "s", "exchange_s": "s", "dwell_s": "s", "power_on_s": "s"}
 
 
 def natural_key(device_id: str) -> tuple:
@@ -261,9 +257,8 @@ def markdown_text(results, spec: dict, worst: list) -> str:
     if every and every != by:
         lines += ["", f"Failing devices with a reason at each stage: {every}."]
     lines += ["", "Spec (null: not checked):", "", "| key | value | unit |", "|---|---|---|"]
-    from host_tools.lot import inputs
-    units = {**SPEC_UNITS, **{k: doc[0] for k, doc in getattr(inputs, "SPEC_DOC", {}).items()}}
-    lines += [f"| {k} | {_spec_value(k, v)} | {units.get(k, '')} |" for k, v in spec.items()]
+    from host_tools.lot.inputs import SPEC_DOC
+    lines += [f"| {k} | {_spec_value(k, v)} | {SPEC_DOC[k][0] if k in SPEC_DOC else ''} |" for k, v in spec.items()]
     shown = ("device", "status", "reason", "train_s", "drive_freq_hz", "terms") + tuple(f[0] for f in FIGURES) + (
         "crc32", "warnings")
     lines += ["", "## Devices", "",
