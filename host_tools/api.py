@@ -272,6 +272,16 @@ class CompensatedRun(_RunLog):
                 "flags": self.flags}
 
 
+def _start_up_note(model, t_s) -> str | None:
+    """The warning for a log that starts at power-on (first ``t_s`` 0) compensated by a model whose
+    fit did not calibrate the start-up (model.json fit.start_up, hdrg fit), else None."""
+    start = model.fit.get("start_up") or {}
+    if start.get("calibrated") is not False or len(t_s) == 0 or float(t_s[0]) != 0.0:
+        return None
+    return (f"this log starts at power-on and the model's start-up is not calibrated: {start.get('why', '')} "
+            f"(model.json fit.start_up)")
+
+
 def compensate(run, model, *, impl: str = "float", table=None, output=None, strict: bool = False) -> CompensatedRun:
     """Apply ``model`` (path or BiasModel) to ``run`` (a path, a RunLog, a mapping of column name ->
     array or a pandas DataFrame: ``t_s`` [s], ``rate_dph`` [deg/h], ``freq_hz`` [Hz] and/or
@@ -284,7 +294,7 @@ def compensate(run, model, *, impl: str = "float", table=None, output=None, stri
     ``out.term_labels``; the same as columns ``rate_dph``, ``bias_dph``, ``valid`` (1/0), ``flags``
     of the compensated log (docs/RUN_LOG.md, "Compensated run logs").  ``output``: also write it
     (CSV or ``.npz``).  Extrapolation and saturation warn (CompensationWarning), or raise with
-    ``strict``."""
+    ``strict``; a log from power-on under a model whose start-up is not calibrated warns too."""
     from host_tools.atomic import refuse_overwrite
     from host_tools.golden import flags
     from host_tools.golden import runlog
@@ -318,6 +328,9 @@ def compensate(run, model, *, impl: str = "float", table=None, output=None, stri
             # a metadata value with a newline (an NPZ's, a file name's) must not end its '# key: value' line
             out.metadata = {meta_text(k, key=True): meta_text(v) for k, v in out.metadata.items()}
         runlog.write(out, output)
+    note = _start_up_note(model, out.t_s)      # after the output: a failed write is the one message
+    if note:
+        _warnings.warn(note, flags.CompensationWarning, stacklevel=2)
     return out
 
 

@@ -291,3 +291,19 @@ def test_api_fit_says_what_hdrg_fit_says(tmp_path):
     said = [str(w.message) for w in caught if issubclass(w.category, api.FitWarning)]
     assert not any("training runs:" in s or "cover" in s for s in said), said
     assert all("\n" not in s for s in said)
+
+
+def test_api_compensate_repeats_an_uncalibrated_start_up(tmp_path):
+    """api.compensate, like `hdrg compensate`, warns once when a log from power-on meets a model
+    whose start-up is not calibrated (one training run), and not on a log that starts later."""
+    from host_tools import api
+    from host_tools.golden.flags import CompensationWarning
+    model = api.fit(api.simulate("paper-mr-cycle-4dpm", seed=1, duration_s=3600))
+    assert model.fit["start_up"]["calibrated"] is False
+    run = api.simulate("paper-mr-cycle-4dpm", seed=2, duration_s=1800)
+    for log, want in ((run, 1), (run.select(slice(400, None)), 0)):
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            api.compensate(log, model)
+        said = [w for w in seen if issubclass(w.category, CompensationWarning) and "start-up" in str(w.message)]
+        assert len(said) == want, [str(w.message) for w in seen]

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 
 from host_tools.cli.options import example, out_option, writable_output
 from host_tools.golden.compensate import IMPLS, check_impl
@@ -38,19 +37,4 @@ def run(args) -> int:
     out = api.compensate(args.run, args.model, impl=args.impl, table=args.table, output=args.output,
                          strict=args.strict)
     print(f"{args.output}: {flags.summary(out)}")
-    note = start_up_note(args.model, out.t_s)
-    if note:
-        print(f"hdrg compensate: warning: {note}", file=sys.stderr)
     return 0
-
-
-def start_up_note(model_path, t_s) -> str | None:
-    """The one-line warning for a log that starts at power-on (first t_s 0) compensated by a model
-    whose fit did not calibrate the start-up (model.json fit.start_up, hdrg fit), else None."""
-    from host_tools.golden.model import BiasModel
-
-    start = BiasModel.from_json(model_path).fit.get("start_up") or {}
-    if start.get("calibrated") is not False or len(t_s) == 0 or float(t_s[0]) != 0.0:
-        return None
-    return (f"this log starts at power-on and the model's start-up is not calibrated: {start.get('why', '')} "
-            f"(model.json fit.start_up)")
