@@ -8,7 +8,8 @@ warm-up flag (the rate stage restarts at an invalid sample and the one after it,
 re-warms with it).  With ``s_m`` = +1 (m = 0, 1), -1 (m = 2),
 0 (m = 3) and ``kk = max(K, 0)``, every term j gives g_j (Q1.30), then::
 
-    acc = sum_j w_j (s_m g_j if sign_j else g_j)         (exact int64: |.| <= 6 2^60)
+    acc = sum_j w_j (s_m g_j if sign_j else g_j)         (exact int64: |.| <= (2^30 + n_terms) 2^30 < 2^61,
+                                                          sum |w_j| <= 2^30 + n_terms checked by the table)
     z   = clamp(RHU(acc, 30), -2^30, 2^30)               (flag 32 when clamped)
 
 Terms (table.AUX_COEF names the coefficients; RHUW = arith.mul_rshift_round_wide; Y_j, ex_j the

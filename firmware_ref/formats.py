@@ -93,7 +93,8 @@ MODE_SIGN = (1, 1, -1, 0)           # rate sign per run-log mode 0..3
 
 # -- the aux regressor z: generators of aux_gen 1 'sum' (host_tools.golden.regressors module doc) -------------
 # AUX_KINDS (term kind 0..6): firmware_ref.vocabulary
-AUX_MAX_TERMS = 6         # terms of the sum (hdrg diagnose: 3 iterations x at most 2 terms)
+AUX_MAX_TERMS = 16        # terms of the sum: the fitter's lag-state block (6) and the closed loop's own
+                          # effects beside it; a table has at most 72 + 2 + 4 + 16 x 11 + 1 = 255 words
 AUX_MAX_CHANNELS = 4      # aux input words A0..A3 (run-log aux_* columns)
 AUX_TERM_WORDS = 11       # table words per term
 AUX_FRAC_MAX = 48         # aux word A_c: int32, LSB 2^-AF_c of its column's unit, AF_c in 0..48 (table)
@@ -182,7 +183,8 @@ SIGNALS = (
         "aux"),
     Fmt("w_j (term weights)", "int32", str(Q), "2^-30", "sum |w_j| <= 2^30 + n_terms", "RHU from float",
         "quantizer refuses |w| > 1", "table"),
-    Fmt("acc_z = sum w_j g_j", "int64", str(2 * Q), "2^-60", "|.| <= 6 2^60", "exact", "cannot overflow", "aux"),
+    Fmt("acc_z = sum w_j g_j", "int64", str(2 * Q), "2^-60", "|.| <= (2^30 + n_terms) 2^30 < 2^61", "exact",
+        "cannot overflow (the weight-sum check)", "aux"),
     Fmt("z (generated)", "int32", str(Q), "2^-30", "[-2^30, 2^30]", "RHU(acc_z, 30)", "clamp, FLAG_AUX_CLAMPED",
         "aux"),
     # sequencer

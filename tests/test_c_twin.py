@@ -24,7 +24,7 @@ from firmware_ref.compensate import run_reference
 from host_tools.fixed.fixed_point import log_words
 from firmware_ref.evaluator import evaluate
 from firmware_ref.kernel import evaluate_words, run_words
-from firmware_ref.table import FIELD_INDEX, Table, TableError, crc32_words
+from firmware_ref.table import FIELD_INDEX, LAYOUT, Table, TableError, crc32_words
 from firmware_ref.terms import K_AUX
 from host_tools.vectors.builders import (aux_stream, corner_stream, make_model, random_aux_model, random_model,
                                   random_stream, with_aux)
@@ -710,12 +710,16 @@ def test_broken_rounding_build_is_caught(tmp_path):
 
 # -- aux generators (aux_gen 1) -------------------------------------------------------------------------
 
+AUX_CASE_TERMS = (3, 4, 5, 6, 9, 12, 16, 16)     # terms of aux_case(seed) by seed % 8 (AUX_MAX_TERMS 16)
+
+
 def aux_case(seed, n, reversal=None):
-    """A random aux model (3..6 terms of random kinds) quantized, and an aux stream for it."""
+    """A random aux model (3..16 terms: AUX_CASE_TERMS; from 7 terms on every kind) quantized, and an
+    aux stream for it."""
     rng = np.random.default_rng(3000 + seed)
     reversal = seed % 3 != 2 if reversal is None else reversal
     est = ("diff", "diffn", "lsq", "iir")[seed % 4]
-    model = random_aux_model(rng, reversal=reversal, estimator=est, n_terms=3 + seed % 4)
+    model = random_aux_model(rng, reversal=reversal, estimator=est, n_terms=AUX_CASE_TERMS[seed % 8])
     table = quantize(model, exchange_s=3.0, dwell_s=7.0, power_on_s=2.0, n_random=10).table
     return table, aux_stream(rng, table, n, reversal=reversal)
 
@@ -811,7 +815,7 @@ def test_aux_table_checks(c_exe):
 
     cases = [
         ("n_terms_0", put({N_FIXED: 0}), N_FIXED),
-        ("n_terms_7", put({N_FIXED: 7}), N_FIXED),
+        ("n_terms_17", put({N_FIXED: F.AUX_MAX_TERMS + 1}), N_FIXED),
         ("n_chan_5", put({N_FIXED + 1: 5}), N_FIXED + 1),
         ("count_mismatch", put({N_FIXED: 5}), FIELD_INDEX["aux_nparams"]),
         ("af_49", put({N_FIXED + 3: 49}), N_FIXED + 3),
@@ -857,8 +861,39 @@ def test_aux_table_checks(c_exe):
         lines.append("TABLE " + " ".join(f"{x:08x}" for x in words))
     out = run_text(c_exe, lines, expect_rc=1)
     assert out[0] == f"T {len(w)} {table.crc:08x}"
+    names = [x[0] for x in LAYOUT] + table.param_names()       # the driver names the aux words as Python does
     for (name, _, word), got in zip(cases, out[1:]):
-        assert got.startswith(f"ERR FIELD word {word} "), (name, got)
+        assert got == f"ERR FIELD word {word} {names[word]}", (name, got)
+
+
+def test_aux_max_terms_table_runs_and_one_more_is_refused(c_exe):
+    """The longest table (AUX_MAX_TERMS = 16 terms of every kind on all four aux words: 255 words)
+    loads (T 255), runs bit for bit as the kernel and the Python reference, and resets its sixteen
+    states at RESET; a 17-term table with consistent words (266) is refused as FIELD at word 72,
+    named aux_n_terms (HDRG_AUX_MAX_TERMS), as Python's Table refuses it naming n_terms."""
+    from firmware_ref.table import N_FIXED, encode_aux
+    from host_tools.vectors.aux import MAX_TERMS_EVERY_KIND, quantize_aux
+    table = quantize_aux(with_aux(make_model(settle_s=2.0, max_stale_s=25.0), list(MAX_TERMS_EVERY_KIND)))
+    aux = table.aux()
+    assert len(aux.terms) == F.AUX_MAX_TERMS and aux.n_chan == F.AUX_MAX_CHANNELS and len(table.to_words()) == 255
+    rng = np.random.default_rng(17)
+    for s in (aux_stream(rng, table, 20_000), aux_stream(rng, table, 3000, extreme=0.2)):
+        got = run_bin(c_exe, table, s)
+        assert_same(kernel(table, s), got, what="16 terms")
+        assert len(np.unique(got["z"])) > 100
+    s = aux_stream(rng, table, 2000)
+    assert_same(reference(table, s), run_bin(c_exe, table, s), REF_KEYS + ("z",), "16 terms (reference)")
+    assert_same(kernel(table, s, True), run_bin(c_exe, table, s, True), what="16 terms self-timed")
+    params = encode_aux(aux.fracs, aux.terms + (dataclasses.replace(aux.terms[-1], weight=0),))
+    body = table.to_words()[:N_FIXED]
+    body[FIELD_INDEX["aux_nparams"]], body[2] = len(params), N_FIXED + len(params) + 1
+    body += [x & 0xFFFFFFFF for x in params]
+    words = body + [crc32_words(body)]
+    assert len(words) == 266
+    with pytest.raises(TableError, match="aux n_terms 17 not in 1..16"):
+        Table.from_words(words, "17 terms")
+    out = run_text(c_exe, [table_line(table), "TABLE " + " ".join(f"{w:08x}" for w in words)], expect_rc=1)
+    assert out == [f"T 255 {table.crc:08x}", f"ERR FIELD word {N_FIXED} aux_n_terms"], out
 
 
 def test_bin_block_width_errors_are_fatal(c_exe):

@@ -56,29 +56,15 @@ def test_a_candidate_that_does_not_fit_the_k7_sum_is_not_offered(ftr_run, taken)
 
 
 def test_the_loops_final_model_quantizes():
-    """Loop bench seed 0 run 22 (FTR, board_temp at 2.17x): two lag blocks (6 terms) and then a
-    single lag were confirmed, 7 terms; now the third step is not offered and the model quantizes."""
+    """Loop bench seed 0 run 22 (FTR, board_temp at 2.17x): with a 6-term k7 sum the loop once
+    confirmed two lag blocks and a single lag, 7 terms the chip refused.  The loop now starts from
+    hdrg fit's model, whose lag-state block already fills 6 of the 16 terms; whatever it adds beside
+    it, the model it writes fits the chip and quantizes."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         tr = simulate_foreign(22, 4.0, False, 0, 0, effect="board_temp", strength=2.1746144995993966)
         ho = simulate_foreign(22, 2.0, False, 1, 1, effect="board_temp", strength=2.1746144995993966)
         rep, model = diagnose([tr], [ho], plots=False)
-    assert sum(it["confirmed"] for it in rep["iterations"]) >= 2      # the two lag blocks
-    assert len(model.config.aux.params.get("terms", [])) <= AUX_MAX_TERMS
+    assert len(rep["iterations"]) >= 2           # the loop tried steps beside the fit's block
+    assert 6 <= len(model.config.aux.params.get("terms", [])) <= AUX_MAX_TERMS
     quantize(model, n_random=50)
-
-
-def test_a_reverted_period_excludes_its_neighbourhood_only(monkeypatch):
-    """Loop bench seed 0 run 53 (MR, periodic 1507 s): the period grid's 4034 s won the CV and was
-    not confirmed; when that excluded the whole family the true line was never tried."""
-    import host_tools.fitting.diagnose_scan as ds
-    assert ds.PERIOD_EXCLUDE_RATIO == 2 ** 0.5
-    key = ds.step_key("periodic", {"period_s": 4033.5})
-    assert key.startswith("periodic@")
-    excluded = frozenset({key})
-    assert ds._excluded(effects.periodic(4033.5), excluded)
-    assert ds._excluded(effects.periodic(3000.0), excluded)       # within 2^(1/2)
-    assert not ds._excluded(effects.periodic(1534.4), excluded)   # another line may still be tried
-    monkeypatch.setattr(ds, "PERIOD_EXCLUDE_RATIO", None)
-    assert ds.step_key("periodic", {"period_s": 4033.5}) == "periodic"
-    assert ds._excluded(effects.periodic(1534.4), frozenset({"periodic"}))

@@ -25,7 +25,9 @@ from firmware_ref.table import FIELD_INDEX, Table, TableError, encode_aux
 from host_tools.vectors.builders import make_model, with_aux
 from host_tools.golden import compensate as hc
 from host_tools.golden import runlog as rl
-from host_tools.fitting.diagnose import STAT_KEYS, stats_one, diagnose
+from host_tools.fitting.diagnose import stats_one, diagnose
+
+STAT_KEYS = ("std_dph", "pp_dph", "std100_dph", "pp100_dph", "rms_dph")   # the figures stats_one gives
 from host_tools.fitting.fit import fit_logs
 from host_tools.fixed.quantize import QuantizeError, quantize, read_table
 from host_tools.fixed.quantize_parts import aux_channel_fracs
@@ -212,7 +214,7 @@ def test_aux_table_words_roundtrip_and_validate():
     assert t.aux_array().shape == (6, F.AUX_TERM_WORDS)
     for change, match in [({"aux_gen": 2}, "aux_gen 2"), ({"aux_gen": 0}, "takes no parameters"),
                           ({"aux_params": t.aux_params[:-1]}, "need"),
-                          ({"aux_params": (7,) + t.aux_params[1:]}, "n_terms"),
+                          ({"aux_params": (F.AUX_MAX_TERMS + 1,) + t.aux_params[1:]}, "n_terms 17 not in 1..16"),
                           ({"aux_params": t.aux_params[:3] + (9,) + t.aux_params[4:]}, "kind 9")]:
         with pytest.raises(TableError, match=match):
             dataclasses.replace(t, **change)
@@ -221,8 +223,54 @@ def test_aux_table_words_roundtrip_and_validate():
     assert d["bound_dph"]["parts"]["z_error"] == d["aux"]["z_error"] > 0
 
 
+def test_aux_table_of_max_terms_roundtrips_and_one_more_is_refused():
+    """AUX_MAX_TERMS (16) terms of every kind on all four aux words: the longest table (255 words,
+    1020 bytes: one serial TABLE frame) quantizes and round-trips through words, bytes and memh, the
+    link's table check accepts it and the kernel equals the Python reference on it; a 17th term (a
+    legal one, weight 0, the words consistent) is refused naming n_terms, by the decoder, Table and
+    from_words, and the quantizer refuses a 17-term model."""
+    from host_tools import link as SL
+    from host_tools.vectors.aux import MAX_TERMS_EVERY_KIND
+    from host_tools.vectors.builders import aux_stream
+
+    t = quantize(with_aux(make_model(coef=COEF), list(MAX_TERMS_EVERY_KIND)), n_random=10).table
+    aux = t.aux()
+    words = t.to_words()
+    assert len(aux.terms) == F.AUX_MAX_TERMS == 16 and aux.n_chan == F.AUX_MAX_CHANNELS
+    assert {F.AUX_KINDS[x.kind] for x in aux.terms} == set(F.AUX_KINDS)
+    assert len(words) == T.N_FIXED + 2 + F.AUX_MAX_CHANNELS + F.AUX_MAX_TERMS * F.AUX_TERM_WORDS + 1 == 255
+    assert words[2] == 255 and len(t.to_bytes()) == 1020 <= SL.MAX_PAYLOAD
+    assert Table.from_words(words) == t == Table.from_bytes(t.to_bytes()) == Table.from_memh(t.to_memh())
+    assert t.param_names()[-1] == "aux_t15_c5" and t.aux_array().shape == (16, F.AUX_TERM_WORDS)
+    assert SL.validate_table_payload(t.to_bytes())[1] == SL.R_OK
+    assert len(SL.encode_frame(SL.T_TABLE, 0, t.to_bytes())) == 1020 + SL.OVERHEAD
+    s = aux_stream(np.random.default_rng(16), t, 600)
+    p = s["p"]
+    kw = dict(f=s["f"], t=s["t"], aux=s["aux"], k=s["k"])
+    ref = run_reference(t, p, s["r"], s["mode"], s["restart"], s["z"], **kw)
+    ker = run_words(t, p, s["r"], s["mode"], s["restart"], s["z"], detail=True, **kw)
+    for name in ("z", "b", "out", "bias", "flags"):
+        assert np.array_equal(np.asarray(ref[name], np.int64), np.asarray(ker[name], np.int64)), name
+    assert len(np.unique(ker["z"])) > 100
+
+    params = encode_aux(aux.fracs, aux.terms + (dataclasses.replace(aux.terms[-1], weight=0),))
+    fixed = words[:T.N_FIXED]
+    fixed[FIELD_INDEX["aux_nparams"]] = len(params)
+    fixed[2] = T.N_FIXED + len(params) + 1
+    body = fixed + [x & 0xFFFFFFFF for x in params]
+    words17 = body + [T.crc32_words(body)]
+    assert len(words17) == 266 == words17[2]
+    for refuse in (lambda: T.decode_aux(params), lambda: dataclasses.replace(t, aux_params=params),
+                   lambda: Table.from_words(words17, "t17")):
+        with pytest.raises(TableError, match="aux n_terms 17 not in 1..16"):
+            refuse()
+    assert SL.validate_table_payload(T.struct.pack("<266I", *words17))[1] == SL.R_TABLE_RANGE
+    with pytest.raises(QuantizeError, match=f"17 terms; the firmware holds at most {F.AUX_MAX_TERMS}"):
+        quantize(with_aux(make_model(coef=COEF), list(MAX_TERMS_EVERY_KIND) + [{"gen": "one", "weight": 0.01}]))
+
+
 @pytest.mark.parametrize("terms,match", [
-    ([{"gen": "one", "weight": 0.1}] * 7, "at most 6"),
+    ([{"gen": "one", "weight": 0.05}] * (F.AUX_MAX_TERMS + 1), f"17 terms; the firmware holds at most {F.AUX_MAX_TERMS}"),
     ([{"gen": "input", "column": f"aux_{c}", "ref": 0.0, "span": 1.0, "weight": 0.1} for c in "abcde"], "4 aux input"),
     ([{"gen": "decay_on", "tau_s": 3.0e9, "weight": 1.0}], "outside"),
     ([{"gen": "decay_on", "tau_s": 0.01, "weight": 1.0}], "outside"),
@@ -347,7 +395,7 @@ def test_acceptance_effect_found_exported_quantized_and_run_in_fixed_point(tmp_p
     cfg0 = hc.fit_config_from_logs(train, reversal=ReversalConfig("trend", settle_s=0.0, order="combine_first"))
     base, _ = fit_logs(train, cfg0, "all", drop_unidentifiable=True)
     before_float = stats_one(*_run(hc.compensate(hold, base), hold))
-    assert before_float == pytest.approx({k: rep["baseline"]["holdout"][k] for k in STAT_KEYS}, rel=1e-12)
+    assert before_float == pytest.approx({k: rep["baseline"]["holdout"][k] for k in before_float}, rel=1e-12)
     rows = {}
     for name, model in (("before", base), ("after", final)):
         model.to_json(tmp_path / f"{name}.model.json")

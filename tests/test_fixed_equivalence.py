@@ -99,16 +99,19 @@ def test_saturating_outputs_agree():
 
 # -- aux generators (aux_gen 1) -----------------------------------------------------------------------------
 
+AUX_TERMS = (3, 4, 5, 6, 3, 8, 11, 6, 14, 16)      # terms of the random aux table of each seed (at most AUX_MAX_TERMS)
+
+
 @pytest.mark.parametrize("seed", range(10))
 def test_reference_equals_numba_aux(seed):
-    """Random aux tables (3..6 terms of every kind: signs, powers, filters up to 10^6 samples,
+    """Random aux tables (3..16 terms of every kind: signs, powers, filters up to 10^6 samples,
     decays, exchange resets, ramps, oscillators) on random streams with restarts, K gaps, negative
     K and K near 2^62: the Python reference == the numba kernel, z included (logged and
     self-timed)."""
     rng = np.random.default_rng(700 + seed)
     reversal = seed % 4 != 3
     model = random_aux_model(rng, reversal=reversal, estimator=("diff", "diffn", "lsq", "iir")[seed % 4],
-                             n_terms=3 + seed % 4)
+                             n_terms=AUX_TERMS[seed])
     table = quantize(model, exchange_s=3.0, dwell_s=7.0, n_random=10).table
     s = aux_stream(rng, table, 2000, reversal=reversal)
     ref, got = both(table, s)
@@ -124,9 +127,9 @@ def test_aux_kinds_are_all_covered_by_the_random_tables():
     for seed in range(10):
         rng = np.random.default_rng(700 + seed)
         model = random_aux_model(rng, reversal=seed % 4 != 3, estimator=("diff", "diffn", "lsq", "iir")[seed % 4],
-                                 n_terms=3 + seed % 4)
+                                 n_terms=AUX_TERMS[seed])
         kinds |= {t["gen"] for t in model.config.aux.terms}
-    assert kinds == set(F.AUX_KINDS)
+    assert kinds == set(F.AUX_KINDS) and max(AUX_TERMS) == F.AUX_MAX_TERMS
 
 
 def test_aux_internal_counter_equals_explicit_k():

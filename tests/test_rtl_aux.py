@@ -53,21 +53,24 @@ def _stream(rng, n: int, table) -> dict:
 
 
 def _directed(rng) -> list:
-    """Tables whose every term is the longest of its family: 6 osc terms (the worst case), 6 filtered
-    power-5 input terms on every channel, decays and rate terms; plus an aux_gen 0 table (z = clamp(Z))."""
+    """Tables whose every term is the longest of its family: AUX_MAX_TERMS (16) osc terms (the worst
+    case), 16 filtered power-5 input terms on every channel (the longest table: 255 words), decays and
+    rate terms; plus an aux_gen 0 table (z = clamp(Z))."""
     base = _base_table()
-    w = (1 << 30) // 6
-    osc = [AuxTerm(6, j % 2, 0, 1, w * (-1) ** j, (int(rng.integers(1, 1 << 63)), 0, j % 2, 0, 0, 0)) for j in range(6)]
+    nt = F.AUX_MAX_TERMS
+    w = (1 << 30) // nt
+    osc = [AuxTerm(6, j % 2, 0, 1, w * (-1) ** j, (int(rng.integers(1, 1 << 63)), 0, j % 2, 0, 0, 0)) for j in range(nt)]
     inp = [AuxTerm(0, 1, src, 5, w, (int(rng.integers(0, 1 << 32)) if src == 0 else int(rng.integers(-1000, 1000)),
                                      int(rng.integers(1, 1 << 31)), 0, int(rng.integers(28, 40)),
                                      int(rng.integers(1, 1 << 31)), int(rng.integers(31, 40))))
-           for src in (0, 1, 2, 3, 4, 5)]
+           for src in (j % (2 + F.AUX_MAX_CHANNELS) for j in range(nt))]
     mix = [AuxTerm(3, 0, 0, 1, w, ((1 << 31) - 1, 33, 0, 0, 0, 0)), AuxTerm(4, 1, 0, 1, -w, (1 << 30, 32, 0, 0, 0, 0)),
            AuxTerm(1, 1, base.proxy_kind, 1, w, (20, 1 << 25, 12, 0, 0, 0)),
            AuxTerm(1, 0, base.proxy_kind, 1, w, (3, 1 << 30, 0, 0, 0, 0)),
            AuxTerm(5, 0, 0, 1, w, (1000, 1 << 30, 40, 0, 0, 0)), AuxTerm(2, 1, 0, 1, w + 1, (0,) * 6)]
     none = dataclasses.replace(base, aux_gen=0, aux_params=())
     tables = [_with_terms(base, osc), _with_terms(base, inp, fracs=(0, 20, 40, 48)), _with_terms(base, mix), none]
+    assert len(tables[1].to_words()) == 255
     return [(t, _stream(rng, 120, t)) for t in tables]
 
 
@@ -104,7 +107,7 @@ def test_icarus_directed_worst_case_bit_exact(directed, op_cycles):
     work, files = directed
     r = CA.rtl_aux_check(work, "icarus", files=files, op_cycles=op_cycles)
     assert r["mismatches"] == 0, r
-    # the schedule: 2 cycles (start, first read) + op_cycles per operation; the worst table is 6 osc terms
+    # the schedule: 2 cycles (start, first read) + op_cycles per operation; the worst table is 16 osc terms
     assert r["cycles_max"] == 2 + op_cycles * (F.AUX_MAX_TERMS * OPS_PER_TERM_MAX + 1), r
     assert r["cycles_min"] == 2 + op_cycles * 1, r  # aux_gen 0: one operation (z = clamp(Z))
 

@@ -7,6 +7,7 @@ import warnings
 import numpy as np
 import pytest
 
+from firmware_ref.formats import AUX_MAX_TERMS
 from host_tools.bench import startup as bench
 from host_tools.bench.accuracy import servable
 from host_tools.fitting import turn_on
@@ -231,7 +232,7 @@ def test_the_output_is_linear_in_the_size_of_the_term(device, runs):
         assert np.allclose(turn_on.decay_size(new, 240.0), size, rtol=1e-9)
         assert sum(abs(t["weight"]) for t in new.config.aux.terms) <= 1.0 + 1e-12
     full = turn_on.with_decay(lagged, decay, 1.0)
-    while len(full.config.aux.terms) + 2 <= 6:
+    while len(full.config.aux.terms) + 2 <= AUX_MAX_TERMS:
         full = turn_on.with_decay(full, effect_term("decay_on", "turn_on", tau_s=60.0 * len(full.config.aux.terms)), 0.1)
     with pytest.raises(ValueError, match="chip's limit"):
         turn_on.with_decay(full, effect_term("decay_on", "turn_on", tau_s=999.0), 1.0)

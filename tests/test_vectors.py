@@ -166,6 +166,15 @@ def test_sets_cover_what_they_claim(manifest):
         assert (c[f"A{j}"] != 0).any()
     assert (c["MODE"] == -1).any() and len(meta["cases"]) == len(aux.tables)
     assert meta["table_words"] is None and len({len(e["words"]) for e in meta["tables"]}) > 2
+    # as many terms as the firmware holds (AUX_MAX_TERMS): several tables of 7..16 terms, 16 terms of every
+    # kind, the longest table (255 words: 16 terms, 4 aux words), a fitted 16-term model on a simulated run
+    nterms = {case["name"]: len(aux.tables[case["table"]].aux().terms) for case in meta["cases"]}
+    assert max(nterms.values()) == F.AUX_MAX_TERMS == 16
+    assert len({n for n in nterms.values() if 7 <= n <= F.AUX_MAX_TERMS}) >= 4
+    full = [aux.tables[case["table"]] for case in meta["cases"] if nterms[case["name"]] == F.AUX_MAX_TERMS]
+    assert any({F.AUX_KINDS[x.kind] for x in t.aux().terms} == set(F.AUX_KINDS) for t in full)
+    assert max(len(t.to_words()) for t in full) == 255
+    assert nterms["sim_aux_16"] == F.AUX_MAX_TERMS and meta["cases"][-1]["name"] == "sim_aux"
 
 
 def test_sets_cover_regress_first(manifest):
@@ -201,7 +210,8 @@ def test_pipeline_vectors_equal_python_reference_on_whole_cases(manifest):
                                            "rtr_residual_saturation_log", "rtr_warmup_log", "rtr_stale_edge_log")),
                             ("e2e", ("mode_reversal", "regress_first_pair")),
                             ("aux", ("single_decay_exchange_sign", "single_input_temp_long_lag", "osc_k_edges",
-                                     "weight_sum_clamp", "coefficient_extremes", "random_5", "sim_aux"))):
+                                     "weight_sum_clamp", "coefficient_extremes", "random_5", "random_16_terms",
+                                     "max_terms_every_kind", "sim_aux_16", "sim_aux"))):
         vs = V.load_set(VECTORS, set_name, manifest["sets"][set_name])
         c = vs.columns
         for case in vs.cases:

@@ -15,7 +15,7 @@
  *   - uint32 -> int32 reinterpretation is done arithmetically, never by a cast.
  *
  * Usage:
- *     static hdrg_state_t st;                     (17.7 kB with HDRG_N_HIST_MAX = 4096)
+ *     static hdrg_state_t st;                     (18.5 kB with HDRG_N_HIST_MAX = 4096)
  *     if (hdrg_init(&st, words, n_words) != HDRG_OK) ... refuse the table
  *     per sample: hdrg_step(&st, &in, &out);      (in: input words, out: outputs + intermediates)
  *     or hdrg_step_aux(&st, &in, &aux, &out) with the aux words A_c and the counter K (aux_gen 1)
@@ -85,12 +85,13 @@
 #define HDRG_N_FIXED_V1 47u             /* words 0..46 of a version-1 table */
 #define HDRG_N_TERMS 17u
 /* aux generators (aux_gen 1 'sum'): parameters n_terms, n_chan, AF_c per channel, 11 words per term */
-#define HDRG_AUX_MAX_TERMS 6u
+#define HDRG_AUX_MAX_TERMS 16u         /* formats.AUX_MAX_TERMS: a table of more is refused (FIELD at n_terms) */
 #define HDRG_AUX_MAX_CH 4u
 #define HDRG_AUX_TERM_WORDS 11u
 #define HDRG_AUX_FRAC_MAX 48u
-#define HDRG_AUX_PARAMS_MAX (2u + HDRG_AUX_MAX_CH + HDRG_AUX_MAX_TERMS * HDRG_AUX_TERM_WORDS)   /* 72 */
-#define HDRG_TABLE_WORDS_MAX (HDRG_N_FIXED + HDRG_AUX_PARAMS_MAX + 1u)                     /* 145 */
+#define HDRG_AUX_PARAMS_MAX (2u + HDRG_AUX_MAX_CH + HDRG_AUX_MAX_TERMS * HDRG_AUX_TERM_WORDS)   /* 182 */
+/* the longest table: 255 words (word addresses 0..254, 1020 bytes: one serial TABLE frame) */
+#define HDRG_TABLE_WORDS_MAX (HDRG_N_FIXED + HDRG_AUX_PARAMS_MAX + 1u)                     /* 255 */
 
 enum hdrg_word {
     HDRG_W_MAGIC = 0, HDRG_W_VERSION, HDRG_W_LENGTH, HDRG_W_PROXY_KIND, HDRG_W_P_REF, HDRG_W_G_U,

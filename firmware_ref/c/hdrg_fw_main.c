@@ -157,16 +157,49 @@ static int parse_args(char **tok, int n, int64_t *vals, const char *usage)
     return 1;
 }
 
+/* The name of word `bad` of a refused table: "crc32" for the last word, the aux parameters of an
+ * aux_gen 1 table by the names of Python's Table.param_names (aux_n_terms, aux_n_chan, aux_af_<c>,
+ * aux_t<j>_<field>), any other by hdrg_word_name. */
+static void word_name(const uint32_t *words, size_t n, unsigned bad, char *out)
+{
+    static const char *const TERM_FIELDS[HDRG_AUX_TERM_WORDS] = {
+        "kind", "sign", "src", "power", "weight", "c0", "c1", "c2", "c3", "c4", "c5"};
+    unsigned nf = (n > 1u && words[1] >= 2u) ? HDRG_N_FIXED : HDRG_N_FIXED_V1, rel, nc;
+    if (n > 0 && bad == n - 1u) {
+        strcpy(out, "crc32");
+        return;
+    }
+    if (bad < nf || bad >= n) {
+        strcpy(out, hdrg_word_name(bad));
+        return;
+    }
+    rel = bad - nf;
+    nc = n > nf + 1u ? words[nf + 1u] : 0u;
+    if (rel == 0u) {
+        strcpy(out, "aux_n_terms");
+    } else if (rel == 1u) {
+        strcpy(out, "aux_n_chan");
+    } else if (nc > HDRG_AUX_MAX_CH) {
+        strcpy(out, "aux_param");
+    } else if (rel < 2u + nc) {
+        sprintf(out, "aux_af_%u", rel - 2u);
+    } else {
+        rel -= 2u + nc;
+        sprintf(out, "aux_t%u_%s", rel / HDRG_AUX_TERM_WORDS, TERM_FIELDS[rel % HDRG_AUX_TERM_WORDS]);
+    }
+}
+
 static void load_table(const uint32_t *words, size_t n)
 {
     unsigned bad = 0;
     int e;
-    char detail[96];
+    char name[48], detail[96];
     g_have_table = 0;
     g_run_kind = 0;
     e = hdrg_init(&g_st, words, n, &bad);
     if (e != HDRG_OK) {
-        sprintf(detail, "word %u %s", bad, n > 0 && bad == n - 1u ? "crc32" : hdrg_word_name(bad));
+        word_name(words, n, bad, name);
+        sprintf(detail, "word %u %s", bad, name);
         err(hdrg_error_name(e), detail);
         return;
     }

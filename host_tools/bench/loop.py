@@ -174,21 +174,43 @@ def run_one(spec: dict, duration_s=None, n_surrogates=None, second_train=None) -
             ratio = heldout_score(rep["baseline"]["holdout"])[0] / _base_error(ctrain, chold)
             fit_ratio = heldout_score(rep["baseline"]["holdout"])[0] / _oracle_fit_error(base, train, hold, ctrain, chold)
     steps = [{"effect": it["effect"], "params": it["params"], "kind": it["kind"], "confirmed": it["confirmed"],
-              "material": it["material"],
+              "material": it["material"], "undone": bool(it.get("undone")),
               "before": it["heldout_error"]["before"], "after": it["heldout_error"]["after"]}
              for it in rep["iterations"]]
+    b, f = heldout_score(rep["baseline"]["holdout"])[0], heldout_score(rep["final"])[0]
+    nf = rep["noise_floor"]
+    floor = nf["std100_dph"] if (rep["baseline"]["holdout"].get("std100_dph") is not None) else nf["std_dph"]
     return {**spec, "verdict": rep["verdict"], "steps": steps,
-            "base": heldout_score(rep["baseline"]["holdout"])[0], "final": heldout_score(rep["final"])[0],
+            "base": b, "final": f, "floor": floor,
+            "gap_closed": (b - f) / (b - floor) if floor is not None and b > floor else None,
+            "loop_vs_fit": f / b if b else None, "final_is": rep.get("final_is"),
+            "valid_share": _valid_share(hold, model), "valid_share_fit": _valid_share(hold, base),
             "third_base": base3, "third_final": final3,
             "effect_ratio": ratio, "oracle_fit_ratio": fit_ratio,
             "named": bool(eff and any(_names_effect(s) and _named(eff, s["effect"]) for s in steps)),
-            "named_or_structure": bool(eff and any(s["confirmed"] and _named(eff, s["effect"]) for s in steps)),
+            "named_or_structure": bool(eff and any(s["confirmed"] and not s["undone"] and _named(eff, s["effect"]) for s in steps)),
             "artifacts": [a["period_s"] for a in (rep["artifacts"] or {}).get("lines", [])],
             "seconds": round(time.time() - t0, 2)}
 
 
+def _valid_share(log, model) -> float:
+    """The share of ``log``'s servable samples (host_tools.bench.accuracy.servable) that ``model``'s
+    output serves."""
+    from host_tools.bench.accuracy import servable
+    from host_tools.golden.compensate import compensate
+    serve = servable(log)
+    valid = (np.asarray(compensate(log, model)["valid"]) > 0) & serve
+    return float(valid.sum() / max(int(serve.sum()), 1))
+
+
+LOOP_TOLERANCE = 1.05     # a run fails when the loop's final model is more than 5 % worse than hdrg fit's
+GAP_HALF = 0.5            # the loop should close at least half of the gap between the start and the noise floor
+
+
 def _confirmed_effect(step) -> bool:
-    return bool(step["confirmed"] and step["kind"] == "effect")
+    """A confirmed effect step still in the final model (not undone because the final model lost
+    to hdrg fit's)."""
+    return bool(step["confirmed"] and step["kind"] == "effect" and not step.get("undone"))
 
 
 def _names_effect(step) -> bool:
@@ -262,7 +284,19 @@ def summarize(records: list) -> dict:
             "confirmed_steps": len(confirmed),
             "worse_confirmed": sum(1 for s in confirmed if not s["after"] < s["before"]),
             "found_without_drop": sum(1 for r in found + structural if not r["final"] < r["base"]),
-            "never_worse": sum(1 for r in records if r["final"] > r["base"] * (1 + 1e-12)) == 0}
+            "never_worse": sum(1 for r in records if r["final"] > r["base"] * (1 + 1e-12)) == 0,
+            "gap_rule": (f"gap closed: (start - final) / (start - noise floor) of the held-out error, the start being "
+                         f"hdrg fit's model and the floor the held-out residual's white noise (diagnose.noise_floor); "
+                         f">= {GAP_HALF:g} counts"),
+            "gap_closed_half_identifiable": _frac(sum((r.get("gap_closed") or 0.0) >= GAP_HALF for r in ident), len(ident)),
+            "loop_worse_than_fit": [r["i"] for r in records if r.get("loop_vs_fit") is not None
+                                    and r["loop_vs_fit"] > LOOP_TOLERANCE],
+            "final_is_fit": sum(1 for r in records if r.get("final_is") == "hdrg fit's model"),
+            "valid_share": {"min": min((r["valid_share"] for r in records if r.get("valid_share") is not None), default=None),
+                            "min_fit": min((r["valid_share_fit"] for r in records if r.get("valid_share_fit") is not None),
+                                           default=None),
+                            "runs_below_fit": sum(1 for r in records if r.get("valid_share") is not None
+                                                  and r["valid_share"] < r["valid_share_fit"] - 1e-9)}}
 
 
 def run_benchmark(n_runs: int, seed: int = 0, duration_s=None, n_surrogates=None, progress=None,

@@ -18,7 +18,7 @@ parasitic-charge settling that no thermometer sees, beside its self-heating):
 * **figures** (:func:`startup_figures`, the paper's Table 4 columns): from power-on + 180 s (the
   first mode-reversal output) to the end, the output less its mean over LATE_S (40..45 min):
   stability = std (1 sigma) of the 100-s means (bins from 180 s on; a bin with valid samples on
-  less than MIN_BIN_SHARE of its span, e.g. the last 20 s, is left out), variation = their peak-to-peak, mean = the mean
+  less than START_MIN_BIN_SHARE of its span, e.g. the last 20 s, is left out), variation = their peak-to-peak, mean = the mean
   over the served samples; **turn-on** = the mean over the served part of the first 5 min
   (180..300 s); repeatability = the rms of the turn-on over the device's start-ups (how far
   the first minutes sit from the settled bias, power-on after power-on); valid share = valid
@@ -39,6 +39,8 @@ import numpy as np
 
 from host_tools.bench.accuracy import SEED_STRIDE, servable
 from host_tools.fitting.fit_pipeline import fit_default
+from host_tools.fitting.metrics import (START_BIN_S, START_FIRST_S, START_LATE_S, START_TURN_ON_S,
+                                       start_figures)
 from host_tools.golden.compensate import compensate
 from host_tools.golden.reversal import DEFAULT_COMBINER, combine
 from host_tools.simulation.sim_foreign import STARTUP_S, foreign_device, simulate_foreign
@@ -51,10 +53,10 @@ TRAIN_RUNS = ((4.0, 0, False), (2.0, 1, True))
 # evaluated start-ups are 2, 3, ...): a lab's room on two days
 TRAIN_STARTUPS = ((8.0, 99), (9.5, 98))
 STARTUPS = 4                        # start-ups per device (the paper's four data sets)
-FIRST_OUTPUT_S = 180.0              # the first mode-reversal output after power-on [s]
-TURN_ON_S = 300.0                   # the turn-on window ends 5 min after power-on [s]
-LATE_S = (2400.0, 2700.0)           # the offset baseline: the mean over 40..45 min [s]
-BIN_S = 100.0                       # averaging of the stability [s]
+FIRST_OUTPUT_S = START_FIRST_S     # the first mode-reversal output after power-on [s]
+TURN_ON_S = START_TURN_ON_S         # the turn-on window ends 5 min after power-on [s]
+LATE_S = START_LATE_S               # the offset baseline: the mean over 40..45 min [s]
+BIN_S = START_BIN_S                 # averaging of the stability [s]
 EFFECT = "turn_on"
 PIPELINES = ("mode reversal alone", "hdrg fit defaults", "noise floor")
 LOOP = "hdrg diagnose defaults"      # the closed loop's final model (optional: about 10 s per device)
@@ -77,29 +79,9 @@ def calibration_runs(dev, effect: str | None = EFFECT) -> list:
 
 
 def startup_figures(t_s, out, valid) -> dict:
-    """Table 4 figures [deg/h] of one start-up's output ``out`` at its ``valid`` samples (module doc)."""
-    t = np.asarray(t_s, np.float64) - float(t_s[0])
-    ok = np.asarray(valid, bool) & np.isfinite(out) & (t >= FIRST_OUTPUT_S)
-    late = ok & (t >= LATE_S[0]) & (t < LATE_S[1])
-    if late.sum() < 2:
-        return {"stability": float("nan"), "variation": float("nan"), "mean": float("nan"), "turn_on": float("nan")}
-    y = np.asarray(out, np.float64) - float(np.mean(np.asarray(out)[late]))
-    bins = ((t[ok] - FIRST_OUTPUT_S) // BIN_S).astype(np.int64)        # from the first output on
-    cnt = np.bincount(bins)
-    full = cnt >= MIN_BIN_SHARE * BIN_S * _rate(t)                      # partial bins (the last) left out
-    means = np.bincount(bins, weights=y[ok])[full] / cnt[full]
-    early = ok & (t < TURN_ON_S)
-    return {"stability": float(np.std(means, ddof=1)) if len(means) > 1 else float("nan"),
-            "variation": float(np.ptp(means)), "mean": float(np.mean(y[ok])),
-            "turn_on": float(np.mean(y[early])) if early.any() else float("nan")}
-
-
-MIN_BIN_SHARE = 0.5                 # a 100-s mean needs valid samples on at least this share of its span
-
-
-def _rate(t) -> float:
-    """Nominal sample rate [Hz] of the time axis ``t`` [s]."""
-    return 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+    """Table 4 figures [deg/h] of one start-up's output ``out`` at its ``valid`` samples
+    (host_tools.fitting.metrics.start_figures: the module doc's windows)."""
+    return start_figures(t_s, out, valid)
 
 
 def _mr_alone(log):
@@ -183,7 +165,26 @@ def summarize(records) -> dict:
     if LOOP in names:
         out["ratio_loop_to_mr_alone"] = float(np.nanmedian(
             [_device_stat(r, LOOP, "stability") / _device_stat(r, PIPELINES[0], "stability") for r in ok]))
+        for r in ok:
+            r["loop_vs_fit"] = loop_vs_fit(r)
+        out["loop_worse_than_fit"] = [r["seed"] for r in ok if r["loop_vs_fit"]["worse"]]
+        out["loop_vs_fit_max"] = {k: float(np.nanmax([r["loop_vs_fit"][k] for r in ok])) for k in ("stability", "repeatability")}
+        out["loop_min_valid_share_vs_fit"] = float(min(r["loop_vs_fit"]["valid_share"] for r in ok))
     return out
+
+
+LOOP_TOLERANCE = 1.05    # a device fails the loop when its loop model is more than 5 % worse than hdrg fit's
+
+
+def loop_vs_fit(rec) -> dict:
+    """One device's loop against hdrg fit: the ratios loop / fit of its stability (median over
+    start-ups) and repeatability (rms of the 0-5 min means), the ratio of their lowest valid
+    shares, and ``worse`` when either ratio exceeds LOOP_TOLERANCE."""
+    ratios = {"stability": _device_stat(rec, LOOP, "stability") / _device_stat(rec, PIPELINES[1], "stability"),
+              "repeatability": _device_stat(rec, LOOP, "turn_on", _rms) / _device_stat(rec, PIPELINES[1], "turn_on", _rms),
+              "valid_share": _device_stat(rec, LOOP, "valid_share", np.min) / max(_device_stat(rec, PIPELINES[1], "valid_share", np.min), 1e-12)}
+    ratios["worse"] = bool(ratios["stability"] > LOOP_TOLERANCE or ratios["repeatability"] > LOOP_TOLERANCE)
+    return ratios
 
 
 def run_benchmark(n_devices: int = 20, seed: int = 0, startups: int = STARTUPS, progress=None, start: int = 0,
@@ -228,4 +229,11 @@ def format_table(result: dict) -> str:
               f"models that learned the turn-on: {s['learned_turn_on']} of {s['devices'] - s['failed']}; "
               f"hdrg fit warned of a held-out start-up worse than mode reversal alone: "
               f"{s.get('start_up_warnings', 0)}; failed devices: {s['failed']}"]
+    if "loop_worse_than_fit" in s:
+        m = s["loop_vs_fit_max"]
+        lines.append(f"loop / hdrg fit per device, worst: stability {m['stability']:.3f}, 0-5 min repeatability "
+                     f"{m['repeatability']:.3f}; lowest valid share loop / fit {s['loop_min_valid_share_vs_fit']:.3f}; "
+                     f"devices where the loop ends more than {100 * (LOOP_TOLERANCE - 1):.0f} % worse than hdrg fit: "
+                     f"{len(s['loop_worse_than_fit'])}" + (f" ({', '.join(map(str, s['loop_worse_than_fit']))})"
+                                                           if s["loop_worse_than_fit"] else ""))
     return "\n".join(lines)

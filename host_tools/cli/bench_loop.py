@@ -132,11 +132,26 @@ def run(args) -> int:
     print(f"  'effect found' runs worse on the third run: {s['found_third_run_worse']}")
     print(f"  confirmed steps {s['confirmed_steps']}, held-out-worse confirmed {s['worse_confirmed']}, "
           f"'effect found' without a held-out drop {s['found_without_drop']}, never worse: {s['never_worse']}")
+    if "gap_closed_half_identifiable" in s:
+        print(_line("gap to the floor half closed, identifiable", s["gap_closed_half_identifiable"]))
+        v = s["valid_share"]
+        print(f"  final model = hdrg fit's on {s['final_is_fit']} runs; valid share of the held-out run: loop min "
+              f"{_pct(v['min'])}, hdrg fit min {_pct(v['min_fit'])}, runs where the loop serves fewer samples: {v['runs_below_fit']}")
+        print(f"  runs where the loop ends more than 5 % worse than hdrg fit: {len(s['loop_worse_than_fit'])}"
+              + (f" (runs {s['loop_worse_than_fit']})" if s["loop_worse_than_fit"] else ""))
     if args.json:
         with atomic_open(args.json, "w", encoding="utf-8") as fh:
             json.dump(res, fh, indent=1)
             fh.write("\n")
+    if s.get("loop_worse_than_fit"):
+        print(f"FAILED: the loop ends more than 5 % worse than hdrg fit on {len(s['loop_worse_than_fit'])} run(s)",
+              file=sys.stderr)
+        return 1
     return 0
+
+
+def _pct(x):
+    return "n/a" if x is None else f"{100 * x:.1f} %"
 
 
 def _line(name, f):

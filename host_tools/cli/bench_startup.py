@@ -15,7 +15,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--control", action="store_true",
                         help="devices WITHOUT a turn-on: what the fit learns there is a false discovery")
     parser.add_argument("--loop", action="store_true",
-                        help="also the closed loop (hdrg diagnose defaults on the calibration runs; about 10 s per device)")
+                        help="also the closed loop (hdrg diagnose defaults on the calibration runs; about 10 s per device); "
+                             "exits 1 when it ends more than 5 %% worse than hdrg fit on a device")
     parser.add_argument("--json", "-o", "--out", "--output", metavar="F", help="write every device's figures and the summary as JSON")
     parser.epilog = "example: hdrg bench startup --devices 20 -o startup.json"
 
@@ -31,4 +32,8 @@ def run(args) -> int:
     if args.json:
         with atomic_open(args.json) as f:
             f.write(json.dumps(result, indent=1) + "\n")
+    worse = result["summary"].get("loop_worse_than_fit")
+    if worse:
+        print(f"FAILED: the loop ends more than 5 % worse than hdrg fit on {len(worse)} device(s)", file=sys.stderr)
+        return 1
     return 0

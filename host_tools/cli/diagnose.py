@@ -65,7 +65,7 @@ def run(args) -> int:
     on = "held-out" if hold else "training"
     base = report["baseline"][report["evaluated_on"]]
     print(f"hdrg diagnose: {report['verdict']} ({on} runs; std 1 s / std 100 s in deg/h)")
-    print(f"  base model: {fmt_value(base['std_dph'])} / {fmt_value(base['std100_dph'])}")
+    print(f"  base model (hdrg fit's): {fmt_value(base['std_dph'])} / {fmt_value(base['std100_dph'])}")
     for k, it in enumerate(report["iterations"], 1):
         params = ", ".join(f"{a}={fmt_value(b) if isinstance(b, float) else b}" for a, b in it["params"].items())
         print(f"  {k}. {it['effect']} ({params}): {fmt_value(it['after']['std_dph'])} / {fmt_value(it['after']['std100_dph'])}"
@@ -83,6 +83,11 @@ def run(args) -> int:
         print(f"  stopped: {report['stopped']['reason']}")
         if report["stopped"].get("not_offered"):
             print(f"  firmware capacity: {report['stopped']['not_offered']}")
+    vs = report.get("versus_fit") or {}
+    if vs.get("on"):
+        print(f"  against hdrg fit's model ({vs['on']}): "
+              + (f"lost on {vs['why']}" if vs["kept"] == "fit" else f"no figure worse by more than {vs['tolerance']:.0%}"))
+    print(f"  model written: {report['final_is']}")
     print(f"written: {os.path.join(args.out, 'diagnose.md')}, diagnose.json, model.json")
     sys.stdout.flush()      # the warnings (stderr) after the summary above
     for m in summary_warnings(report):

@@ -4,27 +4,30 @@ model lacks, add that effect through the auxiliary term k7, and report the error
 
 Procedure (:func:`diagnose`)
 ----------------------------
-0. **What is not an effect of temperature** (several training runs only): each power-on moves
+0. **The start is hdrg fit's model** (:func:`base_model`): host_tools.fitting.fit_pipeline.fit_default
+   on the training runs with the loop's options, exactly the model ``hdrg fit`` writes for them
+   (rate estimator, terms, lag-state block, power-on term, per-run offsets, guard); its held-out
+   figures are the report's ``baseline``.  When the loop keeps no step, the model it writes IS
+   that model.
+1. **What is not an effect of temperature** (several training runs only): each power-on moves
    the bias by its own offset, and every run recorded from its power-on holds the device's
-   turn-on.  ``hdrg fit``'s model of the training runs (host_tools.fitting.fit_pipeline.fit_default, the
-   loop's options; :func:`taken_from_fit`) gives the power-on term when it chose one
-   (host_tools.fitting.turn_on): it is taken out of the training and held-out runs
-   (turn_on.without_term: size x g x the mode sign), and each training run's offset per
-   coefficient bank (its mean residual under that model, the term included) out of that run
-   (fit_pipeline.run_offsets, fit_pipeline.without_run_offsets).  The loop works on those runs
-   (its report's errors are on them), does not offer a second power-on term (family
-   ``turn_on``), keeps AUX_RESERVED k7 terms free, and the model it writes holds the term again
-   (turn_on.with_decay; the same output on every valid sample of the runs as given).  Without
-   this the per-power-on offsets and the turn-on are structure the loop explains with whatever
-   channel wanders like them (`hdrg bench startup --loop`, set 0: the loop's start-up error 0.94
-   x mode reversal alone's against hdrg fit's 0.39 x; docs/LOOP.md "Several power-ons").
-1. **Fit** the starting model on the training runs exactly as ``hdrg fit`` does with its defaults
-   (:func:`base_options` / :func:`base_model`: the options not given are None, so
-   host_tools.golden.compensate's DEFAULT_RATE / DEFAULT_ORDER / DEFAULT_COMBINER / DEFAULT_TERMS apply:
-   one place); ``--proxy``, ``--rate-estimator``, ``--terms``, ``--order``, ``--combiner`` as in
-   ``hdrg fit``.  A regress_first model (two coefficient banks by mode) is scanned with the banked
-   design: every column once per mode, on the per-mode used samples, target c = s * rate, raw
-   noise surrogates (no combiner in the target).
+   turn-on.  The start's power-on term, when it chose one (host_tools.fitting.turn_on), is taken
+   out of the training and held-out runs (turn_on.without_term: size x g x the mode sign) and out
+   of the start (turn_on.without_decay: the same output on every valid sample), and each training
+   run's offset per coefficient bank (its mean residual under that model, the term included) out
+   of that run (fit_pipeline.run_offsets, fit_pipeline.without_run_offsets)
+   (:func:`taken_from_fit`).  The loop works on those runs (its report's errors are on them),
+   does not offer a second power-on term (family ``turn_on``), keeps AUX_RESERVED k7 terms free,
+   and the model it writes holds the term again (turn_on.with_decay).  Without this the
+   per-power-on offsets and the turn-on are structure the loop explains with whatever channel
+   wanders like them (docs/LOOP.md "Several power-ons").  The start's k7 (its lag-state block and
+   the rest of its generators) enters the loop as ONE column (diagnose_scan.FIT_BLOCK: its shape
+   kept, its size refitted with every step), beside which the loop adds its own generators: the
+   chip's k7 sum holds AUX_MAX_TERMS (16) terms.  Options given to the loop
+   (``--proxy``, ``--rate-estimator``, ``--terms``, ``--order``, ``--combiner``) are given to
+   the fit as in ``hdrg fit``.  A regress_first model (two coefficient banks by mode) is scanned
+   with the banked design: every column once per mode, on the per-mode used samples, target c = s
+   * rate, raw noise surrogates (no combiner in the target).
 2. **Residual** = the model's target (FTR output or mode-reversal combined output) minus the
    model, on the valid samples; characterized per run (:func:`characterize`): Allan deviation
    against the white-noise line extrapolated from the shortest tau (taus where it is > 2x that line
@@ -73,8 +76,9 @@ Procedure (:func:`diagnose`)
    half the run: two cycles, ratio 2^(1/4)); never at a **combiner line** (:func:`combiner_lines`: the
    reversal cycle, its harmonics and their sidebands with the chamber cycle), which is reported
    in ``artifacts`` with the combiner as the cause and the structural fix.
-   **Firmware capacity**: the k7 sum holds at most AUX_MAX_TERMS (6) terms, so a candidate that
-   would not fit beside the accepted generators is not offered (``not_offered`` in ``stopped``).
+   **Firmware capacity**: the k7 sum holds at most AUX_MAX_TERMS (16) terms, so a candidate that
+   would not fit beside the start's and the accepted generators is not offered (``not_offered``
+   in ``stopped``).
 5. **Add the effect**: the polynomial terms plus every accepted generator as its own column are
    refitted by a small explicit least-squares solve on the training runs; the generator weights
    are normalized by the sum of their magnitudes (so |z| <= 1 everywhere, host_tools.golden.regressors)
@@ -110,6 +114,22 @@ Procedure (:func:`diagnose`)
    improvement confirmed" when nothing else held).  The confirmation (:data:`CONFIRM_RULE`) also
    counts the mean offset: per held-out run, the quadratic mean over its legs (gap-free segments) of their rms with the mean may rise by at
    most CONFIRM_TOL_RMS (:func:`offsets_hold`).
+   **Never worse than hdrg fit** (:func:`versus_fit`): a step is confirmed only when it raises no
+   figure the report gives (CONFIRM_RULE: the std of 1-s averages by <= 1 %, the start-up figures
+   of held-out runs recorded from a power-on by <= 2 %); and the final model is compared with the
+   start on every figure (VERSUS_KEYS: std of 100-s and 1-s averages, the start window's
+   stability and the 0-5 min repeatability) on the held-out runs, or leaving each training run
+   out (both refitted on the others); when it raises any by more than FIT_TOL (2 %), the model
+   written is hdrg fit's, the verdict NOT_KEPT ("hdrg fit's model kept") and the report says
+   on which figure it lost (``versus_fit``; the steps stay listed, ``undone``).
+   **Second pass**: with held-out runs, when the final held-out error is above SECOND_PASS_FLOOR x
+   the noise floor and the start has a k7 sum, the loop runs again from the start without it (a
+   lag-state block fitted to the training runs can take an effect's shape there and hide it from
+   the scan) and that pass's model replaces the first's only when it beats it as a step would
+   (CONFIRM_RULE; ``fit_block_replaced`` in the report).  **Fit only**: a confirmed effect step
+   whose terms stay below SERVED_MIN_G of their size on every sample the output serves (a decay
+   over the first mode window after power-on, which the per-mode fit uses and the combined output
+   does not serve) is counted as structure (``fit_only``): it changes the fit, not the output.
 6. **Report**: per iteration the effect, its parameters, the evidence (CV gain, threshold, folds,
    ranking; PNG: residual vs the candidate, Allan deviation and spectrum before/after) and the
    error before and after (:func:`error_stats`: stability 1 sigma and variation p-p of 1-s and
@@ -139,6 +159,7 @@ nominal sample rate.
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import replace
 
 import numpy as np
@@ -146,22 +167,23 @@ import numpy as np
 from host_tools.fitting.diagnose_confirm import (CONFIRM_MIN_DROP, CONFIRM_RULE, CONFIRM_TOL_1S, CONFIRM_TOL_RMS,  # noqa: F401
                                          EFFECT_RULE, HELDOUT_METRIC, REPORT_TAUS, STAT_KEYS, clean_stats, fmt_value, residuals, heldout_score,
                                          stats_one, step_metric, confirmed_on_holdout, error_stats, leg_rms, step_errors_leaving_runs_out,
-                                         confirmation, LEAVING_ONE_OUT,
+                                         confirmation, LEAVING_ONE_OUT, pooled_step_errors, worse_figures,
                                          material_on_holdout, noise_floor, offsets_hold, step_errors)
 from host_tools.fitting.diagnose_noise import (allan_bridged, noise_series, artifact_of, characterize,  # noqa: F401
                                        combiner_lines, noise_model, spectral_lines, surrogates)
-from host_tools.fitting.diagnose_report import (verdict_detail_text, extrapolation, generalization, is_minor, kept_step_notes,
+from host_tools.fitting.diagnose_report import (VERDICTS, verdict_detail_text, extrapolation, generalization, is_minor, kept_step_notes,
                                                 line_or_drift, not_scanned, several_runs_caveat, verdict_of, write_report)
 from host_tools.fitting.diagnose_scan import (CV_BLOCKS, CV_FOLDS, DRIFT_MARGIN, G_MIN, MAX_ITER, N_SURROGATES,  # noqa: F401
                                       NULL_QUANTILE, PHASES, STRUCT_TAU_FRACTION, STRUCTURAL, TRIES_PER_STEP, Accepted,
-                                      loop_config, poly_terms, scan_candidates, step_key, kind_of, refit_with, rivals)
+                                      loop_config, poly_terms, scan_candidates, step_key, kind_of, refit_with, rivals, fit_block)
 from host_tools.fitting.diagnose_structure import order_step, settle_step
 from host_tools.fitting.effects import FAMILIES
 from host_tools.fitting.fit import check_cv_blocks, fit_logs
 from host_tools.fitting.fit_pipeline import fit_default, run_offsets, without_run_offsets
-from host_tools.fitting.turn_on import chosen_term, with_decay, without_term
+from host_tools.fitting.turn_on import chosen_term, with_decay, without_decay, without_term
 from host_tools.golden.checks import check_distinct_runs, same_runs
 from host_tools.golden.model import jsonable
+from host_tools.golden.regressors import AuxConfig
 
 
 RULE = ("accept the best candidate iff (a) its cross-validated gain (1 - held-out SSE of 1-s means "
@@ -198,52 +220,49 @@ def base_options(*, proxy=None, rate_estimator=None, rate_n=None, rate_shift=Non
 RATE_KEYS = ("rate_estimator", "n", "shift")
 
 
-def fit_options(opts) -> dict:
-    """``opts`` (:func:`base_options`) as keyword arguments of fit_default: the rate options only
-    when one of them is given (else fit_default's own choice of the rate estimator)."""
-    given = any(opts.get(k) is not None for k in RATE_KEYS)
-    return {k: v for k, v in opts.items() if given or k not in RATE_KEYS}
-
-
-def base_model(train, opts, terms=None):
-    """(model, config): the loop's starting model, fitted like ``hdrg fit`` (host_tools.fitting.fit.fit_logs;
-    ``terms`` None -> compensate.DEFAULT_TERMS; terms the data cannot identify are dropped).  With no
-    rate option given, mode-reversal runs get the rate estimator `hdrg fit` chooses by default
-    (host_tools.fitting.fit_pipeline.fit_default: compensate.DEFAULT_RATE_SELECTION_MR), so the loop starts
-    from the model `hdrg fit` writes WITHOUT its lag-state block (``lag_block='off'``): the loop's
-    k7 is rebuilt from the generators it accepts, and its structure phase offers the lag-state
-    block itself under the same CV and held-out confirmation as every other step.  The start's rate
-    estimator is the candidate of least CV rms (``rate_prefer=None``), not `hdrg fit`'s preference
-    for iir 9 (host_tools.fitting.fit_rate.RATE_PREFERRED): the loop's thresholds were calibrated from
-    that start, and from the preferred start the loop bench's MR control got an "effect found"
-    (seed 2, run 33: periodic 1153 s; docs/LOOP.md "Rate preference").  The structure phase still
-    offers the rate estimator, iir 9 included, under CV and held-out confirmation.  No per-run offsets
-    (run_offsets="off": step 0 takes `hdrg fit`'s out of several runs) and no power-on term
-    (turn_on="off": step 0 takes `hdrg fit`'s out, or the loop offers its turn_on family)."""
-    if all(opts.get(k) is None for k in RATE_KEYS):
-        model = fit_default(train, terms, drop_unidentifiable=True, lag_block="off", rate_prefer=None,
-                            run_offsets="off", turn_on="off", **fit_options(opts))[0]
-        return model, model.config
-    cfg = loop_config(train, opts)
-    return fit_logs(train, cfg, terms, drop_unidentifiable=True)[0], cfg
-
-
-def taken_from_fit(train, hold, opts, terms=None) -> tuple:
-    """Step 0 (module doc): with several training runs, ``hdrg fit``'s model of them
-    (``fit_default``, the loop's options) gives what is not an effect of temperature: its power-on
-    term, when it chose one (host_tools.fitting.turn_on), comes out of the training and held-out
-    runs, and each training run's offset per coefficient bank (its mean residual under that model,
-    the term included: fit_pipeline.run_offsets) out of that run.  Returns (training runs, held-out
-    runs, ``given`` {"run_offsets_dph", "turn_on"}, ``term``: (decay term, scale) for the final
-    model, or None).  One run: nothing is taken."""
+def base_model(train, opts, terms=None) -> tuple:
+    """(model, its config): ``hdrg fit``'s model of the training runs with the loop's options
+    (host_tools.fitting.fit_pipeline.fit_default: rate estimator, terms, lag-state block, power-on
+    term, per-run offsets, guard; ``terms`` None -> its defaults), terms the data cannot identify
+    dropped.  The model the loop starts from (:func:`start_model`) and compares its final model
+    with (:func:`versus_fit`)."""
     import warnings
 
+    given = any(opts.get(k) is not None for k in RATE_KEYS)
+    with warnings.catch_warnings():     # the fit warns about the inputs once (hdrg fit shows them)
+        warnings.simplefilter("ignore")
+        model = fit_default(train, terms, drop_unidentifiable=True,
+                            **{k: v for k, v in opts.items() if given or k not in RATE_KEYS})[0]
+    return model, model.config
+
+
+def start_model(train, fitted, term, opts, terms=None, with_block=True) -> tuple:
+    """(model, config, generators) the loop starts from on its runs ``train`` (step 1 done):
+    with no rate option, ``fitted`` (hdrg fit's model) without its power-on ``term`` (which step 1
+    took out of the runs: the same output), its k7 as one FIT_BLOCK generator; with a rate option
+    given, that estimator's fit of the terms (host_tools.fitting.fit.fit_logs) with no k7, the
+    start the loop's family thresholds were calibrated from."""
+    if all(opts.get(k) is None for k in RATE_KEYS):
+        model = without_decay(fitted, term[0]) if term is not None else fitted
+        if not with_block and fit_block(model):     # the second pass (module doc): the fit's k7 left out
+            model, cfg = refit_with(train, replace(model.config, aux=AuxConfig()), poly_terms(model), [])
+            return model, cfg, []
+        return model, model.config, fit_block(model)
+    cfg = loop_config(train, opts)
+    return fit_logs(train, cfg, terms, drop_unidentifiable=True)[0], cfg, []
+
+
+def taken_from_fit(train, hold, fitted) -> tuple:
+    """Step 0 (module doc): with several training runs, what ``fitted`` (:func:`base_model`)
+    learned that is not an effect of temperature: its power-on term, when it chose one
+    (host_tools.fitting.turn_on), comes out of the training and held-out runs, and each training
+    run's offset per coefficient bank (its mean residual under that model, the term included:
+    fit_pipeline.run_offsets) out of that run.  Returns (training runs, held-out runs, ``given``
+    {"run_offsets_dph", "turn_on"}, ``term``: (decay term, scale) for the final model, or None).
+    One run: nothing is taken."""
     given = {"run_offsets_dph": None, "turn_on": None}
     if len(train) < 2:
         return train, hold, given, None
-    with warnings.catch_warnings():     # the base model's fit warns about the inputs once
-        warnings.simplefilter("ignore")
-        fitted = fit_default(train, terms, drop_unidentifiable=True, **fit_options(opts))[0]
     if fitted.fit.get("run_offsets", {}).get("offsets_dph"):      # the fit removed offsets per run
         given["run_offsets_dph"] = run_offsets(train, fitted)
         train = without_run_offsets(train, given["run_offsets_dph"])
@@ -290,6 +309,73 @@ def cubic_floor(train, hold, model) -> tuple:
     return {"cubic_dph": c, "model_dph": m, "limit": FLOOR_RATIO, "replaced": replaced}, (cubic if replaced else model)
 
 
+NOT_KEPT = VERDICTS[5]   # "hdrg fit's model kept": the verdict when the final model lost to hdrg fit's (versus_fit)
+FIT_TOL = 0.02     # the loop's final model loses to hdrg fit's when it raises a figure by more than 2 %
+VERSUS_KEYS = ("std100_dph", "std_dph", "start_std_dph", "start_rep_dph", "served_share")
+VERSUS_NAMES = {"std100_dph": "std of 100-s averages", "std_dph": "std of 1-s averages",
+                "start_std_dph": "start window's stability", "start_rep_dph": "0-5 min repeatability",
+                "served_share": "share of the samples served"}
+
+
+def versus_fit(train, hold, fitted, final, refit_final, opts, terms, term) -> dict:
+    """The loop's final model against ``fitted`` (hdrg fit's model of ``train``, the loop's start) on
+    every figure the loop reports (VERSUS_KEYS: the std of 100-s and of 1-s averages and, where the
+    runs start at a power-on and last 45 min, the start window's stability and the 0-5 min
+    repeatability): on the held-out runs (``hold``) when there are any, else leaving one training
+    run out (both refitted on the others: hdrg fit's model by :func:`base_model`, the loop's by
+    ``refit_final`` on the others with the power-on ``term`` taken out and put back; None: the
+    final model as it is), else not compared.  ``kept`` is 'fit' when the final model raises any
+    figure by more than FIT_TOL (``why`` names them), else 'loop'.  The runs as given (no step 0)."""
+    if hold:
+        fb, fl = step_errors(hold, fitted, final)
+        on = "the held-out runs"
+    elif len(train) >= 2:
+        pairs = []
+        fs = fitted.config.rate.fs
+        for i, log in enumerate(train):
+            others = [lg for j, lg in enumerate(train) if j != i]
+            f_i = base_model(others, opts, terms)[0]
+            if refit_final is None:
+                l_i = final
+            else:
+                inner = others
+                if len(others) >= 2 and f_i.fit.get("run_offsets", {}).get("offsets_dph"):
+                    inner = without_run_offsets(others, run_offsets(others, f_i))
+                if term is not None:
+                    inner = [without_term(lg, *term, fs) for lg in inner]
+                l_i = refit_final(inner)
+                l_i = with_decay(l_i, *term) if term is not None else l_i
+            pairs.append(step_errors([log], f_i, l_i))
+        fb, fl = pooled_step_errors(pairs)
+        on = "each training run left out"
+    else:
+        return {"on": None, "kept": "loop", "why": "one training run and no held-out run: not compared", "figures": {}}
+    figures = {k: {"fit": fb.get(k), "loop": fl.get(k)} for k in VERSUS_KEYS}
+    worse = worse_figures(fb, fl, VERSUS_KEYS, FIT_TOL)
+    why = "; ".join(f"{VERSUS_NAMES[k.split(' (')[0]]}{k[len(k.split(' (')[0]):]} {fmt_value(b)} -> {fmt_value(a)}"
+                    + ("" if k.startswith("served") else " deg/h") for k, b, a in worse)
+    return {"on": on, "tolerance": FIT_TOL, "figures": figures, "kept": "fit" if worse else "loop",
+            "why": (why + f" ({on})") if worse else None}
+
+
+SECOND_PASS_FLOOR = 2.0   # the second pass (without hdrg fit's k7) runs when the held-out error is above this x the noise floor
+SERVED_MIN_G = 0.05   # an effect step whose terms stay below this (|g|) on every served sample changes the fit only
+
+
+def served_size(logs, model, terms) -> float:
+    """The largest |g| of the generator ``terms`` (each at weight 1) over the samples ``model``'s
+    output serves on ``logs``: how much of the term the user's output can ever carry."""
+    from host_tools.golden.compensate import compensate as _compensate
+    from host_tools.golden.regressors import generator_values
+    fs = model.config.rate.fs
+    top = 0.0
+    for log in logs:
+        valid = np.asarray(_compensate(log, model)["valid"]) > 0
+        if valid.any():
+            top = max(top, max(float(np.max(np.abs(generator_values(log, t, fs)[valid]))) for t in terms))
+    return top
+
+
 def _metric_text(entry) -> str:
     """The step's outcome with its metric named, for the progress lines: the held-out error
     (diagnose_confirm.HELDOUT_METRIC) before -> after, or without held-out runs the training one."""
@@ -305,7 +391,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
              terms=None, combiner=None, order=None, settle_s=None, proxy_range=None, rate_range=None,
              max_iter=MAX_ITER, n_surrogates=N_SURROGATES, g_min=G_MIN, cv_blocks=CV_BLOCKS,
              cv_folds=CV_FOLDS, seed=0, families=None, max_tries=None, rate_alternatives=True, out_dir=None,
-             plots=True, progress=None, phases=None) -> tuple:
+             plots=True, progress=None, phases=None, _without_block=False, _fitted=None) -> tuple:
     """Run the closed loop (module doc) on RunLogs.  Returns ``(report, model)``: the report dict
     (the JSON of the module doc) and the final BiasModel (the last step confirmed on the held-out
     runs; without held-out runs the last accepted one).  With ``out_dir`` the files are written
@@ -324,20 +410,25 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     opts = base_options(proxy=proxy, rate_estimator=rate_estimator, rate_n=rate_n, rate_shift=rate_shift,
                         combiner=combiner, order=order, settle_s=settle_s, proxy_range=proxy_range,
                         rate_range=rate_range, reversal=rev)
-    train_in, hold_in = train, hold
-    train, hold, given, term = taken_from_fit(train, hold, opts, terms)
+    train_in, hold_in, opts0 = train, hold, opts
+    say(f"fitting hdrg fit's model of {len(train)} training run(s): the loop's start")
+    fitted, cfg = base_model(train, opts, terms) if _fitted is None else (_fitted, _fitted.config)
+    train, hold, given, term = taken_from_fit(train, hold, fitted)
     given["text"] = taken_text(given)
     if given["text"]:
         say(given["text"])
+    families_in = families
     if term is not None:     # the loop does not offer a second power-on term, and keeps k7 room for it
         families = tuple(f for f in (FAMILIES if families is None else families) if f != "turn_on")
-    say(f"fitting the base model on {len(train)} training run(s)")
-    model, cfg = base_model(train, opts, terms)
+    model, cfg, gen_terms = start_model(train, fitted, term, opts, terms, with_block=not _without_block)
+    start_block = bool(fit_block(model))
     if all(opts.get(k) is None for k in RATE_KEYS):
         # keep the rate estimator `hdrg fit` chose (auto on MR): every later refit builds its config
         # from opts, which must not fall back to DEFAULT_RATE behind the step's back
         r = cfg.rate
         opts = {**opts, "rate_estimator": r.estimator, "n": r.n, "shift": r.shift}
+    if opts.get("proxy_kind") is None:
+        opts = {**opts, "proxy_kind": cfg.proxy.kind}
     poly = poly_terms(model)
     evals = hold if hold else train
     where = confirmation(train, hold)
@@ -345,7 +436,6 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     checked_on = "on the held-out runs" if hold else where or "on the training runs"
     rng = np.random.default_rng(seed)
     accepted: list[Accepted] = []
-    gen_terms: list = []
     rate_choice = None
     iterations = []
     stopped = None
@@ -429,7 +519,11 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                 cb, ca = step_errors(evals, before_model, model)     # the one metric (HELDOUT_METRIC)
             confirmed = confirmed_on_holdout(cb, ca) if checked else None
             material = (confirmed and material_on_holdout(cb, ca)) if checked else None
-            entry = {"effect": acc.family, "params": acc.params, "kind": kind_of(acc.family, acc.params),
+            kind = kind_of(acc.family, acc.params)
+            unserved = kind == "effect" and acc.terms and served_size(evals, model, acc.terms) < SERVED_MIN_G
+            if unserved:      # the term is ~0 wherever the output is served: it changes the fit, not the output
+                kind = "structure"
+            entry = {"effect": acc.family, "params": acc.params, "kind": kind,
                      "before": clean_stats(before), "after": clean_stats(after), "confirmed": confirmed, "material": material,
                      "heldout_error": step_metric(cb, ca),
                      "train_before": clean_stats(error_stats(train, before_model)) if hold else clean_stats(before),
@@ -439,6 +533,11 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
                      "ranking": scan["ranking"], "null_max": scan["null_max"],
                      "aux": model.config.aux.to_dict(), "rate": model.config.rate.to_dict(),
                      "before_runs": before["runs"], "after_runs": after["runs"]}
+            if unserved:
+                entry["fit_only"] = (f"its term is below {SERVED_MIN_G:g} of its size on every sample the output "
+                                     f"serves (e.g. a decay over the first mode window after power-on, which the "
+                                     f"per-mode fit uses and the combined output does not serve): it changes how the "
+                                     f"model is fitted, not the output, so it is counted as structure")
             entry["caveat"] = line_or_drift(acc.family, acc.params, train)
             entry["rivals"] = rivals(scan["ranking"], best)
             entry["_plot"] = (before_model, model, best)
@@ -484,29 +583,81 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
         stops[phase] = stopped
     stopped = stops.get("effect") or stops.get("structure")
     loop_train, loop_hold = train, hold
-    final_model = with_decay(model, term[0], term[1]) if term is not None else model   # what is written
+    changed = bool(accepted)
+    final_model = fitted if not changed else with_decay(model, term[0], term[1]) if term is not None else model
     floor, chosen = cubic_floor(train_in, hold_in, final_model) if hold else (None, final_model)
     if floor and floor.get("replaced"):
         say(f"the final model's held-out error {floor['model_dph']:.4g} deg/h is above {FLOOR_RATIO:g} x the "
             f"flight stack's cubic ({floor['cubic_dph']:.4g} deg/h): the cubic is the final model")
-        model, train, hold, evals = chosen, train_in, hold_in, hold_in
+    versus = None
+    if changed and not (floor and floor.get("replaced")):
+        refit_final = lambda runs: refit_with(runs, loop_config(runs, opts, rate=rate_choice), poly, gen_terms)[0]   # noqa: E731
+        versus = versus_fit(train_in, hold_in, fitted, chosen, refit_final, opts0, terms, term)
+        if versus["kept"] == "fit":
+            say(f"the loop's final model loses to hdrg fit's on {versus['why']}: hdrg fit's model is the final model")
+            chosen = fitted
+    if chosen is not final_model or not changed:
+        # the cubic or hdrg fit's model: judged on the runs as given
+        model, train, hold, evals = chosen, train_in, hold_in, (hold_in if hold_in else train_in)
     # else the loop's model without the term on the loop's runs: the final model's output on the runs as given
     final = error_stats(evals, model)
     verdict = verdict_of(iterations)
+    detail = verdict_detail_text(iterations, where)
+    if versus and versus["kept"] == "fit":
+        for entry in iterations:
+            if entry.get("confirmed"):
+                entry["undone"] = True
+                entry["status"] += "; undone: the final model lost to hdrg fit's"
+        verdict = NOT_KEPT
+        detail = (f"steps held one by one ({verdict_of(iterations)}: {detail}), but the final model lost to hdrg fit's "
+                  f"on {versus['why']}: hdrg fit's model is written")
     final_train = error_stats(train, model) if hold else final
     report.update({"iterations": iterations, "final": clean_stats(final), "final_runs": final["runs"],
                    "final_train": clean_stats(final_train),
                    "generalization": generalization(heldout_score(final_train)[0], heldout_score(final)[0]) if hold else None,
                    "several_runs": several_runs_caveat(len(train)),
                    "extrapolation": extrapolation(final) if hold else [],
-                   "verdict": verdict, "verdict_detail": verdict_detail_text(iterations, where), "cubic_floor": floor,
+                   "verdict": verdict, "verdict_detail": detail, "cubic_floor": floor, "versus_fit": versus,
+                   "final_is": "hdrg fit's model" if chosen is fitted else "the flight stack's cubic"
+                   if floor and floor.get("replaced") else "the loop's model",
                    "artifacts": artifacts, "stopped": stopped, "characterization": characterization})
     model = chosen
-    model.fit["diagnose"] = {"taken_from_fit": given["text"], "effects": [] if floor and floor.get("replaced") else
-                             [{"effect": a.family, "params": a.params} for a in accepted],
-                             "verdict": report["verdict"]}
+    written = [] if chosen is fitted or (floor and floor.get("replaced")) else accepted
+    model.fit["diagnose"] = {"taken_from_fit": given["text"], "effects": [{"effect": a.family, "params": a.params}
+                                                                          for a in written],
+                             "verdict": report["verdict"], "final_is": report["final_is"]}
+    nf = report["noise_floor"]["std100_dph"] if report["final"].get("std100_dph") is not None else report["noise_floor"]["std_dph"]
+    far = nf is None or (heldout_score(report["final"])[0] or 0.0) > SECOND_PASS_FLOOR * nf
+    if hold and start_block and not _without_block and max_iter > 0 and far:
+        say("the loop again from hdrg fit's model without its k7 sum (a lag-state block fitted to the training "
+            "runs can hide an effect from the scan)")
+        alt_rep, alt_model = diagnose(train_in, hold_in, proxy=proxy, rate_estimator=rate_estimator, rate_n=rate_n,
+                                      rate_shift=rate_shift, terms=terms, combiner=combiner, order=order,
+                                      settle_s=settle_s, proxy_range=proxy_range, rate_range=rate_range,
+                                      max_iter=max_iter, n_surrogates=n_surrogates, g_min=g_min, cv_blocks=cv_blocks,
+                                      cv_folds=cv_folds, seed=seed, families=families_in, max_tries=max_tries,
+                                      rate_alternatives=rate_alternatives, plots=False, progress=progress,
+                                      phases=phases, _without_block=True, _fitted=copy.deepcopy(fitted))
+        if alt_rep["final_is"] == "the loop's model":
+            sb, sa = step_errors(hold_in, model, alt_model)
+            if confirmed_on_holdout(sb, sa):
+                say(f"without hdrg fit's k7 the loop ends better on the held-out runs ({_metric_text({'confirmed': True, 'heldout_error': step_metric(sb, sa), 'before': sb})}): "
+                    f"its model replaces it")
+                alt_rep["fit_block_replaced"] = {
+                    "why": "the loop from hdrg fit's model without its k7 sum (lag-state block) ended better on the "
+                           "held-out runs than the loop from the model with it (judged as a step: confirm_rule)",
+                    "with_block": step_metric(sb, sa)["before"], "without_block": step_metric(sb, sa)["after"],
+                    "with_block_iterations": [{k: it[k] for k in ("effect", "params", "kind", "confirmed")}
+                                              for it in iterations]}
+                alt_rep["verdict_detail"] += ("; hdrg fit's lag-state block was left out: the loop without it "
+                                              "ended better on the held-out runs")
+                alt_rep["baseline_without_block"] = alt_rep["baseline"]
+                alt_rep["baseline"] = report["baseline"]      # the figures of hdrg fit's model come first
+                report, model = alt_rep, alt_model
     if out_dir is not None:
         write_report(report, model, out_dir, loop_train, loop_hold, plots=plots)
+    for entry in report["iterations"]:
+        entry.pop("_plot", None)
     for entry in iterations:
         entry.pop("_plot", None)
     return report, model

@@ -8,10 +8,12 @@ effect) and
 :func:`noise_floor`."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from host_tools.fitting import metrics
-from host_tools.golden.compensate import compensate, prepare, residual
+from host_tools.golden.compensate import compensate, prepare, residual, starts_at_power_on
 from host_tools.golden.flags import problems
 from host_tools.golden.model import BiasModel
 
@@ -20,11 +22,17 @@ REPORT_TAUS = (1.0, 100.0)
 CONFIRM_MIN_DROP = 0.05      # a confirmed step lowers the held-out error by >= 5 % ...
 CONFIRM_TOL_1S = 0.01        # ... and raises the held-out 1-s std by at most 1 %
 CONFIRM_TOL_RMS = 0.05      # ... and raises no held-out run's leg rms (mean offsets included) by more than 5 %
+CONFIRM_TOL_SERVED = 0.005  # ... and lowers no held-out run's served share (valid outputs / samples) by more than 0.5 % of the samples
+CONFIRM_TOL_START = 0.02    # ... and, where held-out runs start at a power-on, raises neither start-up figure by more than 2 %
 RMS_MIN_SAMPLES = 10         # a leg (gap-free segment) needs this many valid samples to count
 CONFIRM_RULE = ("a step is confirmed iff, on the held-out runs, the std of 100-s averages (1-s where "
                 "100 s is undefined) drops by >= 5 %, the std of 1-s averages rises by at most 1 % and, per "
                 "held-out run, the leg rms (quadratic mean over its gap-free segments of each segment's rms, "
-                "mean offset included) rises by at most 5 %; an unconfirmed step is reverted and its family "
+                "mean offset included) rises by at most 5 %; where held-out runs start at a power-on and last "
+                "45 min, neither start-up figure (the start window's stability, 1 sigma of 100-s means 180 s .. "
+                "45 min, and the 0-5 min repeatability, rms over those runs) rises by more than 2 % and more than "
+                "0.1 x its white-noise level, and no held-out run's output serves a share of its samples lower by more "
+                "than 0.005; an unconfirmed step is reverted and its family "
                 "not offered again (a periodic step: the periods within a factor 2^(1/2) of its period)")
 EFFECT_MIN_DROP = 0.18       # an effect is NAMED ("effect found") only when its step lowers the held-out error >= 18 %
 EFFECT_RULE = ("a confirmed step of kind 'effect' names an effect (verdict \"effect found\") only when it lowers the "
@@ -39,7 +47,9 @@ EFFECT_RULE = ("a confirmed step of kind 'effect' names an effect (verdict \"eff
 # error statistics
 # ---------------------------------------------------------------------------------------------
 
-STAT_KEYS = ("std_dph", "pp_dph", "std100_dph", "pp100_dph", "rms_dph")
+STAT_KEYS = ("std_dph", "pp_dph", "std100_dph", "pp100_dph", "rms_dph", "start_std_dph", "start_rep_dph",
+             "served_share")
+START_KEYS = ("start_std_dph", "start_rep_dph")   # the start-up figures (runs from a power-on, >= 45 min)
 
 
 def leg_rms(y, valid, segments) -> list:
@@ -67,10 +77,17 @@ def stats_one(y, t, valid) -> dict:
 
 
 def _mean_stats(rows) -> dict:
+    """STAT_KEYS over the runs' rows: the mean over runs; ``start_std_dph`` the mean of the runs'
+    start-window stabilities, ``start_rep_dph`` the rms of their 0-5 min means (the repeatability
+    of start-ups); None where no run has the figure."""
     out = {}
     for key in STAT_KEYS:
-        vals = [r[key] for r in rows if r[key] is not None]
-        out[key] = float(np.mean(vals)) if vals else None
+        src = "start_turn_on_dph" if key == "start_rep_dph" else key
+        vals = [r[src] for r in rows if r.get(src) is not None]
+        if key == "start_rep_dph":
+            out[key] = float(np.sqrt(np.mean(np.square(vals)))) if vals else None
+        else:
+            out[key] = float(np.mean(vals)) if vals else None
     return out
 
 
@@ -78,22 +95,60 @@ def error_stats(logs, model: BiasModel, other: BiasModel | None = None) -> dict:
     """The error of ``model`` on ``logs``: the compensated output (host_tools.golden.compensate) judged
     by host_tools.fitting.metrics: ``std_dph``/``pp_dph`` (1 sigma / peak-to-peak of 1-s averages) and
     ``std100_dph``/``pp100_dph`` (100-s averages), deg/h, mean over the logs (None where no log
-    supports that tau); ``runs`` holds the per-run values.  With ``other``, only the samples
+    supports that tau); ``served_share`` the share of the samples the output serves; the start-up
+    figures ``start_std_dph``/``start_rep_dph`` over the logs that are start-ups (:func:`start_stats`);
+    ``runs`` holds the per-run values.  With ``other``, only the samples
     valid under both models count (a longer rate warm-up must not win by hiding samples)."""
     rows = []
     for log in logs:
         out = compensate(log, model)
         valid = np.asarray(out["valid"]) == 1
+        served = _served(valid)
         if other is not None:
             valid &= np.asarray(compensate(log, other)["valid"]) == 1
-        rows.append(_run_row(log, out, valid))
+        rows.append(_run_row(log, out, valid, model, served))
     return {**_mean_stats(rows), "runs": rows}
 
 
-def _run_row(log, out, valid) -> dict:
-    """One run's row of :func:`error_stats`: ``out`` (compensated ``log``) judged on ``valid``."""
-    return {"run": log.source, **stats_one(out.rate_dph, log.t_s, valid),
+def _served(valid) -> float:
+    """The share of a run's samples that a model's output serves (its own valid flags)."""
+    return float(np.mean(valid)) if len(valid) else 0.0
+
+
+def _run_row(log, out, valid, model, served) -> dict:
+    """One run's row of :func:`error_stats`: ``out`` (compensated ``log``) judged on ``valid``;
+    ``served_share`` the share of the run's samples the model's own output serves; the start-up
+    figures where ``log`` is a start-up (:func:`start_stats`, ``model``'s proxy)."""
+    return {"run": log.source, "served_share": served, **stats_one(out.rate_dph, log.t_s, valid),
+            **start_stats(log, out.rate_dph, valid, model.config.proxy),
             "rms_legs_dph": leg_rms(out.rate_dph, valid, log.segments), "problems": problems(out)}
+
+
+START_STILL = 0.1    # a start-up: the proxy moves over less than this share of the calibrated range in its first 45 min
+
+
+def start_stats(log, y, valid, proxy) -> dict:
+    """The start-up figures of one run's output ``y`` [deg/h] (host_tools.fitting.metrics.start_figures):
+    ``start_std_dph`` (the stability of 100-s means from 180 s to 45 min after power-on, less the
+    40-45 min mean) and ``start_turn_on_dph`` (the 0-5 min mean less the same), for a START-UP:
+    a run recorded from its power-on (host_tools.fitting.turn_on.starts_at_power_on) over at least
+    45 min at a constant ambient, i.e. whose proxy moves over less than START_STILL of the
+    calibrated range (``proxy``: the model's ProxyConfig, 2 x span) in those 45 min (a chamber
+    run's first 45 min judge its temperature compensation, which the other figures do); None
+    otherwise."""
+    none = {"start_std_dph": None, "start_turn_on_dph": None}
+    if not starts_at_power_on(log) or proxy.column not in log:
+        return none
+    t = np.asarray(log.t_s, np.float64) - float(log.t_s[0])
+    first = (t < metrics.START_LATE_S[1]) & (np.asarray(log.mode) != 3)
+    p = np.asarray(log[proxy.column], np.float64)[first]
+    p = p[np.isfinite(p)]
+    if not len(p) or float(np.ptp(p)) > START_STILL * 2.0 * proxy.span:
+        return none
+    f = metrics.start_figures(log.t_s, y, valid, end_s=metrics.START_LATE_S[1])
+    if not (np.isfinite(f["stability"]) and np.isfinite(f["turn_on"])):
+        return none
+    return {"start_std_dph": f["stability"], "start_turn_on_dph": f["turn_on"]}
 
 
 def residuals(logs, model):
@@ -139,8 +194,8 @@ def step_errors(logs, before: BiasModel, after: BiasModel) -> tuple:
     for log in logs:      # each model compensated once per run (error_stats(logs, a, b) twice would do it twice)
         out_b, out_a = compensate(log, before), compensate(log, after)
         valid = (np.asarray(out_b["valid"]) == 1) & (np.asarray(out_a["valid"]) == 1)
-        rows_b.append(_run_row(log, out_b, valid))
-        rows_a.append(_run_row(log, out_a, valid))
+        rows_b.append(_run_row(log, out_b, valid, before, _served(np.asarray(out_b["valid"]) == 1)))
+        rows_a.append(_run_row(log, out_a, valid, before, _served(np.asarray(out_a["valid"]) == 1)))
     return {**_mean_stats(rows_b), "runs": rows_b}, {**_mean_stats(rows_a), "runs": rows_a}
 
 
@@ -183,7 +238,46 @@ def confirmed_on_holdout(before, after) -> bool:
         return False
     return bool(p1 <= p0 * (1.0 - CONFIRM_MIN_DROP)
                 and (s0 is None or s1 is None or s1 <= s0 * (1.0 + CONFIRM_TOL_1S))
-                and offsets_hold(before, after))
+                and offsets_hold(before, after)
+                and not worse_figures(before, after, START_KEYS + ("served_share",), CONFIRM_TOL_START))
+
+
+START_NOISE_SHARE = 0.1    # a start-up figure is worse only when it also rises by > this x its white-noise level
+# the white-noise level of a start-up figure, as a multiple of the output's std of 1-s averages:
+# a 100-s mean (the start window's stability) and the 120-s mean over 180..300 s (the repeatability)
+START_NOISE = {"start_std_dph": 1.0 / math.sqrt(100.0), "start_rep_dph": 1.0 / math.sqrt(120.0)}
+
+
+def worse_figures(before, after, keys, tol: float) -> list:
+    """The figures of ``keys`` (error_stats keys) that ``after`` raises by more than ``tol``
+    (relative) over ``before``: [(key, before, after)]; a figure either side lacks is not compared.
+    The start-up figures (START_KEYS) are compared per run too (``runs`` in the same order: each
+    power-on's start window and |0-5 min mean|; key ``<key> (<run>)``): a step that serves the
+    chamber runs better must not serve a start-up at room temperature worse.  A start-up figure
+    of one power-on moves with the noise of a few 100-s means, so it counts as raised only when
+    it also rises by more than START_NOISE_SHARE x its white-noise level (START_NOISE x the std of
+    1-s averages of ``before``'s run, an upper bound on the white noise)."""
+    out = []
+
+    def check(k, b, a, std1, name=None):
+        if b is None or a is None:
+            return
+        if k == "served_share":      # higher is better: an absolute share of the samples
+            bad = a < b - CONFIRM_TOL_SERVED
+        else:
+            slack = START_NOISE_SHARE * START_NOISE[k] * (std1 or 0.0) if k in START_NOISE else 0.0
+            bad = a > b * (1.0 + tol) + slack
+        if bad:
+            out.append((k if name is None else f"{k} ({name})", b, a))
+
+    for k in keys:
+        check(k, before.get(k), after.get(k), before.get("std_dph"))
+    for rb, ra in zip(before.get("runs", []), after.get("runs", [])):
+        for k, src in (("start_std_dph", "start_std_dph"), ("start_rep_dph", "start_turn_on_dph"),
+                       ("served_share", "served_share")):
+            if k in keys and rb.get(src) is not None and ra.get(src) is not None:
+                check(k, abs(rb[src]), abs(ra[src]), rb.get("std_dph"), rb.get("run"))
+    return out
 
 
 def material_on_holdout(before, after) -> bool:

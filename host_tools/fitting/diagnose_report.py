@@ -19,7 +19,8 @@ from host_tools.golden.regressors import generator_values
 
 
 VERDICTS = ("effect found", "model structure improved", "minor improvement confirmed", "no confirmed effect",
-            "no significant missing effect")
+            "no significant missing effect", "hdrg fit's model kept")
+# the last: steps held one by one, but the final model lost to hdrg fit's on a figure (diagnose.versus_fit)
 
 
 def is_minor(step) -> bool:
@@ -153,8 +154,11 @@ def _stats_line(s):
     return " | ".join(fmt_value(s.get(k)) for k in STAT_KEYS)
 
 
+VERSUS_LABELS = {"std100_dph": "std 100 s [deg/h]", "std_dph": "std 1 s [deg/h]",
+                 "start_std_dph": "start-up 1 sigma [deg/h]", "start_rep_dph": "0-5 min repeatability [deg/h]",
+                 "served_share": "served share"}
 STAT_HEADERS = {"std_dph": "std 1 s", "pp_dph": "p-p 1 s", "std100_dph": "std 100 s", "pp100_dph": "p-p 100 s",
-                "rms_dph": "rms"}
+                "rms_dph": "rms", "start_std_dph": "start 1 sigma 100 s", "start_rep_dph": "0-5 min repeatability", "served_share": "served"}
 TABLE_HEADER = ("iteration", "effect", "params", *(STAT_HEADERS[k] for k in STAT_KEYS), "CV gain", "threshold",
                 "held-out")
 
@@ -214,6 +218,20 @@ def markdown(doc, model) -> str:
     lines += ["", f"{doc['verdict_detail']}.  Confirmation: {doc['confirm_rule']}."]
     if (doc.get("taken_from_fit") or {}).get("text"):
         lines += ["", f"Before the loop: {doc['taken_from_fit']['text']}."]
+    if doc.get("final_is"):
+        lines += ["", f"The model written: {doc['final_is']} (the base model is hdrg fit's model of the training runs)."]
+    vs = doc.get("versus_fit") or {}
+    if vs.get("figures"):
+        cells = "; ".join(f"{VERSUS_LABELS.get(k, k)} {fmt_value(f['fit'])} -> {fmt_value(f['loop'])}"
+                          for k, f in vs["figures"].items() if f["fit"] is not None and f["loop"] is not None)
+        lines += ["", f"Against hdrg fit's model ({vs['on']}; hdrg fit -> the loop): {cells}"
+                      + (f".  Lost on {vs['why']}: hdrg fit's model is written." if vs["kept"] == "fit" else ".")]
+    if doc.get("fit_block_replaced"):
+        fb = doc["fit_block_replaced"]
+        lines += ["", f"Second pass: {fb['why']}: {fmt_value(fb['with_block'])} -> {fmt_value(fb['without_block'])} deg/h "
+                      f"(std of 100-s averages); the first pass's steps: "
+                      + (", ".join(f"{it['effect']} ({'kept' if it['confirmed'] else 'reverted'})"
+                                   for it in fb["with_block_iterations"]) or "none") + "."]
     fl = doc.get("cubic_floor") or {}
     if fl.get("cubic_dph") is not None and fl.get("model_dph") is not None:
         lines += ["", f"Floor: the flight stack's cubic in temperature gives {fmt_value(fl['cubic_dph'])} deg/h on the held-out "

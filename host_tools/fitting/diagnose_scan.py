@@ -226,14 +226,45 @@ def design_matrix(pr, poly, gen_cols):
     return _banked(pr, np.column_stack([X] + list(gen_cols)) if gen_cols else X)
 
 
+FIT_BLOCK = "fit_block"   # a gen_terms entry: the k7 sum of the starting model (hdrg fit's), one column
+
+
+def fit_block(model) -> list:
+    """The starting model's k7 as gen_terms: [] when it has no k7 generators, else one entry
+    ``{"gen": FIT_BLOCK, "terms": [...]}`` whose column is that k7 sum (its terms at their weights):
+    the loop refits it as ONE column beside its own generators, so `hdrg fit`'s lag block and
+    power-on term keep their shape (and a regress_first lag block its sign twins)."""
+    if K_AUX not in model.terms or not model.config.aux.terms:
+        return []
+    return [{"gen": FIT_BLOCK, "terms": [dict(t) for t in model.config.aux.terms]}]
+
+
+def gen_column(log, term, fs) -> np.ndarray:
+    """One gen_terms column of ``log``: a generator term's values, or a FIT_BLOCK's weighted sum."""
+    if term.get("gen") == FIT_BLOCK:
+        return sum(t["weight"] * generator_values(log, t, fs) for t in term["terms"])
+    return generator_values(log, term, fs)
+
+
+def chip_terms(gen_terms) -> list:
+    """The chip's k7 terms of ``gen_terms`` (a FIT_BLOCK expanded to its terms)."""
+    return [t for g in gen_terms for t in (g["terms"] if g.get("gen") == FIT_BLOCK else [g])]
+
+
+def _same_term(a, b) -> bool:
+    strip = lambda t: json.dumps({k: v for k, v in t.items() if k != "weight"}, sort_keys=True, default=str)   # noqa: E731
+    return strip(a) == strip(b)
+
+
 def explicit_weights(train, cfg, poly, gen_terms) -> list:
-    """Refit poly terms + every generator as its own column (training valid samples, lstsq);
-    return the generator terms with weights c_j / sum |c_j| (|z| <= 1)."""
+    """Refit poly terms + every generator as its own column (a FIT_BLOCK as one column; training
+    valid samples, lstsq); return the chip's k7 terms with weights c_j / sum |c_j| (|z| <= 1; a
+    FIT_BLOCK's terms at its coefficient times their weights)."""
     fs = cfg.rate.fs
     Xs, ys = [], []
     for log in train:
         pr = prepare(log, replace(cfg, aux=AuxConfig()))
-        cols = [generator_values(log, t, fs) for t in gen_terms]
+        cols = [gen_column(log, t, fs) for t in gen_terms]
         X = design_matrix(pr, poly, cols)
         Xs.append(X[fit_mask(pr)])
         ys.append(pr.y[fit_mask(pr)])
@@ -245,10 +276,16 @@ def explicit_weights(train, cfg, poly, gen_terms) -> list:
     m = len(poly) + len(gen_terms)
     banks = [c[b * m + len(poly):(b + 1) * m] for b in range(len(c) // m)]
     cg = max(banks, key=lambda b: float(np.sum(np.abs(b))))   # regress_first: the larger bank's ratios
-    total = float(np.sum(np.abs(cg)))
+    flat = []
+    for t, cj in zip(gen_terms, cg):
+        if t.get("gen") == FIT_BLOCK:
+            flat += [{**u, "weight": float(cj * u["weight"])} for u in t["terms"]]
+        else:
+            flat.append({**t, "weight": float(cj)})
+    total = float(sum(abs(t["weight"]) for t in flat))
     if not total > 0:
         raise ValueError("the accepted generators have zero weight in the explicit refit")
-    return [{**t, "weight": float(cj / total)} for t, cj in zip(gen_terms, cg)]
+    return [{**t, "weight": t["weight"] / total} for t in flat]
 
 
 def refit_with(train, cfg, poly, gen_terms):
@@ -353,7 +390,7 @@ def scan_candidates(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_bl
     kept free for a term the final model adds."""
     fs = cfg.rate.fs
     preps = [prepare(log, replace(cfg, aux=AuxConfig())) for log in train]
-    gen_cols = [[generator_values(log, t, fs) for t in gen_terms] for log in train]
+    gen_cols = [[gen_column(log, t, fs) for t in gen_terms] for log in train]
     X_logs = [design_matrix(pr, poly, gc) for pr, gc in zip(preps, gen_cols)]
     valid = [fit_mask(pr) for pr in preps]
     # base fit on all training data: residual per log
@@ -409,13 +446,13 @@ def scan_candidates(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_bl
         cands += [effects.periodic(float(p)) for p in grid[grid <= PERIOD_GRID_MAX_FRACTION * dur]
                   if not artifact_of(float(p), clines) and all(abs(p / q - 1.0) > 0.05 for q in periods)]
     # drop candidates equal to an accepted generator
-    have = [json.dumps(t, sort_keys=True) for t in gen_terms]
-    cands = [c for c in cands if not any(json.dumps(t, sort_keys=True) in have for t in c.terms)
+    have = chip_terms(gen_terms)
+    cands = [c for c in cands if not any(_same_term(t, h) for t in c.terms for h in have)
              and not _excluded(c, excluded)
              and (phase is None or phase_of(c.family, c.params) == phase or c.family in also)]
     # the model goes to the firmware: its k7 sum holds at most AUX_MAX_TERMS terms, so a candidate
     # that would not fit beside the accepted ones is not offered (the report says how many)
-    room = AUX_MAX_TERMS - reserved - len(gen_terms)
+    room = AUX_MAX_TERMS - reserved - len(have)
     n_full = sum(len(c.terms) > room for c in cands)
     cands = [c for c in cands if len(c.terms) <= room]
 
@@ -478,7 +515,7 @@ def scan_candidates(train, cfg, model, poly, gen_terms, rng, n_sur, g_min, cv_bl
            "noise_models": noise_models, "accept": False, "reason": None, "winner": None, "ranking": [],
            "best": None, "threshold": None, "null_max": [],
            "not_offered": (f"{n_full} candidates not offered: the firmware's k7 sum holds at most {AUX_MAX_TERMS} "
-                           f"terms and {len(gen_terms)} are taken" + (f", {reserved} kept free for the power-on term" if reserved else "")
+                           f"terms and {len(have)} are taken" + (f", {reserved} kept free for the power-on term" if reserved else "")
                            if n_full else None)}
     if not rows:
         out["reason"] = "no candidates" + (f" ({out['not_offered']})" if n_full else "")

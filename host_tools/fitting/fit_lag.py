@@ -39,8 +39,9 @@ Choice (:func:`add_lag_block`), on the training runs only:
    info holds ``lag_block``: {"chosen": label or None, "base_cv_rms", "cv_rms", "candidates":
    [{label, screen_cv_rms, refit_cv_rms if refitted}]} (model.json).
 
-Firmware limit: at most 6 terms in the k7 sum (firmware_ref.formats.AUX_MAX_TERMS), hence one tau
-for mode reversal (3 powers x (P, Q)) and at most two taus of order 3 for FTR.
+Size: at most 6 terms in the k7 sum (one tau for mode reversal, 3 powers x (P, Q); at most two taus
+of order 3 for FTR), of the chip's AUX_MAX_TERMS (16, firmware_ref.formats): the rest is room for
+the power-on term and the closed loop's own generators (host_tools.fitting.diagnose).
 """
 from __future__ import annotations
 

@@ -296,6 +296,43 @@ def allan(out_dph, t_s, valid, fs_hz: float | None = None) -> dict:
 
 # -- run logs -----------------------------------------------------------------------------
 
+# -- the first 45 min after power-on (the paper's Table 4; `hdrg bench startup`, the closed loop) -------
+
+START_FIRST_S = 180.0               # the first mode-reversal output after power-on [s]
+START_TURN_ON_S = 300.0             # the turn-on window ends 5 min after power-on [s]
+START_LATE_S = (2400.0, 2700.0)     # the offset baseline: the mean over 40..45 min [s]
+START_BIN_S = 100.0                 # averaging of the start-up stability [s]
+START_MIN_BIN_SHARE = 0.5           # a 100-s mean needs valid samples on at least this share of its span
+
+
+def start_figures(t_s, out, valid, end_s: float | None = None) -> dict:
+    """The start-up figures [deg/h] of one output ``out`` (deg/h) at its ``valid`` samples, ``t_s``
+    the time since power-on [s] (a log recorded from its power-on): from START_FIRST_S to ``end_s``
+    (None: the end of the log), the output less its mean over START_LATE_S: ``stability`` = 1
+    sigma (ddof=1) of the START_BIN_S means (bins from START_FIRST_S on; a bin with valid samples on
+    less than START_MIN_BIN_SHARE of its span is left out), ``variation`` their peak-to-peak,
+    ``mean`` the mean of the valid samples, ``turn_on`` the mean over START_FIRST_S ..
+    START_TURN_ON_S (the repeatability of start-ups is the rms of it over power-ons).  All NaN
+    when the late window holds fewer than 2 valid samples (a log shorter than 45 min)."""
+    t = np.asarray(t_s, np.float64) - float(t_s[0])
+    ok = np.asarray(valid, bool) & np.isfinite(out) & (t >= START_FIRST_S)
+    if end_s is not None:
+        ok &= t < end_s
+    late = ok & (t >= START_LATE_S[0]) & (t < START_LATE_S[1])
+    if late.sum() < 2:
+        return {"stability": float("nan"), "variation": float("nan"), "mean": float("nan"), "turn_on": float("nan")}
+    y = np.asarray(out, np.float64) - float(np.mean(np.asarray(out)[late]))
+    bins = ((t[ok] - START_FIRST_S) // START_BIN_S).astype(np.int64)
+    cnt = np.bincount(bins)
+    rate = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+    full = cnt >= START_MIN_BIN_SHARE * START_BIN_S * rate            # partial bins (the last) left out
+    means = np.bincount(bins, weights=y[ok])[full] / cnt[full]
+    early = ok & (t < START_TURN_ON_S)
+    return {"stability": float(np.std(means, ddof=1)) if len(means) > 1 else float("nan"),
+            "variation": float(np.ptp(means)) if len(means) else float("nan"), "mean": float(np.mean(y[ok])),
+            "turn_on": float(np.mean(y[early])) if early.any() else float("nan")}
+
+
 def _is_compensated(log: RunLog) -> bool:
     return str(log.metadata.get("compensated", "")).strip().lower() in ("yes", "true", "1")
 

@@ -75,6 +75,7 @@ import numpy as np
 
 from firmware_ref.formats import AUX_MAX_TERMS
 from firmware_ref.terms import K_AUX
+from host_tools.golden.compensate import starts_at_power_on  # noqa: F401  (re-exported: the fit's rule)
 
 TAU_GRID_S = (60.0, 85.0, 120.0, 170.0, 240.0, 340.0, 480.0, 680.0, 960.0, 1360.0, 1920.0)   # candidate time constants [s], ratio 2^(1/2)
 MAX_TAU_FRACTION = 0.36     # tau <= this x the shortest training run: 45-min power-ons reach tau 960 s, and 6 % of
@@ -91,7 +92,6 @@ MIN_SIZE_T = 5.0            # the size fitted on all runs: at least this many st
                             # on `hdrg bench startup --seed 1` (turn-ons 7.0 and up, the control's one 2.9)
 
 
-POWER_ON_TOLERANCE_S = 1.0  # a run starts at its power-on when its first t_s is within this (or 2 samples)
 MIN_START_SPREAD = 0.25     # the power-ons' proxies must span this share of the calibrated range ...
 START_PROXY_S = 60.0        # ... each the median proxy over this long after its power-on [s]
 
@@ -108,15 +108,6 @@ def start_spread(logs, proxy) -> float:
         m = (t - t[0] < START_PROXY_S) & np.isfinite(p)
         starts.append(float(np.median(p[m])) if m.any() else float("nan"))
     return float((max(starts) - min(starts)) / (2.0 * proxy.span)) if starts else 0.0
-
-
-def starts_at_power_on(log) -> bool:
-    """True when ``log`` was recorded from its power-on: t_s is the time since power-on
-    (docs/RUN_LOG.md), so its first t_s is within POWER_ON_TOLERANCE_S or two sample periods of 0
-    (a leg cut from a longer run, or a capture started later, is not)."""
-    t = np.asarray(log.t_s, np.float64)
-    period = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
-    return bool(len(t)) and 0.0 <= float(t[0]) <= max(POWER_ON_TOLERANCE_S, 2.0 * period)
 
 
 def window_of(tau_s: float) -> float:
@@ -363,6 +354,29 @@ def with_decay(model, decay, scale: float):
             banks[:, K_AUX] *= total
     return BiasModel(replace(cfg, aux=AuxConfig.from_terms(terms, cfg.rate.fs)),
                      tuple(sorted(set(model.terms) | {K_AUX})), banks[0], dict(model.fit), model.source,
+                     banks[1] if len(banks) > 1 else None)
+
+
+def without_decay(model, decay):
+    """``model`` with the ``decay`` term (and its sign twin) that :func:`with_decay` put in k7 taken
+    out again: the other generators keep their weights and every bank its k7, so their part of
+    the bias is unchanged (k7 leaves the terms when nothing else is in it).  Compensating a log
+    with the result equals compensating it with ``model`` once the term's size is taken out of
+    the log (:func:`without_term`)."""
+    from host_tools.golden.model import BiasModel
+    from host_tools.golden.regressors import AuxConfig
+
+    cfg = model.config
+    key = {k: v for k, v in decay.items() if k not in ("weight", "sign")}
+    keep = [t for t in cfg.aux.terms if {k: v for k, v in t.items() if k in key} != key or t.get("gen") != "decay_on"]
+    banks = np.array(model.banks, np.float64)
+    terms = tuple(model.terms)
+    if keep:
+        aux = AuxConfig.from_terms(keep, cfg.rate.fs)
+    else:
+        aux, terms = AuxConfig(), tuple(k for k in model.terms if k != K_AUX)
+        banks[:, K_AUX] = 0.0
+    return BiasModel(replace(cfg, aux=aux), terms, banks[0], dict(model.fit), model.source,
                      banks[1] if len(banks) > 1 else None)
 
 

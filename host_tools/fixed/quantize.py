@@ -25,7 +25,7 @@ firmware_ref/FORMATS.md):
   exponent 0, a model whose |B| bound exceeds the output word (2^21 deg/h), or a bound on
   |fixed - golden| above ``max_error_dph`` when given.
 
-* **aux generators** (AuxConfig 'sum', table aux_gen 1, FORMATS.md "Aux generators"): at most 6
+* **aux generators** (AuxConfig 'sum', table aux_gen 1, FORMATS.md "Aux generators"): at most 16
   terms and 4 aux_* columns; each aux column gets the largest AF_c in 0..48 with
   ``(|ref| + 2 span) 2^AF_c <= 2^31 - 1`` (:func:`aux_channel_fracs`); input terms are normalized
   like the proxy on their word (F, T or A_c); filter / decay coefficients ``b = 1 - a = B 2^-SB``

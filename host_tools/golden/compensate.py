@@ -258,6 +258,15 @@ def note_host_checks(out, log, model: BiasModel, prep: Prepared | None = None, w
 POWER_ON_TOLERANCE_S = 1.0   # a log starts at its power-on when its first t_s is within this (or 2 samples)
 
 
+def starts_at_power_on(log) -> bool:
+    """True when ``log`` was recorded from its power-on: t_s is the time since power-on
+    (docs/RUN_LOG.md), so its first t_s is within POWER_ON_TOLERANCE_S or two sample periods of 0
+    (a leg cut from a longer run, or a capture started later, is not)."""
+    t = np.asarray(log.t_s, np.float64)
+    period = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    return bool(len(t)) and 0.0 <= float(t[0]) <= max(POWER_ON_TOLERANCE_S, 2.0 * period)
+
+
 def power_on_caveat(log, model: BiasModel) -> str:
     """'' or why ``model``'s time-since-power-on term (an aux ``decay_on`` generator, which counts
     from the log's first sample and restarts after each gap, as the firmware after a restart) does
@@ -265,11 +274,9 @@ def power_on_caveat(log, model: BiasModel) -> str:
     samples), or it has gaps (each restarts the term as if the gyroscope had been powered on)."""
     if not any(t.get("gen") == "decay_on" for t in model.config.aux.terms) or not len(log):
         return ""
-    t = np.asarray(log.t_s, np.float64)
-    period = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
     said = []
-    if not 0.0 <= float(t[0]) <= max(POWER_ON_TOLERANCE_S, 2.0 * period):
-        said.append(f"the log starts at t_s = {float(t[0]):g} s, not at its power-on")
+    if not starts_at_power_on(log):
+        said.append(f"the log starts at t_s = {float(log.t_s[0]):g} s, not at its power-on")
     gaps = len(log.segments) - 1
     if gaps > 0:
         said.append(f"{gaps} gap(s) restart it (first at row {int(log.segments[1])})")

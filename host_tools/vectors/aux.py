@@ -1,5 +1,6 @@
 """The ``aux`` set's case generator: tables with aux generators (aux_gen 1), every kind alone,
-random multi-term tables and a simulated run with a fitted aux model.
+random multi-term tables, tables of up to formats.AUX_MAX_TERMS (16) terms (the longest table: 255
+words) and simulated runs with fitted aux models (3 and 16 terms).
 """
 from __future__ import annotations
 
@@ -152,8 +153,27 @@ def aux_set(rng) -> VectorSet:
         timed = j == 5
         cs.add(f"random_{j}", f"host_tools.vectors.builders.random_aux_model ({est}, {len(t.aux().terms)} terms) and "
                f"aux_stream{', self-timed' if timed else ''}", t, aux_stream(rng, t, 500, reversal=reversal), timed)
-    # a simulated run with a fitted aux model
-    case, cfg = aux_sim_case()
+    # as many generator terms as the firmware holds (formats.AUX_MAX_TERMS = 16): random tables of 7, 10
+    # and 13 terms and a random one of 16 (every kind: the first 7 terms take each kind once), a hand-made
+    # table of 16 terms with every kind on all four aux words (the longest table: 255 words, the last aux
+    # word at address 253), a fitted 16-term model on a simulated run
+    for nt, est in ((7, "diffn"), (10, "iir"), (13, "lsq"), (F.AUX_MAX_TERMS, "diff")):
+        t = quantize_aux(random_aux_model(rng, reversal=True, estimator=est, n_terms=nt))
+        cs.add(f"random_{nt}_terms", f"host_tools.vectors.builders.random_aux_model ({est}, {len(t.aux().terms)} terms "
+               f"of every kind, {t.aux().n_chan} aux words) and aux_stream", t, aux_stream(rng, t, 300))
+    t = quantize_aux(with_aux(base_model, MAX_TERMS_EVERY_KIND))
+    s = _aux_steps(t, 400, rng)
+    s["restart"][[200, 201, 330]] = 1
+    cs.add("max_terms_every_kind", f"hand-made: {len(t.aux().terms)} terms (AUX_MAX_TERMS) of every kind on F, T and "
+           f"all four aux words, {len(t.to_words())} words (the longest table): inputs with and without filters, "
+           f"powers 1..5, signs, a lag block of the proxy, rate, one, both decays, ramp, sin and cos; channel words "
+           f"step and ramp as the single-kind cases, restarts at 200, 201, 330", t, s)
+    log = aux_sim_log()
+    case16, cfg16 = aux_sim16_case(log)
+    cs.add(*case16)
+    # a simulated run with a fitted aux model (the last case: hdrg cost's aux workload)
+    case, cfg = aux_sim_case(log)
+    cfg = {**cfg, "sim_aux_16": cfg16}
     cs.add(*case)
     vs = VectorSet("aux", "tables with aux generators (aux_gen 1): inputs F T R MODE RESTART Z K A0 A1 A2 A3 (MODE "
                    "-1: self-timed), outputs the 16 fields of the protocol's O line (z: the generated z)",
@@ -170,14 +190,47 @@ def quantize_aux(model) -> Table:
 
 
 AUX_SIM = ("paper-mr-cycle-4dpm", 13, 2400.0, {"turn_on": {"amp_dph": 3.0, "tau_s": 300.0}})
+AUX_SIM16_N = 1200          # samples of the 16-term simulated case (the first 20 minutes: the turn-on)
+
+# the hand-made table of AUX_MAX_TERMS terms of every kind (case max_terms_every_kind; base_model's proxy
+# is freq_hz at 6227 +- 3 Hz, its rate the diff): four aux words, F and T, sum |w| = 0.96
+MAX_TERMS_EVERY_KIND = (
+    {"gen": "input", "column": "aux_a", "ref": 2.0e-7, "span": 5.0e-8, "weight": 0.08},
+    {"gen": "input", "column": "aux_b", "ref": 3.3, "span": 0.05, "tau_s": 12.0, "power": 3, "sign": True,
+     "weight": -0.06},
+    {"gen": "input", "column": "aux_c", "ref": -150.0, "span": 40.0, "power": 5, "weight": 0.05},
+    {"gen": "input", "column": "aux_d", "ref": 2.5e5, "span": 1.0e4, "tau_s": 300.0, "power": 2, "weight": -0.07},
+    {"gen": "input", "column": "freq_hz", "ref": 6227.0, "span": 3.0, "tau_s": 60.0, "weight": 0.07},
+    {"gen": "input", "column": "freq_hz", "ref": 6227.0, "span": 3.0, "tau_s": 240.0, "weight": -0.06},
+    {"gen": "input", "column": "freq_hz", "ref": 6227.5, "span": 2.0, "tau_s": 960.0, "power": 2, "weight": 0.05},
+    {"gen": "input", "column": "temp_c", "ref": 25.0, "span": 40.0, "tau_s": 16384.0, "weight": 0.06},
+    {"gen": "input", "column": "temp_c", "ref": -5.0, "span": 0.5, "tau_s": 0.0625, "sign": True, "weight": -0.05},
+    {"gen": "rate", "column": "freq_hz", "estimator": "diff", "span": 0.01, "sign": True, "weight": 0.06},
+    {"gen": "one", "sign": True, "weight": -0.04},
+    {"gen": "decay_on", "tau_s": 4.0, "weight": 0.08},
+    {"gen": "decay_exchange", "tau_s": 6.0, "sign": True, "weight": -0.07},
+    {"gen": "ramp", "n_samples": 300, "weight": 0.06},
+    {"gen": "osc", "period_s": 7.3, "part": "sin", "weight": 0.05},
+    {"gen": "osc", "period_s": 86400.0, "part": "cos", "weight": -0.05},
+)
 
 
-def aux_sim_case() -> tuple:
-    """(the arguments of Cases.add, configuration) of the simulated aux run: host_tools.simulation.sim with an
-    undeclared turn-on transient, a model with a decay_on, a lagged-proxy and a board-temperature
-    term (fixed generator parameters), fitted, rounded to 7 significant digits, quantized."""
+def aux_sim_log():
+    """The simulated run of AUX_SIM (host_tools.simulation.sim, warnings silenced)."""
     import warnings as _warnings
 
+    from host_tools.simulation.sim import simulate
+
+    scenario, seed, duration, undeclared = AUX_SIM
+    with _warnings.catch_warnings():
+        _warnings.simplefilter("ignore")
+        return simulate(scenario, seed=seed, duration_s=duration, undeclared=undeclared)
+
+
+def _fitted_sim_case(log, terms, name: str, what: str, n: int | None = None) -> tuple:
+    """(the arguments of Cases.add, configuration): the model of ``log`` (fit_config_from_logs, combine_first
+    pair, rounded to 7 significant digits) with the aux ``terms`` (a function of the config and the
+    temperature range), fitted on the whole log, quantized; the case is its first ``n`` samples (all)."""
     from host_tools.fixed.fixed_point import log_words
     from host_tools.golden import compensate as hc
     from host_tools.fitting.fit import fit_logs
@@ -185,21 +238,12 @@ def aux_sim_case() -> tuple:
     from host_tools.golden.proxy import ProxyConfig
     from host_tools.golden.rate import RateConfig
     from host_tools.golden.regressors import AuxConfig
-    from host_tools.simulation.sim import simulate
-
-    scenario, seed, duration, undeclared = AUX_SIM
-    with _warnings.catch_warnings():
-        _warnings.simplefilter("ignore")
-        log = simulate(scenario, seed=seed, duration_s=duration, undeclared=undeclared)
     from host_tools.golden.reversal import ReversalConfig
 
+    scenario, seed, duration, undeclared = AUX_SIM
     cfg0 = hc.fit_config_from_logs([log], reversal=ReversalConfig("pair", order="combine_first"))
     tr = (float(np.min(log["temp_c"])), float(np.max(log["temp_c"])))
-    terms = [{"gen": "decay_on", "tau_s": 300.0, "weight": 0.5},
-             {"gen": "input", "column": cfg0.proxy.column, "ref": round_sig(cfg0.proxy.ref),
-              "span": round_sig(cfg0.proxy.span), "tau_s": 900.0, "weight": -0.25},
-             {"gen": "input", "column": "temp_c", "ref": round_sig(0.5 * (tr[0] + tr[1])),
-              "span": round_sig(0.6 * (tr[1] - tr[0])), "tau_s": 60.0, "weight": 0.25, "sign": True}]
+    terms = terms(cfg0, tr)
     cfg = ModelConfig(ProxyConfig(cfg0.proxy.kind, round_sig(cfg0.proxy.ref), round_sig(cfg0.proxy.span)),
                       RateConfig(cfg0.rate.estimator, cfg0.rate.n, cfg0.rate.shift, round_sig(cfg0.rate.span),
                                  cfg0.rate.fs), cfg0.reversal, AuxConfig.from_terms(terms, cfg0.rate.fs))
@@ -208,10 +252,58 @@ def aux_sim_case() -> tuple:
     model = BiasModel(cfg, fitted.terms, coef, source="<vectors aux sim>")
     table = quantize_aux(model)
     w = log_words(log, cfg)
-    s = {"p": w["p"], "r": w["r"], "mode": w["mode"], "restart": w["restart"], "z": w["z"], "f": w["f"],
-         "t": w["t"], "aux": np.zeros((len(log), 0), np.int64), "k": w["k"]}
+    n = len(log) if n is None else n
+    s = {"p": w["p"][:n], "r": w["r"][:n], "mode": w["mode"][:n], "restart": w["restart"][:n], "z": w["z"][:n],
+         "f": w["f"][:n], "t": w["t"][:n], "aux": np.zeros((n, 0), np.int64), "k": w["k"][:n]}
     desc = (f"host_tools.simulation.sim.simulate({scenario!r}, seed={seed}, duration_s={duration:g}, undeclared={undeclared}); "
-            f"aux decay_on + lagged proxy + s x lagged board temperature, fitted, quantized; log-driven")
+            f"{what}, fitted, quantized; log-driven" + ("" if n == len(log) else f", the first {n} samples"))
     config = {"scenario": scenario, "seed": seed, "duration_s": repr(duration), "undeclared": undeclared,
               "model": {"config": cfg.to_dict(), "terms": list(model.terms), "coef": list(model.coef)}}
-    return ("sim_aux", desc, table, s), jsonable_value(config)
+    if n != len(log):
+        config["samples"] = n
+    return (name, desc, table, s), jsonable_value(config)
+
+
+def aux_sim_case(log=None) -> tuple:
+    """(the arguments of Cases.add, configuration) of the simulated aux run: host_tools.simulation.sim with an
+    undeclared turn-on transient, a model with a decay_on, a lagged-proxy and a board-temperature
+    term (fixed generator parameters), fitted, rounded to 7 significant digits, quantized."""
+    def terms(cfg0, tr):
+        return [{"gen": "decay_on", "tau_s": 300.0, "weight": 0.5},
+                {"gen": "input", "column": cfg0.proxy.column, "ref": round_sig(cfg0.proxy.ref),
+                 "span": round_sig(cfg0.proxy.span), "tau_s": 900.0, "weight": -0.25},
+                {"gen": "input", "column": "temp_c", "ref": round_sig(0.5 * (tr[0] + tr[1])),
+                 "span": round_sig(0.6 * (tr[1] - tr[0])), "tau_s": 60.0, "weight": 0.25, "sign": True}]
+
+    return _fitted_sim_case(aux_sim_log() if log is None else log, terms, "sim_aux",
+                            "aux decay_on + lagged proxy + s x lagged board temperature")
+
+
+def aux_sim16_case(log=None) -> tuple:
+    """As :func:`aux_sim_case` with AUX_MAX_TERMS (16) generator terms on the same run, the first
+    AUX_SIM16_N samples: the fitter's lag-state block (the proxy through six filters, 60 .. 1920 s) and
+    the closed loop's effects beside it (decays since power-on and since an exchange, two board-temperature
+    lags, one with s, the squared temperature, u^4, s, a rate term, a ramp, a slow oscillator)."""
+    def terms(cfg0, tr):
+        px = {"column": cfg0.proxy.column, "ref": round_sig(cfg0.proxy.ref), "span": round_sig(cfg0.proxy.span)}
+        tc = {"column": "temp_c", "ref": round_sig(0.5 * (tr[0] + tr[1])), "span": round_sig(0.6 * (tr[1] - tr[0]))}
+        r = cfg0.rate
+        lag = [{"gen": "input", **px, "tau_s": tau, "weight": w}
+               for tau, w in ((60.0, 0.08), (120.0, -0.07), (240.0, 0.07), (480.0, -0.06), (960.0, 0.06),
+                              (1920.0, -0.05))]
+        return lag + [{"gen": "decay_on", "tau_s": 300.0, "weight": 0.1},
+                      {"gen": "decay_exchange", "tau_s": 8.0, "sign": True, "weight": -0.05},
+                      {"gen": "input", **tc, "tau_s": 60.0, "sign": True, "weight": 0.06},
+                      {"gen": "input", **tc, "tau_s": 600.0, "weight": -0.05},
+                      {"gen": "input", **tc, "tau_s": 120.0, "power": 2, "weight": 0.04},
+                      {"gen": "input", **px, "power": 4, "weight": -0.04},
+                      {"gen": "one", "sign": True, "weight": 0.03},
+                      {"gen": "rate", "column": cfg0.proxy.column, "estimator": r.estimator, "n": r.n,
+                       "shift": r.shift, "span": round_sig(4.0 * r.span), "weight": 0.05},
+                      {"gen": "ramp", "n_samples": 900, "weight": -0.04},
+                      {"gen": "osc", "period_s": 1800.0, "part": "sin", "weight": 0.03}]
+
+    return _fitted_sim_case(aux_sim_log() if log is None else log, terms, "sim_aux_16",
+                            f"{F.AUX_MAX_TERMS} aux terms: a lag block of the proxy (6 filters, 60 .. 1920 s), "
+                            f"decay_on, s x decay_exchange, board-temperature lags (s x 60 s, 600 s, squared 120 s), "
+                            f"u^4, s, a rate term, a ramp, a 1800 s sine", AUX_SIM16_N)

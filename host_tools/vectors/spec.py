@@ -9,11 +9,13 @@ from pathlib import Path
 FORMAT_VERSION = 4          # file layout (columns, record layout, manifest keys); 2: the aux set (K, A0..A3);
                             # 3: table layout v2 (73+ words), the evaluator's bank column;
                             # 4: RESTART bit 1 = the input-invalid bit, the validity set (the aux set's columns)
-GENERATOR_VERSION = 6       # the cases and their values; bump when a vector changes; 2: RHUW, SIN, aux;
+GENERATOR_VERSION = 7       # the cases and their values; bump when a vector changes; 2: RHUW, SIN, aux;
                             # 3: regress_first (two banks, residual combiner pair/trend/none)
                             # 4: table layout v3 (the iir's start-up gear, warm-up 1), the iir_gear_log case
                             # 5: the input-invalid bit (the validity set; its aux_gen 1 cases)
                             # 6: table layout v4 (F word LSB 2^-15 Hz), the drive-frequency cases
+                            # 7: AUX_MAX_TERMS 16: aux tables of 7..16 terms (random_<n>_terms,
+                            #    max_terms_every_kind: 255 words, sim_aux_16)
 STALE_MESSAGE = ("vectors are stale: regenerate with `hdrg vectors generate -o vectors/` and bump "
                  "GENERATOR_VERSION/FORMAT_VERSION")
 ROOT = Path(__file__).resolve().parents[2]

@@ -6,11 +6,13 @@
 //                  sample after rst is treated as a restart, as firmware_ref.compensate's `fresh`)
 //   we, waddr,     table word write, the same convention as hdrg_eval_tm.v: word index = the table
 //   wdata          layout address (firmware_ref/table.py, FORMATS.md): word 45 aux_gen, words
-//                  72..143 the aux parameters (72 n_terms, 73 n_chan, 74.. AF_c (ignored: units
-//                  only), then 11 words per term: kind, sign, src, power, weight, c0..c5).  Other
+//                  72..253 the aux parameters (72 n_terms (1..16), 73 n_chan, 74.. AF_c (ignored:
+//                  units only), then 11 words per term: kind, sign, src, power, weight, c0..c5;
+//                  words past the n_terms-th term, the CRC among them, are ignored).  Other
 //                  addresses are ignored.  Write the whole table (aux_gen and every aux word) while
 //                  idle; any write puts the generators back to power-on (next sample = restart).
-//                  waddr is 8 bits (the aux words reach 143).  Write the aux words in ascending
+//                  waddr is 8 bits (the aux words reach 253, the CRC of the longest table 254: 16
+//                  terms, 4 channels, 255 words).  Write the aux words in ascending
 //                  address order (n_chan before the terms, each term's kind word before its
 //                  coefficients: the shift fields are decoded by kind as they arrive), as a loader
 //                  streaming the table does; not in the same cycle as start.
@@ -37,12 +39,11 @@
 //
 // WHEN z IS READY: done comes 2 + OP_CYCLES * (ops + 1) cycles after start (start and first memory
 // read, OP_CYCLES per datapath operation below, the last one `FIN` writes z), ops = the sum over
-// the table's terms of the operation counts in the table below: at most 6 x 13 = 78 (six
-// oscillators; six filtered power-5 input terms: 72); aux_gen 0: 0.
-//   OP_CYCLES = 2 (default): worst case 160 cycles; the aux vector set's tables 6..94 (the fitted
-//     decay + 2 lags of `sim_aux`: 48).  Fmax 14.4 MHz on an UP5K (docs/COST_AUX.md).
-//   OP_CYCLES = 4 (the add and the shift registered): worst case 318; the set 10..186 (`sim_aux`
-//     98); Fmax 18.8 MHz (docs/COST_AUX.md).
+// the table's terms of the operation counts in the table below: at most 16 x 13 = 208 (sixteen
+// oscillators; sixteen filtered power-5 input terms: 192); aux_gen 0: 0.
+//   OP_CYCLES = 2 (default): worst case 2 + 2 x 209 = 420 cycles (`sim_aux`, the fitted decay +
+//     2 lags: 48; the aux vector set's other tables: docs/COST_AUX.md).  Fmax: docs/COST_AUX.md.
+//   OP_CYCLES = 4 (the add and the shift registered): worst case 2 + 4 x 209 = 838 (`sim_aux` 98).
 // Started together with hdrg_eval_tm (whose k7 operation Z begins 116 cycles after its start),
 // z is ready in time for tables of at most 56 operations (OP_CYCLES 2) or 27 (OP_CYCLES 4).
 //
@@ -78,11 +79,11 @@
 //   then     FIN z = clamp(RHU(acc, 30)) (aux_gen 0: clamp(Z))                   1
 // w' = w, -w (sign and m = 2, xor osc quadrant >= 2) or 0 (sign and m = 3; rate in warm-up).
 //
-// Storage: the terms' 32-bit words (weight, c0..c5) in two 64 x 32 memories (two read ports), the
-// small fields (kind, sign, src, power, the shift fields) in an 8 x 22 memory (and the kinds in an
-// 8 x 3 copy, read at the next term), the states Y_j in an
-// 8 x 64 memory (Yosys: 10 SB_RAM40_4K on iCE40), ex_j in registers; the sample's inputs are
-// registered at start.
+// Storage (up to 16 terms, formats.AUX_MAX_TERMS): the terms' 32-bit words (weight, c0..c5) in two
+// 128 x 32 memories (two read ports; address {term, field}), the small fields (kind, sign, src,
+// power, the shift fields) in a 16 x 22 memory (and the kinds in a 16 x 3 copy, read at the next
+// term), the states Y_j in a 16 x 64 memory (Yosys on iCE40: docs/COST_AUX.md), ex_j in
+// registers; the sample's inputs are registered at start.
 //
 // `define HDRG_BREAK_ROUNDING builds a deliberately wrong module (no rounding constants: RHU truncates).
 `timescale 1ns / 1ns
@@ -129,32 +130,36 @@ module hdrg_aux #(
 
     // ---- table: aux_gen, n_terms, n_chan, per-term small fields in registers; 32-bit words in RAM ----
     reg        aux_gen;
-    reg [2:0]  n_terms;
+    reg [4:0]  n_terms;                  // 1..16
     reg [2:0]  n_chan;
     // per term, in a memory: {fb, fa, power, src, sign, kind}; fa: input SH (c3), rate SH_V (c2), ramp
     // SH (c2), osc part (c2); fb: input SB (c5), rate SB (c0), decay SB (c1).  A copy of the kinds
     // (read at the next term).
-    reg [21:0] tf    [0:7];
-    reg [2:0]  tk2   [0:7];
+    reg [21:0] tf    [0:15];
+    reg [2:0]  tk2   [0:15];
     reg [21:0] wst;                      // the fields of the term being written (words in address order)
-    reg [31:0] ram_a  [0:63];            // {term, field}: field 0 weight, 1..6 c0..c5 (two copies:
-    reg [31:0] ram_b  [0:63];            //  two read ports)
-    reg [63:0] yram   [0:7];             // filter / decay state Y_j (Q1.60)
-    reg [7:0]  ex;                       // decay_exchange: an exchange has been seen
+    reg [31:0] ram_a  [0:127];           // {term, field}: field 0 weight, 1..6 c0..c5 (two copies:
+    reg [31:0] ram_b  [0:127];           //  two read ports)
+    reg [63:0] yram   [0:15];            // filter / decay state Y_j (Q1.60)
+    reg [15:0] ex;                       // decay_exchange: an exchange has been seen
 
-    // word -> (term, field) of the aux parameters: rel = waddr - 74 - n_chan
+    // word -> (term, field) of the aux parameters: rel = waddr - 74 - n_chan = 11 wterm + wfld
+    // (rel < 176: 16 terms; wfld = rel - 11 wterm, computed mod 16)
     wire [7:0] rel = waddr - 8'd74 - {5'd0, n_chan};
-    reg  [2:0] wterm;
+    reg  [3:0] wterm;
     reg  [3:0] wfld;
+    integer    ti;
     always @* begin
-        if (rel < 8'd11)      begin wterm = 3'd0; wfld = rel[3:0]; end
-        else if (rel < 8'd22) begin wterm = 3'd1; wfld = rel[3:0] - 4'd11; end
-        else if (rel < 8'd33) begin wterm = 3'd2; wfld = rel[3:0] - 4'd6; end   // rel - 22 (mod 16)
-        else if (rel < 8'd44) begin wterm = 3'd3; wfld = rel[3:0] - 4'd1; end   // rel - 33
-        else if (rel < 8'd55) begin wterm = 3'd4; wfld = rel[3:0] - 4'd12; end  // rel - 44
-        else                  begin wterm = 3'd5; wfld = rel[3:0] - 4'd7; end   // rel - 55
+        wterm = 4'd0;
+        wfld = rel[3:0];
+        for (ti = 1; ti < 16; ti = ti + 1)
+            if (rel >= 8'd11 * ti[7:0]) begin
+                wterm = ti[3:0];
+                wfld = rel[3:0] - 4'd11 * ti[3:0];
+            end
     end
-    wire wterm_ok = (waddr >= 8'd74 + {5'd0, n_chan}) && (rel < 8'd66);
+    // a word of the terms 0 .. n_terms - 1 (the CRC and anything after the last term are ignored)
+    wire wterm_ok = (waddr >= 8'd74 + {5'd0, n_chan}) && (rel < 8'd176) && ({1'b0, wterm} < n_terms);
     // the term's fields after this word (its kind word, field 0, comes first and clears the others)
     reg [21:0] wnew;
     always @* begin
@@ -181,7 +186,7 @@ module hdrg_aux #(
     always @(posedge clk) begin
         if (we) begin
             if (waddr == 8'd45) aux_gen <= wdata[0];
-            if (waddr == 8'd72) n_terms <= wdata[2:0];
+            if (waddr == 8'd72) n_terms <= wdata[4:0];
             if (waddr == 8'd73) n_chan <= wdata[2:0];
             if (wterm_ok) begin
                 wst <= wnew;
@@ -210,7 +215,7 @@ module hdrg_aux #(
                                         // OP_CYCLES 4: 1 add, 2 shift, 3 write
     reg               prime;            // the cycle after start: the memories read the first op's words
     reg [4:0]         op, nop;
-    reg [2:0]         j, nj;
+    reg [3:0]         j, nj;            // term 0..15
     reg [2:0]         cnt;              // power / Horner counter
     reg               ovp, ovn, ge;     // rate clamp above / below, ramp K >= N
     reg [1:0]         quad;             // osc quadrant
@@ -221,7 +226,7 @@ module hdrg_aux #(
     reg [2:0]  knext;
     always @(posedge clk) begin
         tcur <= tf[nj];
-        knext <= tk2[nj + 3'd1];
+        knext <= tk2[nj + 4'd1];
     end
     wire [2:0] kind = tcur[2:0];
     wire       cur_sign = tcur[3];
@@ -427,7 +432,7 @@ module hdrg_aux #(
     wire signed [31:0] r32 = hi ? (cl31_q ? 32'sh7fffffff : ONE) : (lo ? (cl31_q ? -32'sh7fffffff : -ONE) : shr[31:0]);
 
     // next op (decided in the X cycle)
-    wire [4:0] term_end = (j + 3'd1 >= n_terms) ? OP_FIN : first_op(knext, ex[j + 3'd1], rs, warmq, mq);
+    wire [4:0] term_end = ({1'b0, j} + 5'd1 >= n_terms) ? OP_FIN : first_op(knext, ex[j + 4'd1], rs, warmq, mq);
     wire [4:0] pw_or_wt = (cur_pow > 3'd1) ? OP_PW : OP_WT;
     reg  [4:0] next_op;
     always @* begin
@@ -481,9 +486,9 @@ module hdrg_aux #(
             z_clamped <= 1'b0;
             ph <= 2'd0;
             prime <= 1'b0;
-            ex <= 8'd0;
+            ex <= 16'd0;
             nop <= OP_FIN;
-            nj <= 3'd0;
+            nj <= 4'd0;
         end else if (!busy) begin
             if (we) begin fresh <= 1'b1; pend <= 1'b0; end
             if (start) begin
@@ -500,7 +505,7 @@ module hdrg_aux #(
                 warmq <= warm;
                 sq <= s;
                 acc <= 64'sd0;
-                nj <= 3'd0;
+                nj <= 4'd0;
                 nop <= aux_gen ? first_op(kind, ex[0], restart | fresh | we, warm, mode) : OP_FIN;
                 ph <= 2'd0;
             end
@@ -518,7 +523,7 @@ module hdrg_aux #(
             clamp_q <= clamp_op;
             cl31_q <= cl31;
             nop <= next_op;
-            nj <= (op == OP_WT) ? j + 3'd1 : ((op == OP_FIN) ? 3'd0 : j);   // idle: term 0
+            nj <= (op == OP_WT) ? j + 4'd1 : ((op == OP_FIN) ? 4'd0 : j);   // idle: term 0
             case (op)
                 OP_DX: cnt <= 3'd0;
                 OP_P1: cap <= x[62:31];
