@@ -643,7 +643,8 @@ def test_cli_summary_warnings_go_to_stderr(tmp_path, capsys, monkeypatch):
               "generalization": {"warning": "the held-out error (1 deg/h) is 12.0 x the training error"},
               "holdout_in_training": ["run2.csv is also a training run"],
               "extrapolation": ["proxy 1.3 x the fitted range"], "not_scanned": ["aux_vdd: no such column"],
-              "several_runs": None, "artifacts": {"lines": []}, "stopped": None}
+              "several_runs": None, "artifacts": {"lines": []}, "stopped": None,
+              "versus_fit": None, "final_is": "hdrg fit's model"}
     monkeypatch.setattr(api, "diagnose", lambda *a, **k: (report, None))
     paths = []
     for s in (1, 2):
