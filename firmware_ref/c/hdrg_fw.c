@@ -114,9 +114,10 @@ static inline int64_t rhu64b(int64_t x, unsigned s)
 #endif
 }
 
-/* RHU(x, s) of a 32-bit word, 0 <= s <= 31 (any int32 x): ASR(x, s) plus bit s - 1 of x, since
- * x = q 2^s + r (0 <= r < 2^s) rounds up exactly when r >= 2^(s-1).  No intermediate leaves
- * int32 (x + 2^(s-1) could). */
+/* RHU(x, s) of a 32-bit word, 0 <= s <= 31 (any int32 x): with y = floor(x / 2^(s-1)),
+ * floor((x + 2^(s-1)) / 2^s) = floor((y + 1) / 2) (nested floors) = y - floor(y / 2) (the ceiling
+ * of y / 2): one ASR and one subtract of an ASR-shifted operand.  No intermediate leaves int32
+ * (x + 2^(s-1) could). */
 static inline int32_t rhu32(int32_t x, unsigned s)
 {
     if (s == 0u) {
@@ -125,7 +126,10 @@ static inline int32_t rhu32(int32_t x, unsigned s)
 #ifdef HDRG_BREAK_ROUNDING
     return asr32(x, s);
 #else
-    return asr32(x, s) + (int32_t)(((uint32_t)x >> (s - 1u)) & 1u);
+    {
+        int32_t y = asr32(x, s - 1u);
+        return y - asr32(y, 1u);
+    }
 #endif
 }
 
@@ -643,6 +647,7 @@ static void derive_bank(hdrg_bank_t *k, const int32_t *m, const uint32_t *e_row,
     k->k7_shift = (unsigned)HDRG_Q + e_7 - e_acc;
     k->k7_half = P2(k->k7_shift - 1u);
     k->e_acc = e_acc;
+    k->y_sh = e_acc >= (unsigned)HDRG_Y_FRAC ? e_acc - (unsigned)HDRG_Y_FRAC : (unsigned)HDRG_Y_FRAC - e_acc;
 }
 
 int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, unsigned *bad_word)
@@ -1165,16 +1170,31 @@ static HDRG_COLD int64_t evaluate_k(const hdrg_bank_t *k, int32_t u, int32_t v, 
     acc = mulq30(acc, u) + horner_row(k, 2u, v);
     acc = mulq30(acc, u) + horner_row(k, 1u, v);
     acc = mulq30(acc, u) + horner_row(k, 0u, v);
-    /* RHU(m_7 z, s), s = 30 + e_7 - E: |m_7 z| < 2^61 (one SMLAL onto 2^(s-1)), |.| <= |m_7| */
+    /* RHU(m_7 z, s), s = 30 + e_7 - E: |m_7 z| < 2^61 (one SMLAL onto 2^(s-1)), |.| <= |m_7|.
+     * The shift of the table's constant s without a variable 64-bit shift: for s >= 32,
+     * floor(x / 2^s) = floor(floor(x / 2^32) / 2^(s - 32)) (the high word, one 32-bit ASR);
+     * s = 30 and 31 are constant two-register shifts. */
+    {
 #ifdef HDRG_BREAK_ROUNDING
-    acc += (int32_t)asr64((int64_t)k->m7 * zz, k->k7_shift);
+        int64_t x7 = (int64_t)k->m7 * zz;
 #else
-    acc += (int32_t)asr64(k->k7_half + (int64_t)k->m7 * zz, k->k7_shift);
+        int64_t x7 = k->k7_half + (int64_t)k->m7 * zz;
 #endif
-    if (k->e_acc >= (unsigned)HDRG_Y_FRAC) {
-        return rhu32(acc, k->e_acc - (unsigned)HDRG_Y_FRAC);
+        unsigned s7 = k->k7_shift;
+        if (s7 >= 32u) {
+            acc += asr32((int32_t)asr64(x7, 32u), s7 - 32u);    /* |x7 / 2^32| < 2^29 */
+        } else if (s7 == 30u) {
+            acc += (int32_t)asr64(x7, 30u);
+        } else {
+            acc += (int32_t)asr64(x7, 31u);
+        }
     }
-    return (int64_t)acc * P2((unsigned)HDRG_Y_FRAC - k->e_acc);   /* |acc| < 2^31: below 2^52 */
+    if (k->e_acc >= (unsigned)HDRG_Y_FRAC) {
+        return rhu32(acc, k->y_sh);                             /* y_sh = E - 21 */
+    }
+    /* acc 2^y_sh, y_sh = 21 - E in 1..21 (|acc| < 2^31: below 2^52): the high word
+     * floor(acc / 2^(32 - y_sh)), the low word acc 2^y_sh mod 2^32 (no variable 64-bit shift) */
+    return (int64_t)asr32(acc, 32u - k->y_sh) * P2(32) + I64((uint32_t)acc << k->y_sh);
 }
 
 int64_t hdrg_evaluate_bank(const hdrg_table_t *t, unsigned bank, int32_t u, int32_t v, int32_t z, int *z_clamped)
