@@ -37,6 +37,14 @@
 #define HDRG_COLD
 #endif
 #define P2(k) ((int64_t)1 << (k))
+/* x unchanged, but opaque to the compiler's value-range tracking (GCC, Clang): an int32 known to be
+ * non-negative would otherwise be zero-extended, and its 64-bit product with a signed word becomes
+ * three multiplies instead of one SMULL/SMLAL */
+#if defined(__GNUC__)
+#define HDRG_OPAQUE(x) __asm__("" : "+r"(x))
+#else
+#define HDRG_OPAQUE(x) ((void)0)
+#endif
 /* the stages of the per-sample path, inlined into both entry points (GCC, Clang; not in a
  * -fno-inline build, which the per-stage code bytes of `hdrg cost` use) */
 #if defined(__GNUC__) && !defined(__NO_INLINE__)
@@ -945,6 +953,7 @@ static HDRG_INLINE int32_t proxy_u(const hdrg_table_t *t, uint32_t pw, unsigned 
     uint32_t d = a >= r ? a - r : r - a;
     int32_t m = d > (uint32_t)HDRG_INT32_SYM ? HDRG_INT32_SYM : (int32_t)d;
     int32_t dp = a >= r ? m : -m;
+    HDRG_OPAQUE(dp);                                /* one SMLAL below */
     return clamp_one(asr64(t->u_add + I64(dp) * t->g_u, t->sh_u), flags, HDRG_FLAG_PROXY_CLAMPED);
 }
 
