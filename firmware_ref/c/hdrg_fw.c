@@ -1051,10 +1051,12 @@ static HDRG_INLINE int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int
     if (restart) {
         comb_restart(st);
     }
-    for (o = 1; o <= 2u; o++) {
-        if (st->age[o] < HDRG_COUNT_MAX) {
-            st->age[o] += 1u;
-        }
+    {                                               /* both ages, saturating (one LDRD / STRD) */
+        uint32_t a1 = st->age[1], a2 = st->age[2];
+        a1 += a1 < HDRG_COUNT_MAX ? 1u : 0u;
+        a2 += a2 < HDRG_COUNT_MAX ? 1u : 0u;
+        st->age[1] = a1;
+        st->age[2] = a2;
     }
     cur = st->cur;
     if (mode != cur) {
