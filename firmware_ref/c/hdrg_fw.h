@@ -304,7 +304,6 @@ typedef struct hdrg_state {
     uint8_t t_state;
     uint32_t t_cnt;
     /* rate estimator */
-    uint32_t hist[HDRG_N_HIST_MAX + 1];     /* ring of the last n + 1 proxy words (bit patterns) */
     uint32_t head;                          /* index of the present word */
     uint32_t k;                             /* samples since restart, saturating at t.k_sat */
     int64_t iy;                             /* iir state, 2^-24 P LSB */
@@ -326,6 +325,9 @@ typedef struct hdrg_state {
     uint8_t aux_pend;                       /* a restart on an input-invalid sample, for the input filters */
     int64_t kc;
     uint8_t fresh;
+    /* the history ring last: every other register is then within an immediate load offset of the
+     * state's address (Cortex-M: no second base register for the fields behind a 16 kB ring) */
+    uint32_t hist[HDRG_N_HIST_MAX + 1];     /* ring of the last n + 1 proxy words (bit patterns) */
 } hdrg_state_t;
 
 /* ---- primitives (FORMATS.md "primitives"; preconditions as firmware_ref/arith.py) ------- */
