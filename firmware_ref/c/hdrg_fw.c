@@ -36,6 +36,13 @@
 #else
 #define HDRG_COLD
 #endif
+/* kept out of line in a size-optimized build (GCC, Clang -Os: __OPTIMIZE_SIZE__), inlined by the
+ * compiler's choice otherwise: helpers called from several sites of the optional aux generators */
+#if defined(__GNUC__) && defined(__OPTIMIZE_SIZE__)
+#define HDRG_OUTLINE_OS static __attribute__((noinline))
+#else
+#define HDRG_OUTLINE_OS static inline
+#endif
 #define P2(k) ((int64_t)1 << (k))
 /* x unchanged, but opaque to the compiler's value-range tracking (GCC, Clang): an int32 known to be
  * non-negative would otherwise be zero-extended, and its 64-bit product with a signed word becomes
@@ -331,6 +338,13 @@ int64_t hdrg_rhuw(int64_t a, int64_t d, unsigned s)
 #endif
 }
 
+/* hdrg_rhu for the aux generators and their sine: at -Os their several rounding shifts share one
+ * copy of the 64-bit shift (less per-sample code; the generators are optional work) */
+HDRG_OUTLINE_OS int64_t rhu_out(int64_t x, unsigned s)
+{
+    return hdrg_rhu(x, s);
+}
+
 /* sin(pi/2 x) = x (S0 + S1 x^2 + ... + S5 x^10), Q.30 (formats.SIN_POLY) */
 static const int64_t SIN_POLY[6] = {1686629713, -693598663, 85569264, -5026852, 172032, -3670};
 
@@ -339,13 +353,13 @@ int32_t hdrg_sin_q30(uint64_t phase)
     unsigned quad = (unsigned)(phase >> 62);
     int64_t r = (int64_t)((phase >> 32) & 0x3FFFFFFFu) + (int64_t)((phase >> 31) & 1u);
     int64_t x = (quad & 1u) ? HDRG_ONE - r : r;      /* 0 .. 2^30 */
-    int64_t x2 = hdrg_rhu(x * x, HDRG_Q);
+    int64_t x2 = rhu_out(x * x, HDRG_Q);
     int64_t p = SIN_POLY[5];
     int i;
     for (i = 4; i >= 0; i--) {
-        p = hdrg_rhu(p * x2, HDRG_Q) + SIN_POLY[i];  /* |p| < 2^31 */
+        p = rhu_out(p * x2, HDRG_Q) + SIN_POLY[i];  /* |p| < 2^31 */
     }
-    p = hdrg_rhu(p * x, HDRG_Q);
+    p = rhu_out(p * x, HDRG_Q);
     if (p > HDRG_ONE) {
         p = HDRG_ONE;
     }
@@ -1219,11 +1233,17 @@ int64_t hdrg_evaluate(const hdrg_table_t *t, int32_t u, int32_t v, int32_t z, in
 }
 
 #if HDRG_AUX_GEN
+/* hdrg_clamp for the aux generators (as rhu_out) */
+HDRG_OUTLINE_OS int64_t clamp_out(int64_t x, int64_t lo, int64_t hi, int *clamped)
+{
+    return hdrg_clamp(x, lo, hi, clamped);
+}
+
 /* aux.normalize: q = clamp(RHU(clamp(x - REF) G + OFF, SH), +-2^30) */
 static int64_t aux_norm(int64_t x, const int64_t *c)
 {
-    int64_t dx = hdrg_clamp(x - c[0], -I64(HDRG_INT32_SYM), HDRG_INT32_SYM, NULL);
-    return hdrg_clamp(hdrg_rhu(dx * c[1] + c[2], (unsigned)c[3]), -HDRG_ONE, HDRG_ONE, NULL);
+    int64_t dx = clamp_out(x - c[0], -I64(HDRG_INT32_SYM), HDRG_INT32_SYM, NULL);
+    return clamp_out(rhu_out(dx * c[1] + c[2], (unsigned)c[3]), -HDRG_ONE, HDRG_ONE, NULL);
 }
 
 /* aux.AuxStage.step: the raw sum RHU(acc, 30) (the caller clamps it); inv: the input-invalid
@@ -1255,7 +1275,7 @@ static HDRG_COLD int64_t aux_step(hdrg_state_t *st, const hdrg_input_t *in, cons
                 if (irs) {
                     *ys = 0;
                 }
-                g = y = hdrg_rhu(*ys, HDRG_Q);
+                g = y = rhu_out(*ys, HDRG_Q);
             } else if (c[5] != 0) {
                 filt = 1;
                 set = irs;
@@ -1267,8 +1287,8 @@ static HDRG_COLD int64_t aux_step(hdrg_state_t *st, const hdrg_input_t *in, cons
         case HDRG_AUX_RATE:
             if (!warm) {
                 int64_t lim = P2((unsigned)c[0]) - 1;
-                g = hdrg_rhu(hdrg_clamp(s, -lim, lim, NULL) * c[1], (unsigned)c[2]);
-                g = hdrg_clamp(g, -HDRG_ONE, HDRG_ONE, NULL);
+                g = rhu_out(clamp_out(s, -lim, lim, NULL) * c[1], (unsigned)c[2]);
+                g = clamp_out(g, -HDRG_ONE, HDRG_ONE, NULL);
             }
             break;
         case HDRG_AUX_ONE:
@@ -1293,7 +1313,7 @@ static HDRG_COLD int64_t aux_step(hdrg_state_t *st, const hdrg_input_t *in, cons
             }
             break;
         case HDRG_AUX_RAMP:
-            g = kk >= c[0] ? HDRG_ONE : hdrg_rhu(kk * c[1], (unsigned)c[2]);   /* kk < N < 2^31 */
+            g = kk >= c[0] ? HDRG_ONE : rhu_out(kk * c[1], (unsigned)c[2]);   /* kk < N < 2^31 */
             break;
         default:                                    /* osc: the phase K W mod 2^64 (unsigned) */
             g = hdrg_sin_q30((uint64_t)kk * (uint64_t)c[0] + (c[2] != 0 ? UINT64_C(0x4000000000000000) : 0u));
@@ -1301,11 +1321,11 @@ static HDRG_COLD int64_t aux_step(hdrg_state_t *st, const hdrg_input_t *in, cons
         }
         if (filt) {
             *ys = set ? setv : *ys + hdrg_rhuw(coef, target - *ys, sh);
-            g = y = hdrg_rhu(*ys, HDRG_Q);
+            g = y = rhu_out(*ys, HDRG_Q);
         }
         if (a->kind == HDRG_AUX_INPUT) {
             for (i = 1; i < a->power; i++) {
-                g = hdrg_rhu(g * y, HDRG_Q);
+                g = rhu_out(g * y, HDRG_Q);
             }
         }
         if (a->sign) {
@@ -1313,7 +1333,7 @@ static HDRG_COLD int64_t aux_step(hdrg_state_t *st, const hdrg_input_t *in, cons
         }
         acc += a->w * g;                            /* |.| <= 6 2^60 */
     }
-    return hdrg_rhu(acc, HDRG_Q);
+    return rhu_out(acc, HDRG_Q);
 }
 
 #endif /* HDRG_AUX_GEN */
