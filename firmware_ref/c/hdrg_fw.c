@@ -669,7 +669,7 @@ static void derive_bank(hdrg_bank_t *k, const int32_t *m, const uint32_t *e_row,
     k->k7_shift = (unsigned)HDRG_Q + e_7 - e_acc;
     k->k7_half = P2(k->k7_shift - 1u);
     k->e_acc = e_acc;
-    k->y_sh = e_acc >= (unsigned)HDRG_Y_FRAC ? e_acc - (unsigned)HDRG_Y_FRAC : (unsigned)HDRG_Y_FRAC - e_acc;
+    k->y_sh = (int32_t)e_acc - HDRG_Y_FRAC;
 }
 
 int hdrg_table_parse(hdrg_table_t *t, const uint32_t *words, size_t n_words, unsigned *bad_word)
@@ -1214,12 +1214,17 @@ static HDRG_COLD int64_t evaluate_k(const hdrg_bank_t *k, int32_t u, int32_t v, 
             acc += (int32_t)asr64(x7, 31u);
         }
     }
-    if (k->e_acc >= (unsigned)HDRG_Y_FRAC) {
-        return rhu32(acc, k->y_sh);                             /* y_sh = E - 21 */
+    {
+        int32_t ys = k->y_sh;                                   /* E - 21 */
+        unsigned l;
+        if (ys >= 0) {
+            return rhu32(acc, (unsigned)ys);
+        }
+        /* acc 2^l, l = 21 - E in 1..21 (|acc| < 2^31: below 2^52): the high word
+         * floor(acc / 2^(32 - l)), the low word acc 2^l mod 2^32 (no variable 64-bit shift) */
+        l = (unsigned)-ys;
+        return (int64_t)asr32(acc, 32u - l) * P2(32) + I64((uint32_t)acc << l);
     }
-    /* acc 2^y_sh, y_sh = 21 - E in 1..21 (|acc| < 2^31: below 2^52): the high word
-     * floor(acc / 2^(32 - y_sh)), the low word acc 2^y_sh mod 2^32 (no variable 64-bit shift) */
-    return (int64_t)asr32(acc, 32u - k->y_sh) * P2(32) + I64((uint32_t)acc << k->y_sh);
 }
 
 int64_t hdrg_evaluate_bank(const hdrg_table_t *t, unsigned bank, int32_t u, int32_t v, int32_t z, int *z_clamped)

@@ -213,7 +213,7 @@ typedef struct hdrg_bank {
     int32_t m7;                 /* k7 mantissa */
     uint32_t k7_shift;          /* 30 + e_7 - E (30..61) */
     uint32_t e_acc;             /* E */
-    uint32_t y_sh;              /* E >= 21: E - 21 (the RHU of the result), else 21 - E (its left shift) */
+    int32_t y_sh;               /* E - 21 (-21..31): >= 0 the RHU of the result, < 0 its left shift by 21 - E */
 } hdrg_bank_t;
 
 /* The decoded table fields (FORMATS.md "Coefficient table layout"); signed fields decoded from
