@@ -44,6 +44,14 @@
 #define HDRG_OUTLINE_OS static inline
 #endif
 #define P2(k) ((int64_t)1 << (k))
+/* a condition that is rarely true on the per-sample path (restarts, window changes, invalid inputs,
+ * clamps, saturations, the aux generators): GCC and Clang lay its code out of the fall-through path, so
+ * that the common case runs without taken branches */
+#if defined(__GNUC__)
+#define RARE(c) __builtin_expect(!!(c), 0)
+#else
+#define RARE(c) (c)
+#endif
 /* x unchanged, but opaque to the compiler's value-range tracking (GCC, Clang): an int32 known to be
  * non-negative would otherwise be zero-extended, and its 64-bit product with a signed word becomes
  * three multiplies instead of one SMULL/SMLAL */
@@ -978,7 +986,7 @@ static HDRG_INLINE int32_t rate_step(hdrg_state_t *st, uint32_t pw, int restart,
     const hdrg_table_t *t = &st->t;
     uint32_t k = st->k, n = WIN_N(st), j, prev = 0;
     int64_t p, s = 0, sc;
-    if (restart) {
+    if (RARE(restart)) {
         rate_reset(st);
         k = 0;
     }
@@ -1018,10 +1026,10 @@ static HDRG_INLINE int32_t rate_step(hdrg_state_t *st, uint32_t pw, int restart,
         return 0;
     }
     sc = s;                                         /* clamp to +-s_lim = +-(2^SB - 1) */
-    if (s > t->s_lim) {
+    if (RARE(s > t->s_lim)) {
         sc = t->s_lim;
         *flags |= HDRG_FLAG_RATE_CLAMPED;
-    } else if (s < -t->s_lim) {
+    } else if (RARE(s < -t->s_lim)) {
         sc = -t->s_lim;
         *flags |= HDRG_FLAG_RATE_CLAMPED;
     }
@@ -1062,7 +1070,7 @@ static HDRG_INLINE int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int
         st->y_hold = I64(r) * P2(HDRG_Y_FRAC - 10);  /* R << 11 */
         return 1;
     }
-    if (restart) {
+    if (RARE(restart)) {
         comb_restart(st);
     }
     {                                               /* both ages, saturating (one LDRD / STRD) */
@@ -1073,7 +1081,7 @@ static HDRG_INLINE int comb_step(hdrg_state_t *st, unsigned mode, int32_t r, int
         st->age[2] = a2;
     }
     cur = st->cur;
-    if (mode != cur) {
+    if (RARE(mode != cur)) {
         if (cur != 0u && st->cnt >= 1u && !st->taint) {   /* commit the closing window (a clean one) */
             if (comb_commit(st, cur)) {
                 *flags |= HDRG_FLAG_SAT;
@@ -1396,7 +1404,7 @@ static HDRG_INLINE int step_core(hdrg_state_t *st, const hdrg_input_t *in, const
     /* 4b. aux: the generators (aux_gen 1; the sample counter kc is read by them only, so it is
      * kept for aux_gen 1 tables only) or the Z word */
 #if HDRG_AUX_GEN
-    if (t->aux_gen == 1u) {
+    if (RARE(t->aux_gen == 1u)) {
         int64_t k = (ax != NULL && ax->k_given) ? ax->k : st->kc;
         st->kc = k < HDRG_K_LIMIT ? k + 1 : HDRG_K_LIMIT;
         z = clamp_one(aux_step(st, in, ax, k, mode, restart || st->fresh, s, warm, inv), &flags,
@@ -1415,7 +1423,7 @@ static HDRG_INLINE int step_core(hdrg_state_t *st, const hdrg_input_t *in, const
     cvalid = comb_step(st, mode, in->r, restart, b, warm, inv, &flags);
     /* 6. compensate */
     valid = cvalid && !warm && mode != 3u && !inv;
-    if (inv) {
+    if (RARE(inv)) {
         flags |= HDRG_FLAG_INPUT_SAT;
     }
     if (valid) {
@@ -1424,7 +1432,7 @@ static HDRG_INLINE int step_core(hdrg_state_t *st, const hdrg_input_t *in, const
         st->out_hold = (int32_t)hdrg_sat_signed(rhu64b(ORDER(t) == 0u ? st->y_hold - b : st->y_hold,
                                                          HDRG_OUT_SHIFT), 32u, &s1);
         st->bias_hold = (int32_t)hdrg_sat_signed(rhu64b(b, HDRG_OUT_SHIFT), 32u, &s2);
-        if (s1 || s2) {
+        if (RARE(s1 || s2)) {
             flags |= HDRG_FLAG_SAT;
         }
     }
