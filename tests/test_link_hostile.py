@@ -20,6 +20,7 @@ from host_tools import cli
 from host_tools import link as SL
 from host_tools.golden import runlog
 from host_tools.link import device as D
+from pty_device import PtyDevice
 from host_tools.simulation import sim
 
 SCENARIO = "paper-mr-cycle-4dpm"
@@ -39,25 +40,6 @@ def tables(tmp_path_factory):
     (d / "t1.bin").write_bytes(t1.to_bytes())
     (d / "t10.bin").write_bytes(t10.to_bytes())
     return {"log": log1, "t1": t1, "t10": t10, "t1_bin": d / "t1.bin", "t10_bin": d / "t10.bin"}
-
-
-class PtyDevice:
-    """A virtual device on a fresh pty; ``name`` is the host's end."""
-
-    def __init__(self, log, table, **kw):
-        kw.setdefault("speed", 0.0)
-        master, slave, self.name = D.open_pty()
-        self.link = D.FdLink(master, keep=(slave,), name=self.name)
-        self.dev = D.VirtualDevice(self.link, D.DeviceRun.from_log(log), table, **kw)
-
-    def __enter__(self):
-        self.dev.start()
-        return self
-
-    def __exit__(self, *exc):
-        assert self.dev.unplug(5.0)
-        assert self.dev.error is None, self.dev.error
-        return False
 
 
 class Scripted:

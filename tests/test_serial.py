@@ -32,6 +32,7 @@ from firmware_ref.kernel import run_words
 from host_tools.link import device as D
 from host_tools.golden import runlog
 from host_tools import link as SL
+import pty_device
 from host_tools.simulation import sim
 from host_tools.golden.compensate import fit_config_from_logs
 from host_tools.golden.model import BiasModel
@@ -58,25 +59,15 @@ def run():
             "model2": model2, "table2": quantize(model2, n_random=16).table}
 
 
-class PtyDevice:
+class PtyDevice(pty_device.PtyDevice):
     """A virtual device on a fresh pty and the host's pyserial port on its other end."""
 
     def __init__(self, log, table, **kw):
-        kw.setdefault("speed", 0.0)
-        master, slave, self.name = D.open_pty()
-        self.link = D.FdLink(master, keep=(slave,), name=self.name)
-        self.dev = D.VirtualDevice(self.link, D.DeviceRun.from_log(log), table, **kw)
+        super().__init__(log, table, **kw)
         self.port = SL.open_port(self.name)
 
-    def __enter__(self):
-        self.dev.start()
-        return self
-
-    def __exit__(self, *exc):
-        assert self.dev.unplug(5.0), "device thread did not stop"
+    def close(self) -> None:
         self.port.close()
-        assert self.dev.error is None, self.dev.error
-        return False
 
 
 class RecordingLink:

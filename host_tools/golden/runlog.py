@@ -366,8 +366,7 @@ def check_metadata(log: RunLog, header_line: int | None = None) -> None:
     if str(log.metadata.get(CAPTURE_KEY, "")).strip().lower() == CAPTURE_OPEN:
         msg = (f"{src}: unfinished capture (metadata '{CAPTURE_KEY}: {CAPTURE_OPEN}'): the recording was "
                f"interrupted or is still running; the {len(log)} rows written so far are used")
-        log.notes.append(msg)
-        warnings.warn(msg, RunLogWarning, stacklevel=3)
+        _repaired(log, msg, stacklevel=4)
 
 
 def _metadata_number(value) -> float | None:
@@ -447,8 +446,14 @@ def _check_first_mode(log: RunLog) -> None:
            f"(row {row}, t_s {float(log.t_s[row])!r}); the sequencer runs mode 1 first (power-on, exchange, mode 1, "
            f"exchange, mode 2), so modes 1 and 2 are probably swapped: that flips the sign of the combined "
            f"output (true rate and non-reversing bias); fix the mode column if so")
+    _repaired(log, msg, stacklevel=5)
+
+
+def _repaired(log: RunLog, msg: str, stacklevel: int) -> None:
+    """Say what the reader repaired or suspects about ``log``: in its notes (which the tools print and
+    the reports keep) and as a RunLogWarning at ``stacklevel`` (counted from here)."""
     log.notes.append(msg)
-    warnings.warn(msg, RunLogWarning, stacklevel=4)
+    warnings.warn(msg, RunLogWarning, stacklevel=stacklevel)
 
 
 def _find_segments(log: RunLog, report: bool) -> np.ndarray:
@@ -466,8 +471,7 @@ def _find_segments(log: RunLog, report: bool) -> np.ndarray:
                f"{d[big]:.6g} s before {where}. Repair: all samples kept; the log is split into "
                f"{len(gaps) + 1} segments at the gaps (RunLog.segments) and causal estimators restart "
                f"at each segment")
-        log.notes.append(msg)
-        warnings.warn(msg, RunLogWarning, stacklevel=3)
+        _repaired(log, msg, stacklevel=4)
     return np.concatenate([[0], gaps + 1]).astype(np.int64)
 
 
