@@ -346,3 +346,50 @@ def test_a_lag_starts_soaked_and_is_exact_for_a_ramp():
     quiet = copy.deepcopy(foreign_device(3))
     quiet.self_heating["rise_c"] = 0.0
     assert all(np.max(np.abs(x - 20.0)) < 1e-12 for x in node_temperatures(quiet, t, np.full_like(t, 20.0)))
+
+
+def test_sparse_sequence_layout_and_bad_arguments():
+    """Power-on exchange, a mode-1 reference window, then an excursion (exchange, mode 2, exchange)
+    every period from exchange_s + window_s; mode 1 everywhere else."""
+    from host_tools.simulation.sim_physics import sparse_sequence
+    t = np.arange(4000.0)
+    m = sparse_sequence(t, 30.0, 45.0, 1200.0)
+    assert (m[:30] == 3).all() and (m[30:75] == 1).all()
+    for start in (75, 1275, 2475, 3675):
+        assert (m[start:start + 30] == 3).all() and (m[start + 30:start + 75] == 2).all()
+        assert (m[start + 75:start + 105] == 3).all() and m[start + 105] == 1
+    assert set(np.unique(m[180:1275])) == {1} and np.count_nonzero(m == 2) == 4 * 45
+    with pytest.raises(ValueError, match="period_s 150 s is shorter than an excursion"):
+        sparse_sequence(t, 30.0, 45.0, 150.0)
+    with pytest.raises(ValueError, match="window_s must be > 0"):
+        sparse_sequence(t, 30.0, 0.0, 1200.0)
+
+
+def test_an_explicit_schedule_keeps_the_physics():
+    """A run in mode 1 throughout (explicit modes) is the FTR run of the same power-on and noise
+    seed sample for sample (same temperatures, noise, bias; no exchange, no settling tail); in mode
+    2 throughout, c = -rate keeps the flipping terms and negates the others."""
+    dev = foreign_device(5)
+    n = int(DUR) + 1
+    ftr = _run(dev, reversal=False)
+    one = _run(dev, modes=np.ones(n, int))
+    two = _run(dev, modes=np.full(n, 2))
+    floor_one = _run(dev, modes=np.ones(n, int), thermal=False)
+    floor_two = _run(dev, modes=np.full(n, 2), thermal=False)
+    assert (one.mode == 1).all() and one.metadata["schedule"] == "explicit" and "dwell_s" not in one.metadata
+    np.testing.assert_array_equal(one.rate_dph, ftr.rate_dph)
+    # rate = s (omega + flip) + keep + noise; the floor runs hold omega and the noise alone
+    keep = (one.rate_dph + two.rate_dph) / 2 - (floor_one.rate_dph + floor_two.rate_dph) / 2
+    flip = (one.rate_dph - two.rate_dph) / 2 - (floor_one.rate_dph - floor_two.rate_dph) / 2
+    assert np.std(keep) > 1.0 and np.std(flip) > 0.1     # both kinds of bias are there
+    np.testing.assert_allclose(ftr.rate_dph - floor_one.rate_dph, flip + keep, atol=1e-9)
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(reversal=False, modes=np.ones(3001, int)), "needs reversal on"),
+    (dict(modes=np.ones(10, int)), r"\(10,\) values for a run of 3001 samples"),
+    (dict(modes=np.r_[np.ones(100, int), 0, np.ones(2900, int)]), "sample 100 has mode 0"),
+])
+def test_bad_explicit_schedules(kw, match):
+    with pytest.raises(ValueError, match=match):
+        _run(foreign_device(5), **kw)

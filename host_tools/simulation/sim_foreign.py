@@ -384,7 +384,8 @@ def _parse_effects(effect) -> tuple:
 
 def simulate_foreign(device, rate_c_per_min: float, reversal: bool, power_on: int = 0, noise_seed: int = 0,
                      duration_s: float | None = None, thermal: bool = True, effect=None,
-                     strength: float = 1.0, ambient_c: float | None = None, start_low: bool = False) -> RunLog:
+                     strength: float = 1.0, ambient_c: float | None = None, start_low: bool = False,
+                     modes=None) -> RunLog:
     """One run of ``device`` (a ForeignDevice or a seed) at chamber rate ``rate_c_per_min``
     [degC/min], mode reversal on/off, power-on index ``power_on`` (selects the damping change),
     ``noise_seed``; ``duration_s`` None = the whole chamber profile; ``thermal=False`` zeroes every
@@ -395,7 +396,8 @@ def simulate_foreign(device, rate_c_per_min: float, reversal: bool, power_on: in
     the run; ``duration_s`` None = STARTUP_S): the start-up of the paper's Table 4.  ``start_low``:
     the chamber cycles start soaked at the low end (the power-on at the cold end of the range).
     The log has no ``freq_hz`` column when the device is temperature-only (``dev.logs_freq`` False;
-    module doc)."""
+    module doc).  ``modes``: an explicit mode schedule (int[n] of 1, 2, 3, e.g.
+    host_tools.simulation.sim_physics.sparse_sequence) instead of the paper's; needs ``reversal``."""
     dev = device if isinstance(device, ForeignDevice) else foreign_device(device)
     power_on = _check_int(power_on, "power_on")
     noise_seed = _check_int(noise_seed, "noise_seed")
@@ -418,7 +420,7 @@ def simulate_foreign(device, rate_c_per_min: float, reversal: bool, power_on: in
     if n > MAX_SAMPLES:
         raise ValueError(f"duration_s {duration_s} gives {n} samples, more than {MAX_SAMPLES}")
     t = np.arange(n, dtype=np.float64)
-    mode = mode_sequence(t, bool(reversal), EXCHANGE_S, DWELL_S)
+    mode = mode_sequence(t, bool(reversal), EXCHANGE_S, DWELL_S) if modes is None else _check_modes(modes, n, reversal)
     s = np.where(mode == 2, -1.0, np.where(mode == 3, 0.0, 1.0))
 
     # temperatures (profile holds its last value past its end)
@@ -483,7 +485,7 @@ def simulate_foreign(device, rate_c_per_min: float, reversal: bool, power_on: in
 
     meta = {"device": f"foreign-{dev.seed}", "sample_rate_hz": "1", "reversal": "on" if reversal else "off"}
     if reversal:
-        meta.update({"exchange_s": f"{EXCHANGE_S:g}", "dwell_s": f"{DWELL_S:g}"})
+        meta.update({"exchange_s": f"{EXCHANGE_S:g}", "dwell_s": f"{DWELL_S:g}"} if modes is None else {"schedule": "explicit"})
     meta.update({"family": "random", "foreign_version": str(FOREIGN_VERSION), "seed": str(dev.seed),
                  "profile": (f"trapezoid {rate_c_per_min:g} degC/min" + (", cold start" if start_low else "")
                              if ambient_c is None
@@ -495,6 +497,20 @@ def simulate_foreign(device, rate_c_per_min: float, reversal: bool, power_on: in
     cols = {"t_s": t, "freq_hz": freq} if dev.logs_freq else {"t_s": t}
     return RunLog.from_arrays(metadata=meta, source=src, **cols, rate_dph=rate, mode=mode,
                               temp_c=temp_c, aux_vdd=vdd, aux_acc_x=acc[0], aux_acc_y=acc[1], aux_acc_z=acc[2])
+
+
+def _check_modes(modes, n: int, reversal: bool) -> np.ndarray:
+    """An explicit mode schedule: int64[n], values 1, 2, 3, on a mode-reversal run."""
+    if not reversal:
+        raise ValueError("modes: an explicit mode schedule needs reversal on")
+    m = np.asarray(modes)
+    if m.shape != (n,):
+        raise ValueError(f"modes: {m.shape} values for a run of {n} samples")
+    bad = ~np.isin(m, (1, 2, 3))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(f"modes: sample {i} has mode {m[i].item()!r} (1, 2 or 3 on a mode-reversal run)")
+    return m.astype(np.int64)
 
 
 def _effect_term(name, p, dev, t, mode, temps, since, b_d, vdd, acc) -> np.ndarray:

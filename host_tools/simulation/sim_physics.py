@@ -47,6 +47,29 @@ def mode_sequence(t_s: np.ndarray, reversal: bool, exchange_s: float, dwell_s: f
     return mode
 
 
+def sparse_sequence(t_s: np.ndarray, exchange_s: float, window_s: float, period_s: float) -> np.ndarray:
+    """Mode of every sample under sparse reversal: the gyroscope runs in mode 1 and makes an
+    *excursion* (exchange (3) ``exchange_s``, mode 2 ``window_s``, exchange back) every
+    ``period_s``.  From power-on: exchange, mode 1 ``window_s`` (the first excursion's reference),
+    then the first excursion at ``exchange_s + window_s``, the next ones ``period_s`` apart
+    [s].  A ``period_s`` shorter than one excursion plus its reference window is an error."""
+    for what, v in (("exchange_s", exchange_s), ("window_s", window_s), ("period_s", period_s)):
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"sparse reversal: {what} must be > 0 s, not {v!r}")
+    if period_s < 3 * exchange_s + 2 * window_s:
+        raise ValueError(f"sparse reversal: period_s {period_s:g} s is shorter than an excursion and its "
+                         f"reference window (3 x exchange_s + 2 x window_s = {3 * exchange_s + 2 * window_s:g} s)")
+    t = np.asarray(t_s, float)
+    mode = np.ones(len(t), np.int64)
+    mode[t < exchange_s] = 3
+    first = exchange_s + window_s
+    ph = np.mod(t - first, period_s)
+    on = t >= first
+    mode[on & (ph < 2 * exchange_s + window_s)] = 3
+    mode[on & (ph >= exchange_s) & (ph < exchange_s + window_s)] = 2
+    return mode
+
+
 def _rng(seed: int, name: str, sub: int = 0) -> np.random.Generator:
     """Random stream ``sub`` of effect ``name``: independent of every other effect and of the run
     length (a longer run of the same seed starts with the same samples)."""
