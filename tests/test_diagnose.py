@@ -657,3 +657,23 @@ def test_cli_summary_warnings_go_to_stderr(tmp_path, capsys, monkeypatch):
     lines = [x for x in cap.err.splitlines() if "warning:" in x]
     assert lines == ["hdrg diagnose: warning: " + m for m in cli_diagnose.summary_warnings(report)]
     assert len(lines) == 3 and "12.0 x the training error" in lines[0] and "extrapolation" in lines[2]
+
+
+def test_the_console_says_when_the_loop_was_not_compared_with_hdrg_fits_model(tmp_path, capsys, monkeypatch):
+    """One training run and no held-out run: versus_fit cannot compare; the summary says so instead
+    of staying silent about the comparison."""
+    from host_tools import api
+
+    base = {"std_dph": 1.0, "std100_dph": 0.5}
+    report = {"verdict": "effect found", "verdict_detail": "one step kept", "evaluated_on": "training",
+              "baseline": {"training": base}, "iterations": [], "generalization": None, "holdout_in_training": [],
+              "extrapolation": [], "not_scanned": [], "several_runs": None, "artifacts": {"lines": []},
+              "stopped": None, "final_is": "the loop's model",
+              "versus_fit": {"on": None, "kept": "loop", "why": "one training run and no held-out run: not compared",
+                             "figures": {}}}
+    monkeypatch.setattr(api, "diagnose", lambda *a, **k: (report, None))
+    p = tmp_path / "run1.csv"
+    runlog.write(world(1), p)
+    assert main(["diagnose", str(p), "--out", str(tmp_path / "o"), "--no-plots"]) == 0
+    out = capsys.readouterr().out
+    assert "against hdrg fit's model: one training run and no held-out run: not compared" in out

@@ -87,6 +87,8 @@ def run(args) -> int:
     if vs.get("on"):
         print(f"  against hdrg fit's model ({vs['on']}): "
               + (f"lost on {vs['why']}" if vs["kept"] == "fit" else f"no figure worse by more than {vs['tolerance']:.0%}"))
+    elif vs.get("why"):
+        print(f"  against hdrg fit's model: {vs['why']}")
     print(f"  model written: {report['final_is']}")
     print(f"written: {os.path.join(args.out, 'diagnose.md')}, diagnose.json, model.json")
     sys.stdout.flush()      # the warnings (stderr) after the summary above

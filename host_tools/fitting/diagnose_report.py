@@ -226,6 +226,8 @@ def markdown(doc, model) -> str:
                           for k, f in vs["figures"].items() if f["fit"] is not None and f["loop"] is not None)
         lines += ["", f"Against hdrg fit's model ({vs['on']}; hdrg fit -> the loop): {cells}"
                       + (f".  Lost on {vs['why']}: hdrg fit's model is written." if vs["kept"] == "fit" else ".")]
+    elif vs.get("why"):
+        lines += ["", f"Against hdrg fit's model: {vs['why']}."]
     if doc.get("fit_block_replaced"):
         fb = doc["fit_block_replaced"]
         lines += ["", f"Second pass: {fb['why']}: {fmt_value(fb['with_block'])} -> {fmt_value(fb['without_block'])} deg/h "
