@@ -339,6 +339,60 @@ def cycles_m4(stream: list, dis: dict, P: int, div: int) -> int:
     return total
 
 
+MIX_CLASSES = ("alu", "multiply", "divide", "load/store", "load/store multiple", "branch taken", "branch not taken")
+FLASH_WAIT_STATES = (1, 2, 5)   # wait states of on-chip flash (e.g. STM32F4 at 168 MHz: 5)
+
+
+def instruction_mix(stream: list, dis: dict) -> tuple[dict, int]:
+    """({class: count}, flash fetch events) of an executed instruction stream: the classes of
+    MIX_CLASSES (multiply: MUL/MLA/MLS and the 32x32->64 SMULL/UMULL/SMLAL/UMLAL; load/store
+    multiple: LDM/STM/PUSH/POP/LDRD/STRD), and the events that would miss a flash prefetch buffer with
+    no cache: every taken branch and every POP/LDM into pc (a refetch at a new address) and every
+    literal-pool load (LDR ..., [pc, ...]).  The per-instruction model (:func:`cycles_m4`) assumes zero-wait-state memory; with
+    code in flash of W wait states and no cache each event costs up to W more cycles."""
+    mix = dict.fromkeys(MIX_CLASSES, 0)
+    events = 0
+    for i, pc in enumerate(stream):
+        mn, ops, size = dis[pc]
+        base = mn.split(".")[0]
+        nxt = stream[i + 1] if i + 1 < len(stream) else None
+        if base in ("sdiv", "udiv"):
+            k = "divide"
+        elif base.startswith(("mul", "mla", "mls", "smull", "umull", "smlal", "umlal", "smla", "smul", "smmul", "smmla")):
+            k = "multiply"
+        elif base.startswith(("ldm", "stm", "push", "pop")) or base in ("ldrd", "strd"):
+            k = "load/store multiple"
+            events += "pc" in ops[ops.find("{") + 1:ops.find("}")] if "{" in ops else 0
+        elif _LOADS.match(mn):
+            k = "load/store"
+            if "[pc" in ops:
+                events += 1
+        elif base.startswith("b") and base not in ("bic", "bics", "bfi", "bfc") or base in ("cbz", "cbnz", "tbb", "tbh"):
+            taken = (nxt is not None and nxt != pc + size) or base in ("bl", "blx", "bx")
+            k = "branch taken" if taken else "branch not taken"
+            events += taken
+        else:
+            k = "alu"
+        mix[k] += 1
+    return mix, events
+
+
+def mix_summary(samples: list, dis: dict) -> dict:
+    """Per-sample means over traced ``samples``: instruction mix (:func:`instruction_mix`), flash
+    fetch events and the nominal cycles with code in flash of each of FLASH_WAIT_STATES wait states
+    and no cache (each event + W: an upper bound; a flash accelerator or a cache hides most of it)."""
+    n = max(len(samples), 1)
+    tot = collections.Counter()
+    events = 0
+    for s_ in samples:
+        m, e = instruction_mix(s_, dis)
+        tot.update(m)
+        events += e
+    nominal = sum(cycles_m4(s_, dis, **M4_MODEL["nominal"]) for s_ in samples) / n
+    return {"mix": {k: round(tot[k] / n, 1) for k in MIX_CLASSES}, "flash_events": round(events / n, 1),
+            "cycles_flash_no_cache": {str(w): round(nominal + w * events / n, 1) for w in FLASH_WAIT_STATES}}
+
+
 def inline_chains(elf: Path, addrs) -> dict:
     """address -> [function, ...] of the inline chain at that address (innermost first), from
     ``addr2line -a -f -i`` on the ELF's debug info."""
@@ -469,7 +523,8 @@ def measure_build(target: str, work: Path, name: str, defines=(), accepts=None, 
                                  "cycles_m4_model": {k: _stats([cycles_m4(s_, dis, **m) for s_ in samples])
                                                      for k, m in M4_MODEL.items()},
                                  "per_stage_instructions": {k: round(v / n, 1) for k, v in counts.most_common()},
-                                 "per_stage_cycles": {k: round(v / n, 1) for k, v in cyc_stage.most_common()}}
+                                 "per_stage_cycles": {k: round(v / n, 1) for k, v in cyc_stage.most_common()},
+                                 **mix_summary(samples, dis)}
     bad = build_mcu(target, "-O2", work / f"{target}-{name}-broken", defines=(*defs, "HDRG_BREAK_ROUNDING"))
     res["broken_build_caught"] = check_cases(qemu_argv(target, bad["elf"]), accepts, LEAN_FIELDS,
                                              log=lambda s: None)["mismatches"] > 0
