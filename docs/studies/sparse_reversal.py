@@ -29,6 +29,9 @@ Rows:
   and in mode 2 throughout: (r1 + r2) / 2, plus the noise of the floor run).  Any output that
   passes the present sample at full bandwidth carries one mode's noise; the paper's pair averages
   two modes and halves it (its metric can go below 1).
+* ``perfect damping and slow noise``: the same, with the noise's flicker and random walk known too
+  (they do not flip sign with the mode, so an excursion sees them as damping): the common-mode
+  error and the white noise alone, sqrt(var + white^2).
 
     python docs/studies/sparse_reversal.py --workers 2 > docs/studies/sparse_reversal.txt
 """
@@ -124,6 +127,8 @@ def one_device(seed: int) -> dict:
     noise = simulate_foreign(dev, 2.0, True, 1, 1, thermal=False, modes=np.ones(n, int)).rate_dph
     ideal = (r1 + r2) / 2 + (noise - np.mean(noise))
     rec["perfect damping"] = (1.0, float(np.std(ideal[t >= SERVED_FROM_S])) / floor)
+    eps = ((r1 + r2) / 2)[t >= SERVED_FROM_S]
+    rec["perfect damping and slow noise"] = (1.0, float(np.sqrt(np.var(eps) + dev.noise["white_dph"] ** 2)) / floor)
     for p in PERIODS_MIN:
         log = simulate_foreign(dev, 2.0, True, 1, 1, modes=sparse_sequence(t, EXCHANGE_S, WINDOW_S, 60.0 * p))
         pr, r, dm = residual_parts(log, model)
