@@ -277,6 +277,26 @@ def cost_m4_stages(recs: dict) -> str:
                    "code bytes (-O2 -fno-inline)"], rows)
 
 
+def cost_m4_mix(recs: dict) -> str:
+    """docs/COST.md: the firmware builds' instruction mix per sample (host_tools.bench.cost.instruction_mix,
+    mean over their e2e traces), the flash fetch events and the nominal cycles with code in flash of
+    1, 2 and 5 wait states, a prefetch buffer and no cache (an upper bound; the other tables' cycles
+    assume zero wait states)."""
+    from host_tools.bench.cost import FLASH_WAIT_STATES, MIX_CLASSES
+
+    r = recs["cortex-m4"]
+    builds = (("lean", "firmware entry point"), ("specialized", "specialized"))
+    rows = [[k, *(_d(r.get(f"builds.{b}.per_sample.mix.{k}")) for b, _ in builds)] for k in MIX_CLASSES]
+    rows.append(["instructions", *(_d(r.get(f"builds.{b}.instructions_per_sample")) for b, _ in builds)])
+    rows.append(["cycles, zero wait states (the model)", *(_d(r.get(f"builds.{b}.cycles_per_sample")) for b, _ in builds)])
+    rows.append(["flash fetch events (taken branches, returns, literal loads)",
+                 *(_d(r.get(f"builds.{b}.per_sample.flash_events")) for b, _ in builds)])
+    rows += [[f"cycles, flash with {w} wait state{'s' if w > 1 else ''}, prefetch buffer, no cache (upper bound)",
+              *(_d(r.get(f"builds.{b}.per_sample.cycles_flash_no_cache.{w}")) for b, _ in builds)]
+             for w in FLASH_WAIT_STATES]
+    return _table(["per sample (e2e, -O2)", *(label for _, label in builds)], rows)
+
+
 # -- FPGA ----------------------------------------------------------------------------------------------
 
 def _fpga_cycles(r: Record) -> tuple:
@@ -452,6 +472,7 @@ TABLES = {
     "fpga": (("ice40", "xc7"), readme_fpga),
     "cortex-m4-measured": (("cortex-m4",), cost_m4),
     "cortex-m4-stages": (("cortex-m4",), cost_m4_stages),
+    "cortex-m4-mix": (("cortex-m4",), cost_m4_mix),
     "fpga-measured": (("ice40", "xc7"), cost_fpga),
     "goals": (("cortex-m4", "ice40"), cost_goals),
 }
