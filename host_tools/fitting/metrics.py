@@ -8,8 +8,8 @@ All rates are in deg/h, times in s, ARW in deg/sqrt(h).
 * raw mode-reversal log (modes 1/2/3): the combined output of
   ``host_tools.golden.reversal.combine(log, combiner, bad=...)`` (``out_dph`` where ``valid``);
   the input-invalid samples (``bad``) are never used and a window holding one is not paired;
-* compensated log (metadata ``compensated: yes``, written by ``hdrg compensate``): ``rate_dph``
-  where the column ``valid`` is 1.
+* compensated log (metadata ``compensated: yes``, or a ``bias_dph`` or ``flags`` column: written
+  by ``hdrg compensate``): ``rate_dph`` where the column ``valid`` is 1.
 
 Exchange samples (mode 3) and invalid samples never enter any statistic (a mode-3 sample is
 excluded even when a compensated log marks it valid).  A raw log's **input-invalid samples** are
@@ -334,7 +334,11 @@ def start_figures(t_s, out, valid, end_s: float | None = None) -> dict:
 
 
 def _is_compensated(log: RunLog) -> bool:
-    return str(log.metadata.get("compensated", "")).strip().lower() in ("yes", "true", "1")
+    """The output of `hdrg compensate`: metadata ``compensated: yes`` or its columns (``bias_dph``,
+    ``flags``; host_tools.golden.checks.is_compensated, the rule of compensate, fit and report)."""
+    from host_tools.golden.checks import is_compensated
+    return (str(log.metadata.get("compensated", "")).strip().lower() in ("yes", "true", "1")
+            or is_compensated(log))
 
 
 def output_of(log: RunLog, combiner: str | None = None, max_stale_s: float | None = None,
@@ -349,7 +353,8 @@ def output_of(log: RunLog, combiner: str | None = None, max_stale_s: float | Non
     not_exchange = log.mode != MODE_EXCHANGE
     if _is_compensated(log):
         if "valid" not in log.columns:
-            raise RunLogError(log.source, None, "compensated log (metadata 'compensated: yes') lacks the column 'valid'")
+            raise RunLogError(log.source, None, "compensated log (metadata 'compensated: yes' or a bias_dph/flags "
+                                                "column) lacks the column 'valid'")
         vcol = log.columns["valid"]
         bad = (vcol != 0) & (vcol != 1)
         if bad.any():

@@ -48,7 +48,8 @@ disabled term, a missing or unexpected second bank, a ``fit.train`` that is not 
 also, naming the field: a number in ``config`` or a coefficient that is not finite (``1e999``,
 ``NaN``) or is an integer too large for a float, a coefficient with |k| above :data:`COEF_LIMIT_DPH`
 (what the output word holds), and a ``settle_s`` or ``max_stale_s`` over :data:`TIMER_LIMIT_N`
-samples at the model's sample rate (what the firmware's timing fields hold).
+samples at the model's sample rate (what the firmware's timing fields hold), and an aux
+``params.fs`` that is not ``rate.fs`` (the k7 generators' time constants use it).
 """
 from __future__ import annotations
 
@@ -224,6 +225,7 @@ class BiasModel:
         _check_numbers(d["config"], "config", source)
         config = ModelConfig.from_dict(d["config"], source)
         _check_timing(config, source)
+        _check_aux_fs(config, source)
         for name in ("coef_dph", "coef_mode2_dph"):
             if d.get(name) is not None:
                 _check_coef_range(d[name], source, name)
@@ -291,6 +293,19 @@ def _check_timing(config: ModelConfig, source) -> None:
             raise ModelError(source, f"config.reversal.{name}",
                              f"{value:g} s is more than {TIMER_LIMIT_N} samples at {fs:g} Hz "
                              f"(at most {TIMER_LIMIT_N / fs:.6g} s)")
+
+
+def _check_aux_fs(config: ModelConfig, source) -> None:
+    """ModelError when the k7 generators' sample rate ``config.aux.params.fs`` is not the model's
+    nominal rate ``config.rate.fs``: the generators turn their time constants into per-sample
+    coefficients with it, so another rate would filter every compensated log with the wrong lag."""
+    if config.aux.generator == "none":
+        return
+    aux_fs, fs = float(config.aux.params["fs"]), float(config.rate.fs)
+    if aux_fs != fs:
+        raise ModelError(source, "config.aux.params.fs",
+                         f"{aux_fs:g} Hz is not the model's sample rate config.rate.fs {fs:g} Hz (the k7 "
+                         f"generators' time constants would be converted at the wrong rate)")
 
 
 def _check_coef_range(coef, source, name) -> None:

@@ -350,7 +350,7 @@ def check_metadata(log: RunLog, header_line: int | None = None) -> None:
         raise RunLogError(src, log.line_of(row), f"metadata 'reversal: {log.metadata['reversal']}' but row {row} "
                                                  f"has mode {log.mode[row]}: fix the metadata or the mode column")
     m = re.match(r"\s*([0-9.eE+-]+)", log.metadata.get("sample_rate_hz", ""))
-    if m and len(log) > 2:
+    if m and len(log) >= 2:
         try:
             meta = float(m.group(1))
         except ValueError:

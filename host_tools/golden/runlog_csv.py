@@ -346,10 +346,11 @@ def unknown_columns(names) -> list:
 def check_columns(names, source: str, line: int | None, notes: list, depth: int = 6,
                   header_text: str | None = None) -> None:
     """The column checks of every run-log reader (CSV header, NPZ ``columns``): refuse an empty or
-    repeated name, a missing required column, and a column that is not a format column but equals
-    one the log lacks once case, spaces, '_' and '-' are ignored (``Mode``, ``Freq Hz``: names are
-    matched exactly, so the log would be read without it; ``rate_dph`` and ``rate_dps`` stand for
-    each other); warn (RunLogWarning, noted in ``notes``) about a column not in the format.
+    repeated name, both ``rate_dph`` and ``rate_dps`` (one would be ignored), a missing required
+    column, and a column that is not a format column but equals one the log lacks once case,
+    spaces, '_' and '-' are ignored (``Mode``, ``Freq Hz``: names are matched exactly, so the log
+    would be read without it; ``rate_dph`` and ``rate_dps`` stand for each other); warn
+    (RunLogWarning, noted in ``notes``) about a column not in the format.
     ``line``: the header's file line (None for an NPZ); ``depth``: the warning's stack level."""
     where = f"{source}:{line}" if line is not None else source
     if any(not c for c in names):
@@ -359,6 +360,9 @@ def check_columns(names, source: str, line: int | None, notes: list, depth: int 
         if c in seen:
             raise RunLogError(source, line, f"column '{c}' appears twice in the header")
         seen.add(c)
+    if "rate_dph" in seen and "rate_dps" in seen:
+        raise RunLogError(source, line, "columns 'rate_dph' and 'rate_dps' are both present: the log has two rate "
+                                        "columns and one of them would be ignored; keep one")
     present = {_squash(c) for c in names if c in FORMAT_COLUMNS}
     if "ratedph" in present or "ratedps" in present:
         present |= {"ratedph", "ratedps"}
