@@ -81,3 +81,17 @@ def test_metrics_reads_a_compensated_log_without_its_metadata_as_compensated(tmp
         res = metrics.run_metrics(p)
     assert res["kind"] == "compensated"
     assert res["mean_dph"] == pytest.approx(float(np.mean(rate[5:])))
+
+
+def test_a_log_sampled_off_the_model_rate_is_refused_whatever_its_metadata_says(tmp_path):
+    from host_tools.golden import compensate as hc
+
+    model = make_model("temp", ref=20.0, span=20.0, combiner=None)      # fs 1 Hz
+    n = 400
+    temp = 20.0 + 0.01 * np.arange(n)
+    p = tmp_path / "fast.csv"
+    for meta in ("# sample_rate_hz: 1\n", ""):                          # 1.019 Hz: 1.9 % off the model
+        p.write_text(meta + "t_s,rate_dph,temp_c\n" + "".join(f"{i * 0.981!r},1.0,{x!r}\n" for i, x in enumerate(temp.tolist())))
+        with pytest.raises(ValueError, match=r"fast\.csv: sample rate 1\.01937 Hz \(1 / its median t_s step 0\.981 s\) "
+                                             r"does not match the model's nominal fs 1 Hz"):
+            hc.compensate(rl.read(p), model)

@@ -123,11 +123,14 @@ def coverage_advice(logs, proxy: str | None = None) -> list:
 
 def check_sample_rate(log, fs: float) -> None:
     """Refuse a log whose sample rate differs from the model's nominal fs [Hz] by more than
-    ``FS_TOLERANCE`` (1 %): the rate estimator assumes the nominal period."""
-    fs_log = log.sample_rate_hz
-    if np.isfinite(fs_log) and abs(fs_log / fs - 1.0) > FS_TOLERANCE:
-        raise ValueError(f"{log.source}: sample rate {fs_log:.6g} Hz does not match the model's "
-                         f"nominal fs {fs:.6g} Hz (the rate estimator assumes the nominal period)")
+    ``FS_TOLERANCE`` (1 %): the rate estimator assumes the nominal period.  Both the log's
+    declared rate (metadata ``sample_rate_hz``, which the reader lets differ from t_s by 2 %) and
+    its rate from t_s (1 / the median step) are compared."""
+    data = 1.0 / log.nominal_step_s if len(log) >= 2 else float("nan")
+    for fs_log, how in ((data, f" (1 / its median t_s step {log.nominal_step_s:.6g} s)"), (log.sample_rate_hz, "")):
+        if np.isfinite(fs_log) and abs(fs_log / fs - 1.0) > FS_TOLERANCE:
+            raise ValueError(f"{log.source}: sample rate {fs_log:.6g} Hz{how} does not match the model's "
+                             f"nominal fs {fs:.6g} Hz (the rate estimator assumes the nominal period)")
 
 
 # -- compensated logs where raw ones are needed, modes 1 and 2 swapped ------------------------------
