@@ -95,3 +95,20 @@ def test_a_log_sampled_off_the_model_rate_is_refused_whatever_its_metadata_says(
         with pytest.raises(ValueError, match=r"fast\.csv: sample rate 1\.01937 Hz \(1 / its median t_s step 0\.981 s\) "
                                              r"does not match the model's nominal fs 1 Hz"):
             hc.compensate(rl.read(p), model)
+
+
+def test_report_names_training_runs_of_the_other_kind_instead_of_blaming_the_held_out_run():
+    from host_tools.fitting.baseline import baseline_config
+
+    n = 600
+    t = np.arange(float(n))
+    ftr = rl.RunLog.from_arrays(t_s=t, rate_dph=np.ones(n), temp_c=20.0 + t / 100, source="ftr.csv")
+    mode = np.tile(np.r_[np.full(30, 3), np.full(120, 1), np.full(30, 3), np.full(120, 2)], 2)[:n].astype(np.int64)
+    mr = rl.RunLog.from_arrays(t_s=t, rate_dph=np.ones(n), temp_c=20.0 + t / 100, mode=mode, source="mr.csv")
+    ftr_model = make_model("temp", ref=20.0, span=20.0, combiner=None)
+    mr_model = make_model("temp", ref=20.0, span=20.0, combiner="pair")
+    with pytest.raises(ValueError, match=r"mr\.csv: mode-reversal training run\(s\) for an FTR model"):
+        baseline_config([mr], like=ftr_model.config)
+    with pytest.raises(ValueError, match=r"ftr\.csv: FTR training run\(s\) for a mode-reversal model"):
+        baseline_config([ftr], like=mr_model.config)
+    assert baseline_config([ftr], like=ftr_model.config).reversal is None

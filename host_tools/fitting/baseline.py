@@ -20,9 +20,16 @@ BASELINE_TERMS = (0, 1, 2, 3)
 
 def baseline_config(logs, like: ModelConfig | None = None) -> ModelConfig:
     """Config of the flight-stack baseline on ``logs``: temp_c proxy clamped to the training
-    range (margin 0), the reversal settings of ``like`` (the model it is compared with)."""
+    range (margin 0), the reversal settings of ``like`` (the model it is compared with); ValueError
+    for a log that is FTR where ``like`` is mode reversal, or the reverse."""
     kind = "temp" if all("temp_c" in log for log in logs) else None
     reversal = like.reversal if like is not None else None
+    if like is not None:
+        other = [log.source for log in logs if log.reversal != (reversal is not None)]
+        if other:
+            raise ValueError(f"{', '.join(other)}: {'FTR' if reversal is not None else 'mode-reversal'} training "
+                             f"run(s) for {'a mode-reversal' if reversal is not None else 'an FTR'} model (the "
+                             f"baseline is applied to the model's target)")
     if any(log.reversal for log in logs) and reversal is None:
         reversal = {"combiner": "pair"}
     return fit_config_from_logs(logs, proxy_kind=kind, proxy_margin=0.0,
