@@ -145,3 +145,21 @@ def test_top_every_vector(sim, tmp_path):
     # busy past the evaluator: bounded by the worst legal table (cost_fpga.CYCLES_AUX_WORST)
     assert max(x["cycles_max"] for n, x in r.items() if n != "aux") <= CYCLES_GOAL
     assert CYCLES_GOAL < r["aux"]["cycles_max"] <= cost_fpga.CYCLES_AUX_WORST, r["aux"]
+
+
+@pytest.mark.skipif(not ICARUS, reason="Icarus Verilog not installed (Debian package iverilog)")
+def test_a_window_longer_than_the_rings_depth_is_refused(tmp_path):
+    """An RTL built with a short ring (N_HIST) reads and writes the ring out of range for a longer
+    diffn/lsq window: table_fits goes low and the testbench refuses the table (ERR FIELD word 9
+    rate_n), as the C twin refuses a window above 4096; a window that fits loads as before."""
+    m = V.read_manifest(V.DEFAULT_DIR)
+    tables = [t for st in m["sets"].values() for t in st.get("tables", []) if t["fields"].get("rate_est") in (1, 2)]
+    short = next(t for t in tables if t["fields"]["rate_n"] <= 6)
+    long_ = next(t for t in tables if t["fields"]["rate_n"] > 6)
+    exe = tmp_path / "tb_top_n6.vvp"
+    subprocess.run(["iverilog", "-g2001", "-Ptb_top.N_HIST=6", "-o", str(exe), str(cost_rtl.TB_TOP),
+                    *map(str, cost_rtl.top_sources())], check=True, capture_output=True, timeout=300)
+    data = "".join("TABLE " + " ".join(t["words"]) + "\n" for t in (short, long_, short)) + "QUIT\n"
+    out = subprocess.run(["vvp", "-n", str(exe)], input=data, capture_output=True, text=True, timeout=300).stdout.splitlines()
+    assert out[0] == f"T {len(short['words'])} {short['words'][-1]}" and out[2] == out[0]
+    assert out[1].startswith("ERR FIELD word 9 rate_n") and "N_HIST 6" in out[1]

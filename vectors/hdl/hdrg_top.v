@@ -37,7 +37,8 @@
 // S = (n - 1) A' - 2 Q' = sum_j (2j - (n - 1)) (P_j - P) exactly (the weights sum to zero).
 // Worst case measured by tb_top over every vector: the RESULT line's cycles.
 //
-// N_HIST: ring depth (longest diffn/lsq window n; the firmware allows 4096, the vectors use less).
+// N_HIST: ring depth (longest diffn/lsq window n; the firmware allows 4096, the vectors use less);
+// a table with a longer window drives `table_fits` low: the controller refuses it.
 // `define HDRG_BREAK_ROUNDING builds a deliberately wrong pipeline (the ALU and evaluator truncate).
 `timescale 1ns / 1ns
 module hdrg_top #(
@@ -86,7 +87,8 @@ module hdrg_top #(
     output reg  [7:0]         flags,
     output wire               z_clamped,
     output reg                busy,
-    output reg                done
+    output reg                done,
+    output wire               table_fits   // the loaded table's window n fits the ring (n <= N_HIST)
 );
     localparam [30:0] CMAX = 31'h7fffffff;                    // COUNT_MAX
     localparam signed [63:0] SLOPE_MAX = 64'sd1099511627775;  // 2^40 - 1
@@ -129,6 +131,10 @@ module hdrg_top #(
                 default: ;
             endcase
     wire [12:0] n = (est == 2'd1 || est == 2'd2) ? n_tab : 13'd1;
+    // a table whose diffn/lsq window is longer than this build's ring would read and write the ring
+    // out of range (wrong rates, no flag): table_fits is low for it, and the controller must refuse
+    // the table (the testbench answers ERR FIELD, as the C twin does for a window above 4096)
+    assign table_fits = ({19'd0, n} <= N_HIST);
     // k saturates at max(warmup, 2^shift) for iir (the gear reads k up to 2^shift), else at warmup
     wire [31:0] ksat = (est == 2'd3 && (32'd1 << ishift) > warmup) ? (32'd1 << ishift) : warmup;
     wire ftr = (combiner == 2'd0);

@@ -26,7 +26,7 @@ module hdrg_top_pnr #(
     wire signed [31:0] u, v, z, out, bias;
     wire signed [63:0] s, acc, y, b;
     wire [30:0] cnt;
-    wire valid, zc, done;
+    wire valid, zc, done, fits;
     always @(posedge clk)
         if (shift) sr <= {sr[190:0], sdi};
     hdrg_top #(.N_HIST(N_HIST)) top (
@@ -36,8 +36,8 @@ module hdrg_top_pnr #(
         .kin(sr[191:128]), .k_given(sr[37]), .eval_u(sr[159:128]), .eval_v(sr[191:160]), .eval_bank(sr[36]),
         .state(state), .vs(vs), .mode_o(mode_o), .sign(sign), .u(u), .v(v), .z(z), .s(s), .acc(acc), .cnt(cnt),
         .y_hold(y), .b(b), .out_hold(out), .bias_hold(bias), .valid(valid), .flags(flags), .z_clamped(zc),
-        .busy(busy), .done(done));
-    wire [639:0] all = {state, vs, flags, mode_o, sign, u, v, z, out, bias, s, acc, y, b, cnt, valid, zc, 168'd0};
+        .busy(busy), .done(done), .table_fits(fits));
+    wire [639:0] all = {state, vs, flags, mode_o, sign, u, v, z, out, bias, s, acc, y, b, cnt, valid, zc, fits, 167'd0};
     integer i;
     reg [15:0] fold;
     always @* begin

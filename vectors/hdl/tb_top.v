@@ -17,6 +17,7 @@ module tb_top;
     parameter LINE = 4096;                    // longest request line (characters)
 
     reg clk = 1'b0, rst = 1'b1, we = 1'b0, load = 1'b0, start = 1'b0, eval_start = 1'b0;
+    wire table_fits;
     reg [7:0] waddr = 8'd0;
     reg [31:0] wdata = 32'd0, f = 32'd0;
     reg signed [31:0] t = 0, r = 0, zin = 0, eu = 0, ev = 0, a0 = 0, a1 = 0, a2 = 0, a3 = 0;
@@ -38,7 +39,8 @@ module tb_top;
         .eval_start(eval_start), .f(f), .t(t), .r(r), .mode(mode), .self_timed(self_timed), .restart(restart), .invalid(invalid),
         .zin(zin), .a0(a0), .a1(a1), .a2(a2), .a3(a3), .kin(kin), .k_given(k_given), .eval_u(eu), .eval_v(ev), .eval_bank(ebank), .state(state), .vs(vs), .mode_o(mode_o),
         .sign(sign), .u(u), .v(v), .z(z), .s(s), .acc(acc), .cnt(cnt), .y_hold(y), .b(b), .out_hold(out),
-        .bias_hold(bias), .valid(valid), .flags(flags), .z_clamped(zc), .busy(busy), .done(done));
+        .bias_hold(bias), .valid(valid), .flags(flags), .z_clamped(zc), .busy(busy), .done(done),
+        .table_fits(table_fits));
 
     always #5 clk = ~clk;
 
@@ -135,7 +137,10 @@ module tb_top;
                     load = 1'b1;
                     tick;
                     load = 1'b0;
-                    $display("T %0d %08x", ntok, last);
+                    if (table_fits)
+                        $display("T %0d %08x", ntok, last);
+                    else
+                        $display("ERR FIELD word 9 rate_n: the window is longer than this build's ring (N_HIST %0d)", N_HIST);
                 end else if (cmd == "S") begin
                     ntok = 0;
                     for (i = 0; i < 11; i = i + 1) a[i] = 64'sd0;
