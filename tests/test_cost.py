@@ -8,7 +8,7 @@ import textwrap
 import pytest
 
 from host_tools import cli
-from host_tools.bench import cost, cost_fpga
+from host_tools.bench import cost, cost_fpga, cost_m4_model
 
 pytestmark = pytest.mark.target      # the target toolchains: `pytest -m target` (.ci/run)
 
@@ -31,10 +31,10 @@ def test_m4_cycle_model_counts_branches_loads_and_pops():
     # not taken: ldr 2, ldr pipelined 1, adds 1, cmp 1, bne 1, nop 1, ... ; taken: bne 1 + P
     straight = [0x10, 0x12, 0x14, 0x16, 0x18, 0x1a]
     taken = [0x10, 0x12, 0x14, 0x16, 0x18, 0x20, 0x24]
-    assert cost.cycles_m4(straight, dis, P=2, div=7) == 2 + 1 + 1 + 1 + 1 + 1
-    assert cost.cycles_m4(taken, dis, P=2, div=7) == 2 + 1 + 1 + 1 + 3 + 1 + (1 + 3 + 2)
-    assert cost.cycles_m4(taken, dis, P=1, div=7) < cost.cycles_m4(taken, dis, P=3, div=7)
-    mix, events = cost.instruction_mix(taken + [0x12], {**dis, 0x12: ("ldr", "r2, [pc, #8]", 2)})
+    assert cost_m4_model.cycles_m4(straight, dis, P=2, div=7) == 2 + 1 + 1 + 1 + 1 + 1
+    assert cost_m4_model.cycles_m4(taken, dis, P=2, div=7) == 2 + 1 + 1 + 1 + 3 + 1 + (1 + 3 + 2)
+    assert cost_m4_model.cycles_m4(taken, dis, P=1, div=7) < cost.cycles_m4(taken, dis, P=3, div=7)
+    mix, events = cost_m4_model.instruction_mix(taken + [0x12], {**dis, 0x12: ("ldr", "r2, [pc, #8]", 2)})
     assert mix == {"alu": 2, "multiply": 1, "divide": 0, "load/store": 3, "load/store multiple": 1,
                    "branch taken": 1, "branch not taken": 0}
     assert events == 4         # the taken bne, the pop into pc and the literal-pool load (twice)
@@ -125,7 +125,7 @@ def test_mcu_cost_json(target, tmp_path):
         assert not any(k.startswith("other") for k in b["per_sample"]["per_stage_instructions"])
         ps = b["per_sample"]
         assert abs(sum(ps["mix"].values()) - b["instructions_per_sample"]) < 1 and ps["mix"]["multiply"] > 0
-        fl = [ps["cycles_flash_no_cache"][str(w)] for w in cost.FLASH_WAIT_STATES]
+        fl = [ps["cycles_flash_no_cache"][str(w)] for w in cost_m4_model.FLASH_WAIT_STATES]
         assert b["cycles_per_sample"] < fl[0] < fl[1] < fl[2] and ps["flash_events"] > 0
         assert cost.LEAN_STEP in b["-Os"]["step_functions"] and cost.STEP not in b["-Os"]["step_functions"]
     generic_case = e2e["per_case"][spec["e2e_cases"][0]]

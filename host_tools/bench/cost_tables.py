@@ -13,7 +13,7 @@ between two markers that name the table and the commands that measure its record
 tests/test_cost_tables.py checks that the documents hold exactly what the committed records render.
 
 Units: cycles are per sample (Cortex-M4: the mean of the nominal per-instruction model over the traced
-samples, host_tools.bench.cost.M4_MODEL; FPGA: clock cycles of the RTL, the worst or the mean over a
+samples, host_tools.bench.cost_m4_model.M4_MODEL; FPGA: clock cycles of the RTL, the worst or the mean over a
 vector set's sample requests), code and stack in bytes, vectors are compared vectors, FPGA resources
 are Yosys cells (LUT4 / LUT, flip-flops, DSP and block-RAM cells), Fmax in MHz (nextpnr-ice40).
 A goal is judged from the record's numbers (``met`` / ``missed``), never copied.
@@ -278,11 +278,11 @@ def cost_m4_stages(recs: dict) -> str:
 
 
 def cost_m4_mix(recs: dict) -> str:
-    """docs/COST.md: the firmware builds' instruction mix per sample (host_tools.bench.cost.instruction_mix,
+    """docs/COST.md: the firmware builds' instruction mix per sample (host_tools.bench.cost_m4_model.instruction_mix,
     mean over their e2e traces), the flash fetch events and the nominal cycles with code in flash of
     1, 2 and 5 wait states, a prefetch buffer and no cache (an upper bound; the other tables' cycles
     assume zero wait states)."""
-    from host_tools.bench.cost import FLASH_WAIT_STATES, MIX_CLASSES
+    from host_tools.bench.cost_m4_model import FLASH_WAIT_STATES, MIX_CLASSES
 
     r = recs["cortex-m4"]
     builds = (("lean", "firmware entry point"), ("specialized", "specialized"))
