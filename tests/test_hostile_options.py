@@ -111,8 +111,8 @@ def test_compensate_strict_refuses_a_model_with_a_huge_coefficient(tmp_path, cap
     ("--max-error", "nan", "--max-error nan"), ("--max-error", "-1", "--max-error -1"),
     ("--max-error", "inf", "--max-error inf"), ("--exchange-s", "inf", "--exchange-s inf"),
     ("--exchange-s", "nan", "--exchange-s nan"), ("--power-on-s", "-2", "--power-on-s -2"),
-    ("--dwell-s", "0", "--dwell-s 0"), ("--dwell-s", "0.4", "0 samples at the model's sample rate 1 Hz"),
-    ("--exchange-s", "0.4", "0 samples at the model's sample rate 1 Hz"),
+    ("--dwell-s", "0", "--dwell-s 0"), ("--dwell-s", "0.4", "shorter than one sample at the model's sample rate 1 Hz"),
+    ("--exchange-s", "0.4", "shorter than one sample at the model's sample rate 1 Hz"),
     ("--power-on-s", "0.2", "--power-on-s 0.2"), ("--exchange-s", "1e300", "2147483646 samples"),
 ])
 def test_quantize_refuses_meaningless_numbers(tmp_path, capsys, option, value, needle):

@@ -5,6 +5,8 @@ The options are checked before anything is quantized (one-line errors naming the
 times [s] must be finite and >= 0 (``--dwell-s`` > 0), and a time > 0 must be at least one sample
 and at most the timing fields' 2^31 - 2 samples at the model's sample rate (a time that rounds to
 0 samples would silently switch the blanking off); ``--max-error`` [deg/h] must be finite and >= 0.
+A time that is not a whole number of samples is rounded to the nearest (the table's timing fields
+count samples) with a note on stderr naming the option and the samples kept.
 """
 from __future__ import annotations
 
@@ -79,6 +81,11 @@ def run(args) -> int:
         print(f"aux generators: {len(a['terms'])} terms ({gens}), aux words {words}; |z_fixed - z_golden| "
               f"bound {a['z_error']:.3g}, measured {a['measured_z']['z_max']:.3g}")
     sys.stdout.flush()
+    for option, value_s in (("--power-on-s", args.power_on_s), ("--exchange-s", args.exchange_s),
+                            ("--dwell-s", args.dwell_s)):
+        note = rounding_note(option, value_s, fs)
+        if note:
+            print(f"hdrg quantize: note: {note}", file=sys.stderr)
     for w in q.report["warnings"]:
         print(f"hdrg quantize: warning: {w}", file=sys.stderr)
     return 0
@@ -98,10 +105,20 @@ def check_samples(option: str, value_s: float, fs: float, zero: bool = True) -> 
     if value_s == 0:
         return
     n = round(value_s * fs)
-    if n < 1:
-        raise UserError(f"{option} {value_s:g}: rounds to 0 samples at the model's sample rate {fs:g} Hz "
+    if value_s * fs < 1 - 1e-9:
+        raise UserError(f"{option} {value_s:g}: shorter than one sample at the model's sample rate {fs:g} Hz "
                         f"(one sample is {1 / fs:g} s); give at least {1 / fs:g} s"
                         + (" or 0 for none" if zero else ""))
     if n > TIMER_LIMIT_N:
         raise UserError(f"{option} {value_s:g}: more than the {TIMER_LIMIT_N} samples the table's timing fields "
                         f"hold at the model's sample rate {fs:g} Hz (at most {TIMER_LIMIT_N / fs:.6g} s)")
+
+
+def rounding_note(option: str, value_s: float, fs: float) -> str | None:
+    """The note for a time ``value_s`` [s] that is not a whole number of samples at ``fs`` [Hz] (the
+    table holds it rounded), or None."""
+    n = value_s * fs
+    if abs(n - round(n)) <= 1e-9 * max(1.0, n):
+        return None
+    return (f"{option} {value_s:g} s is {n:.6g} samples at the model's sample rate {fs:g} Hz: the table holds "
+            f"{round(n)} samples ({round(n) / fs:g} s)")

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 from host_tools.cli.options import add_random_family_options
 
@@ -82,7 +83,7 @@ def run(args) -> int:
             raise ValueError(f"{opt} belongs to --lot")
     if args.family == "random":
         return _run_random(args)
-    from host_tools.simulation.sim import format_list, simulate
+    from host_tools.simulation.sim import build_config, format_list, schedule_notes, simulate
 
     if args.list:
         print(format_list())
@@ -109,6 +110,8 @@ def run(args) -> int:
                    undeclared=args.undeclared, **overrides)
     runlog.write(log, args.output)
     print(f"hdrg simulate: {len(log)} samples ({args.scenario}, seed {args.seed}) -> {args.output}")
+    for note in schedule_notes(build_config(args.scenario, args.duration, args.rate, args.undeclared, **overrides)):
+        print(f"hdrg simulate: note: {note}", file=sys.stderr)
     return 0
 
 

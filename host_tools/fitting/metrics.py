@@ -57,7 +57,9 @@ differences that would span a break left out).
   N / sqrt(tau), with N in deg/h*sqrt(s) = N/60 deg/sqrt(h)), method ``"adev_at_1s"``; when 1 s
   is not among the taus, from a fit of sigma = N / sqrt(tau) to the leading taus whose local
   log-log slope lies in [-0.75, -0.25] (method ``"fit_-1/2"``).  Both values are reported when
-  available (``arw_at_1s_deg_rth``, ``arw_fit_deg_rth``).
+  available (``arw_at_1s_deg_rth``, ``arw_fit_deg_rth``).  Like the bias instability, only from
+  taus that hold at least 8 independent tau-averages; with fewer at every tau both are n/a (None)
+  and ``reason`` says so.
 
 For a raw mode-reversal log the Allan figures are those of the combined output: within a window
 it is (c + W_other)/2 with W_other constant, so its short-tau noise is about half the raw loop's
@@ -86,7 +88,7 @@ DEFAULT_TAUS = (1.0, 10.0, 100.0)
 MIN_FILL = 0.5          # a bin needs >= 50 % of the samples tau seconds hold at the nominal rate
 MIN_BINS = 2            # a tau is supported with >= 2 bins
 BI_FACTOR = 0.664       # flicker floor: sigma_min = 0.664 B
-BI_MIN_AVERAGES = 8     # bias instability only at taus with >= 8 independent averages
+BI_MIN_AVERAGES = 8     # bias instability and ARW only at taus with >= 8 independent averages
 MIN_STRETCH = 3         # shortest stretch the Allan deviation uses [samples]
 PAPER_TAU_S = 100.0     # the averaging time we take the paper's tables to be
 
@@ -273,14 +275,18 @@ def allan(out_dph, t_s, valid, fs_hz: float | None = None) -> dict:
         k = adm[np.argmin(adev[adm])]
         res.update(bias_instability_dph=float(adev[k] / BI_FACTOR), bi_tau_s=float(taus[k]),
                    bi_at_edge=bool(k == adm[-1]))
-    # ARW at 1 s
+    else:
+        res["reason"] = (f"fewer than {BI_MIN_AVERAGES} independent averages at every tau ({res['samples']} "
+                         f"samples in {len(spans)} stretch(es)): no ARW or bias instability")
+    # ARW at 1 s (n_avg falls with tau: the taus with enough averages are the first len(adm))
     one = np.flatnonzero(np.abs(taus - 1.0) < 1e-9)
     if len(one):
         res["adev_1s_dph"] = float(adev[one[0]])
-        res["arw_at_1s_deg_rth"] = float(adev[one[0]] / 60.0)
+        if n_avg[one[0]] >= BI_MIN_AVERAGES:
+            res["arw_at_1s_deg_rth"] = float(adev[one[0]] / 60.0)
     # ARW from the -1/2 region at the short taus
-    if len(taus) >= 2:
-        slopes = np.diff(np.log(adev)) / np.diff(np.log(taus))
+    if len(adm) >= 2:
+        slopes = np.diff(np.log(adev[:len(adm)])) / np.diff(np.log(taus[:len(adm)]))
         good = (slopes >= -0.75) & (slopes <= -0.25)
         nlead = int(np.argmin(good)) if not good.all() else len(good)
         if nlead >= 1:

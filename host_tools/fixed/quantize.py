@@ -242,8 +242,9 @@ MAX_TABLE_BYTES = 4 << 20        # a table.json is ~20 kB, a .bin/.memh under 1 
 def read_table(path) -> Table:
     """A table from table.json (checks CRC and that its fields agree with its words), a binary
     ``.bin`` or a ``.memh``/``.hex`` memory file.  TableError (naming the file) for a file that is
-    not a regular file, is over 4 MiB, is not UTF-8 or JSON, repeats a key, nests too deep, or
-    holds a field of the wrong type."""
+    not a regular file, is over 4 MiB, is not UTF-8 or JSON, repeats a key, nests too deep,
+    holds a field of the wrong type, or a ``timing`` field that disagrees with the words
+    (:func:`check_timing`)."""
     return read_table_json(path)[0]
 
 
@@ -286,6 +287,7 @@ def read_table_json(path) -> tuple:
     bad = [k for k, v in fields_.items() if vals.get(k) != v or isinstance(v, bool)]
     if bad:
         raise TableError(f"{path}: fields {', '.join(bad)} disagree with the words (edited by hand?)")
+    check_timing(path, d.get("timing"), vals)
     for key in ("coef_dph", "coef_mode2_dph", "coef_quantized_dph", "coef_quantized_mode2_dph"):
         v = d.get(key)
         if v is not None and not (isinstance(v, list) and all(isinstance(c, (int, float)) and not isinstance(c, bool)
@@ -295,3 +297,36 @@ def read_table_json(path) -> tuple:
     if src is not None and not isinstance(src, str):
         raise TableError(f"{path}: field 'model_source' must be a string or null, not {type(src).__name__}")
     return table, d
+
+
+TIMING_WORDS = ("settle_n", "max_stale_n", "power_on_n", "exchange_n", "dwell_n")
+TIMING_SECONDS = {"power_on_s": "power_on_n", "exchange_s": "exchange_n", "dwell_s": "dwell_n"}
+
+
+def check_timing(path, timing, vals: dict) -> None:
+    """TableError naming the field unless a table.json's ``timing`` (None: absent) agrees with the
+    table's words ``vals`` (field name -> value): ``fs_hz`` gives the word ``fs_q16``, each ``*_n`` is
+    its word, each time [s] rounds to its word's samples at ``fs_hz``; no other key.  An export copies
+    ``timing``: it must not contradict the words it sits beside."""
+    if timing is None:
+        return
+    if not isinstance(timing, dict):
+        raise TableError(f"{path}: field 'timing' must be an object, not {type(timing).__name__}")
+    known = ("fs_hz",) + TIMING_WORDS + tuple(TIMING_SECONDS)
+    for key, v in timing.items():
+        if key not in known:
+            raise TableError(f"{path}: field 'timing.{key}': unknown (known: {', '.join(known)})")
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
+            raise TableError(f"{path}: field 'timing.{key}': must be a finite number >= 0, not {v!r}")
+    fs = timing.get("fs_hz", vals["fs_q16"] / 65536)
+    if "fs_hz" in timing and (fs <= 0 or rhu(Fraction(fs) * (1 << 16)) != vals["fs_q16"]):
+        raise TableError(f"{path}: field 'timing.fs_hz': {fs:g} Hz disagrees with the word fs_q16 "
+                         f"{vals['fs_q16']} ({vals['fs_q16'] / 65536:g} Hz) (edited by hand?)")
+    for key in TIMING_WORDS:
+        if key in timing and timing[key] != vals[key]:
+            raise TableError(f"{path}: field 'timing.{key}': {timing[key]!r} disagrees with the word {key} "
+                             f"{vals[key]} (edited by hand?)")
+    for key, word in TIMING_SECONDS.items():
+        if key in timing and round(timing[key] * fs) != vals[word]:
+            raise TableError(f"{path}: field 'timing.{key}': {timing[key]:g} s is {round(timing[key] * fs)} "
+                             f"samples at {fs:g} Hz, the word {word} says {vals[word]} (edited by hand?)")

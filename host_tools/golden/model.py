@@ -43,13 +43,16 @@ Floats are written in shortest round-trip form, so a model survives write/read b
 Reading refuses (:class:`ModelError`, a ValueError whose message names the file and the field)
 a non-JSON file, a file that is not a regular file or is over 16 MiB, a key repeated in one
 object, nesting over 32 levels (host_tools.jsonread), another ``format``, a missing or unknown
-``version``, a missing field, a wrong type or an out-of-range value, a non-zero coefficient of a
-disabled term, a missing or unexpected second bank, a ``fit.train`` that is not a list of paths;
-also, naming the field: a number in ``config`` or a coefficient that is not finite (``1e999``,
-``NaN``) or is an integer too large for a float, a coefficient with |k| above :data:`COEF_LIMIT_DPH`
-(what the output word holds), and a ``settle_s`` or ``max_stale_s`` over :data:`TIMER_LIMIT_N`
-samples at the model's sample rate (what the firmware's timing fields hold), and an aux
-``params.fs`` that is not ``rate.fs`` (the k7 generators' time constants use it).
+``version``, a missing field, an unknown field (at the top level, in ``config``, ``config.proxy``,
+``config.rate``, ``config.reversal`` and the aux terms: a misspelt key), a wrong type or an
+out-of-range value (a proxy ``span`` below one LSB of the proxy word, a drive-frequency ``ref``
+<= 0), a non-zero coefficient of a disabled term, a missing or unexpected second bank, a
+``fit.train`` that is not a list of paths; also, naming the field: a number in ``config`` or a
+coefficient that is not finite (``1e999``, ``NaN``) or is an integer too large for a float, a
+coefficient with |k| above :data:`COEF_LIMIT_DPH` (what the output word holds), and a ``settle_s``
+or ``max_stale_s`` over :data:`TIMER_LIMIT_N` samples at the model's sample rate (what the
+firmware's timing fields hold), and an aux ``params.fs`` that is not ``rate.fs`` (the k7
+generators' time constants use it).
 """
 from __future__ import annotations
 
@@ -107,6 +110,7 @@ class ModelConfig:
     def from_dict(cls, d: dict, source: str = "<dict>") -> "ModelConfig":
         if not isinstance(d, dict):
             raise ModelError(source, "config", f"must be an object, not {type(d).__name__}")
+        _refuse_unknown(d, ("proxy", "rate", "reversal", "aux"), source, "config.")
         parts = {}
         for name, make in (("proxy", ProxyConfig.from_dict), ("rate", RateConfig.from_dict),
                            ("reversal", ReversalConfig.from_dict), ("aux", AuxConfig.from_dict)):
@@ -214,6 +218,8 @@ class BiasModel:
         for name in ("config", "terms", "coef_dph"):
             if name not in d:
                 raise ModelError(source, name, "missing")
+        _refuse_unknown(d, ("format", "version", "config", "terms", "term_names", "coef_dph", "coef_mode2_dph",
+                            "fit"), source)
         rev = d["config"].get("reversal") if isinstance(d["config"], dict) else None
         if isinstance(rev, dict):
             if version == 1 and "order" in rev:
@@ -246,6 +252,14 @@ class BiasModel:
         except InputFileError as exc:
             raise ModelError(source, None, str(exc).removeprefix(f"{source}: ")) from None
         return cls.from_dict(d, source)
+
+
+def _refuse_unknown(d: dict, known, source: str, prefix: str = "") -> None:
+    """ModelError naming the first key of ``d`` not in ``known`` (a misspelt key must not be ignored
+    while its field falls back to a default or goes missing)."""
+    unknown = [k for k in d if k not in known]
+    if unknown:
+        raise ModelError(source, f"{prefix}{unknown[0]}", f"unknown field (fields here: {', '.join(known)})")
 
 
 def _check_terms(terms, source) -> tuple:

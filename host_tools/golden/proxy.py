@@ -7,7 +7,8 @@ The proxy p is one column of the run log:
 * ``kind = "temp"``: ``temp_c``, a temperature sensor [degC].
 
 A :class:`ProxyConfig` holds ``ref`` (the centre of the operating range) and ``span`` (its
-half-width, > 0), both in proxy units (Hz or degC).  The operating range is
+half-width, > 0; in a model file at least one LSB of the firmware's proxy word, SPAN_MIN, and a
+drive frequency's ref > 0), both in proxy units (Hz or degC).  The operating range is
 ``[ref - span, ref + span]``.
 
 Exact semantics, per sample i (the fixed-point reference copies them step for step):
@@ -37,9 +38,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from firmware_ref import formats as F
 from firmware_ref.vocabulary import PROXY_KINDS as KINDS
+from host_tools.golden.fields import check_fields
 UNITS = {"freq": "Hz", "temp": "degC"}
 COLUMNS = {"freq": "freq_hz", "temp": "temp_c"}
+# the smallest meaningful span: one LSB of the firmware's proxy input word (firmware_ref/FORMATS.md)
+SPAN_MIN = {"freq": 2.0 ** -F.FREQ_FRAC, "temp": 2.0 ** -F.TEMP_FRAC}
 
 
 @dataclass(frozen=True)
@@ -125,8 +130,16 @@ class ProxyConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> "ProxyConfig":
-        """Inverse of :meth:`to_dict` ('unit' is informative and checked if present)."""
+        """Inverse of :meth:`to_dict` ('unit' is informative and checked if present; no other key;
+        ``span`` at least SPAN_MIN, a drive frequency's ``ref`` > 0)."""
+        check_fields("proxy config", d, ("kind", "ref", "span"), ("unit",))
         cfg = cls(d["kind"], d["ref"], d["span"])
+        if cfg.span < SPAN_MIN[cfg.kind]:
+            raise ValueError(f"proxy span {cfg.span!r} {cfg.unit} is below one LSB of the {cfg.column} input "
+                             f"word ({SPAN_MIN[cfg.kind]:g} {cfg.unit}): u would be the quantization noise of "
+                             f"the proxy")
+        if cfg.kind == "freq" and not cfg.ref > 0:
+            raise ValueError(f"proxy ref {cfg.ref!r} Hz: a drive frequency is positive")
         if "unit" in d and d["unit"] != cfg.unit:
             raise ValueError(f"proxy unit {d['unit']!r} does not match kind {cfg.kind!r} ({cfg.unit})")
         return cfg

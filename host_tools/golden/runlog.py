@@ -19,7 +19,7 @@ Bad input (each case is tested in tests/test_runlog.py):
   (except the last line, below), text in a numeric cell, an empty cell, NaN or inf (except in a
   compensated log's ``rate_dph`` / ``bias_dph`` where ``valid`` is 0: empty in CSV, read as NaN,
   BLANK_WHERE_INVALID), a blank line inside the data,
-  non-increasing or duplicated ``t_s``, a ``mode`` code that is not 0, 1, 2 or 3, a ``freq_hz``
+  non-increasing, duplicated or negative ``t_s``, a ``mode`` code that is not 0, 1, 2 or 3, a ``freq_hz``
   that is not positive, metadata that contradicts the data (``reversal: on`` without a ``mode``
   column or with every sample in mode 0, ``reversal: off`` with modes 1/2/3, a
   ``sample_rate_hz`` more than 2 % away from 1 / the median ``t_s`` step, ``exchange_s`` > 0 with
@@ -307,6 +307,9 @@ def _validate(log: RunLog) -> None:
                 row = int(np.argmax(bad))
                 raise RunLogError(src, where(row), f"{rowtxt(row)}column '{name}' is {arr[row]} (NaN/inf is not a value)")
     t = cols["t_s"]
+    if t[0] < 0:                        # t_s increases: only the first can be the first negative one
+        raise RunLogError(src, where(0), f"{rowtxt(0)}t_s {float(t[0])!r} is negative: t_s is the time since "
+                                         f"power-on (shared/formats/run-log.md), never before it")
     if n > 1:
         d = np.diff(t)
         if np.any(d <= 0):

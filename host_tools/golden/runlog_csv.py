@@ -325,11 +325,19 @@ def _decode(raw: bytes, source: str, offset: int) -> str:
             from None
 
 
-def _parse_metadata_line(text: str, index: int, metadata: dict) -> None:
+def _parse_metadata_line(text: str, index: int, metadata: dict, lines: dict, source: str) -> None:
+    """Add the metadata line ``text`` (file line ``index``) to ``metadata``; ``lines``: key -> the line
+    that set it.  A key repeated with another value is refused with both lines (one would be lost);
+    a repeat with the same value is kept once."""
     body = text[1:].strip()
     if ":" in body:
-        key, value = body.split(":", 1)
-        metadata[key.strip()] = value.strip()
+        key, value = (x.strip() for x in body.split(":", 1))
+        if key in metadata and metadata[key] != value:
+            raise RunLogError(source, index, f"metadata key '{key}' repeated with another value: line "
+                                             f"{lines[key]} says {metadata[key]!r}, line {index} says {value!r} "
+                                             f"(one would be ignored); keep one")
+        metadata[key] = value
+        lines.setdefault(key, index)
     elif body:
         metadata[f"#{index}"] = body
 
@@ -388,7 +396,7 @@ def check_columns(names, source: str, line: int | None, notes: list, depth: int 
 
 def _read_head(fh, source: str):
     """Metadata lines up to the header row: (metadata, header names, header text, header line)."""
-    metadata, lineno, content = {}, 0, False
+    metadata, lines, lineno, content = {}, {}, 0, False
     while True:
         offset = fh.tell()
         raw = fh.readline(HEAD_LINE_MAX + 1)
@@ -403,7 +411,7 @@ def _read_head(fh, source: str):
             raw, offset = raw[3:], offset + 3
         text = _decode(raw, source, offset).rstrip("\r\n")
         if text.startswith("#"):
-            _parse_metadata_line(text, lineno, metadata)
+            _parse_metadata_line(text, lineno, metadata, lines, source)
             content = True
         elif text.strip():
             return metadata, [c.strip() for c in text.split(",")], text, lineno

@@ -297,12 +297,32 @@ def build_config(scenario: str = "static", duration_s=None, sample_rate_hz: floa
         raise ValueError(f"sample_rate_hz must be > 0, not {sample_rate_hz}")
     if not (math.isfinite(duration_s) and duration_s > 0):
         raise ValueError(f"duration_s must be > 0, not {duration_s}")
+    if params.reversal:
+        for name in ("exchange_s", "dwell_s"):
+            value = getattr(params, name)
+            if value != 0 and value * sample_rate_hz < 1 - 1e-9:
+                raise ValueError(f"{name} {value:g} s is shorter than one sample at {sample_rate_hz:g} Hz "
+                                 f"({1 / sample_rate_hz:g} s)" + (" (or 0 for none)" if name == "exchange_s" else ""))
     n = int(round(duration_s * sample_rate_hz))
     if n < 2:
         raise ValueError(f"duration {duration_s} s at {sample_rate_hz} Hz gives {n} sample(s); need at least 2")
     if n > MAX_SAMPLES:
         raise ValueError(f"duration {duration_s} s at {sample_rate_hz} Hz gives {n} samples (limit {MAX_SAMPLES})")
     return SimConfig(scenario, profile, params, effects, frozenset(hidden), duration_s, sample_rate_hz)
+
+
+def schedule_notes(cfg: SimConfig) -> list:
+    """Notes on a mode-reversal schedule whose exchange or dwell is not a whole number of samples:
+    the schedule runs in continuous time, so those phases last one sample more or less by turns."""
+    fs, p = cfg.sample_rate_hz, cfg.params
+    notes = []
+    for name, phase in (("exchange_s", "exchange"), ("dwell_s", "mode-1/2 window")) if p.reversal else ():
+        n = getattr(p, name) * fs
+        if abs(n - round(n)) > 1e-9 * max(1.0, n):
+            notes.append(f"{name} {getattr(p, name):g} s is {n:.6g} samples at {fs:g} Hz: the schedule runs in "
+                         f"continuous time, so each {phase} lasts {math.floor(n)} or {math.ceil(n)} samples "
+                         f"(a sequencer counts whole samples)")
+    return notes
 
 
 # ---------------------------------------------------------------------------------------------
