@@ -34,6 +34,10 @@ Rows:
   error and the white noise alone, sqrt(var + white^2).
 
     python docs/studies/sparse_reversal.py --workers 2 > docs/studies/sparse_reversal.txt
+    python docs/studies/sparse_reversal.py --startup 20 --workers 2 > docs/studies/sparse_reversal_startup.txt
+
+The second command: the start-up benchmark's devices (`hdrg bench startup`: 20 devices, 4
+power-ons each at constant ambient) under the paper's schedule and under sparse reversal.
 """
 import argparse
 import functools
@@ -41,8 +45,11 @@ import functools
 import numpy as np
 
 from host_tools.bench.accuracy import SEED_STRIDE, floor_of
+from host_tools.bench.startup import EFFECT, STARTUPS, TRAIN_RUNS, ambient_of, calibration_runs
+from host_tools.fitting.metrics import start_figures
 from host_tools.fitting.fit_pipeline import fit_default
 from host_tools.golden.compensate import compensate, prepare
+from host_tools.golden.reversal import combine
 from host_tools.lot.parallel import map_ordered
 from host_tools.simulation.sim_foreign import foreign_device, simulate_foreign
 from host_tools.simulation.sim_physics import sparse_sequence
@@ -144,6 +151,58 @@ def one_device(seed: int) -> dict:
     return rec
 
 
+def one_startup_device(seed: int) -> dict:
+    """The start-up benchmark's protocol (host_tools.bench.startup: its calibration runs, `hdrg fit`,
+    STARTUPS power-ons of 45 min at constant ambient), each start-up simulated under the paper's
+    schedule and under sparse reversal (the first excursion right after power-on, then every 45
+    min): the start-up figures (host_tools.fitting.metrics.start_figures) of both outputs and their
+    served shares from power-on + 180 s."""
+    dev = foreign_device(seed)
+    model, _ = fit_default(calibration_runs(dev))
+    rows = []
+    for k in range(STARTUPS):
+        p = len(TRAIN_RUNS) + k
+        amb = ambient_of(dev, p)
+        paper = simulate_foreign(dev, 1.0, True, p, p, effect=EFFECT, ambient_c=amb)
+        t = np.asarray(paper.t_s)
+        out = compensate(paper, model)
+        valid = np.asarray(out["valid"]) > 0
+        row = {"paper": {**start_figures(t, np.asarray(out.rate_dph), valid), "served": score(np.zeros(len(t)), valid, t)[0]}}
+        log = simulate_foreign(dev, 1.0, True, p, p, effect=EFFECT, ambient_c=amb,
+                               modes=sparse_sequence(t, EXCHANGE_S, WINDOW_S, 2700.0))
+        pr, r, dm = residual_parts(log, model)
+        o = sparse_output(pr.mode, r, np.asarray(pr.used, bool), dm, True)
+        row["sparse 45 min"] = {**start_figures(t, np.nan_to_num(o), np.isfinite(o)), "served": score(np.zeros(len(t)), np.isfinite(o), t)[0]}
+        # the noise floors: the same start-ups without thermal terms, the paper's pairing of the raw
+        # output (the start-up benchmark's floor) and one mode's output where sparse reversal serves
+        fl = simulate_foreign(dev, 1.0, True, p, p, effect=EFFECT, ambient_c=amb, thermal=False)
+        c = combine(fl, "pair")
+        row["noise floor, paired"] = {**start_figures(t, c.out_dph, np.asarray(c.valid, bool)), "served": float("nan")}
+        fl1 = simulate_foreign(dev, 1.0, True, p, p, effect=EFFECT, ambient_c=amb, thermal=False, modes=log.mode)
+        c1 = np.where(fl1.mode == 2, -1.0, 1.0) * fl1.rate_dph
+        row["noise floor, one mode"] = {**start_figures(t, c1, np.isfinite(o)), "served": float("nan")}
+        rows.append(row)
+    return {"seed": seed, "startups": rows}
+
+
+def startup_table(recs) -> str:
+    """Median over devices of the per-device median stability and of the rms of the 0-5 min means
+    (repeatability), lowest served share, per schedule; the median per-device ratio sparse / paper."""
+    lines = ["| schedule | stability (deg/h) | 0-5 min repeatability (deg/h) | served from 180 s, lowest |", "|---|---|---|---|"]
+    per = {}
+    for name in ("paper", "sparse 45 min", "noise floor, paired", "noise floor, one mode"):
+        stab = [np.median([s[name]["stability"] for s in r["startups"]]) for r in recs]
+        rep = [np.sqrt(np.mean([s[name]["turn_on"] ** 2 for s in r["startups"]])) for r in recs]
+        served = min(s[name]["served"] for r in recs for s in r["startups"])
+        per[name] = np.array(stab)
+        cell = "-" if not np.isfinite(served) else f"{100 * served:.1f} %"
+        lines.append(f"| {name} | {np.median(stab):.3f} | {np.median(rep):.3f} | {cell} |")
+    ratio = per["sparse 45 min"] / per["paper"]
+    lines.append(f"\nstability ratio sparse / paper per device: median {np.median(ratio):.2f}, "
+                 f"max {np.max(ratio):.2f}, above 1.2 on {int(np.sum(ratio > 1.2))} of {len(ratio)} devices")
+    return "\n".join(lines)
+
+
 def table(recs_by_set) -> str:
     rows = list(recs_by_set[0][1][0].keys())[1:]
     head = "| pipeline | " + " | ".join(f"set {s}: served (lowest) | median | p90" for s, _ in recs_by_set) + " |"
@@ -162,7 +221,15 @@ def main():
     ap.add_argument("--sets", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--devices", type=int, default=None, help="per set (default: the accuracy records' 50, 40, 40)")
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--startup", type=int, default=0, metavar="N",
+                    help="instead: the start-up benchmark's first N devices of set 0 under both schedules")
     a = ap.parse_args()
+    if a.startup:
+        recs = map_ordered(one_startup_device, list(range(a.startup)), a.workers)
+        print(f"start-ups, set 0, {a.startup} devices x {STARTUPS} power-ons at constant ambient (45 min), "
+              f"`hdrg fit` on the start-up benchmark's calibration runs; figures from power-on + 180 s\n")
+        print(startup_table(recs))
+        return
     out = []
     for s in a.sets:
         seeds = [s * SEED_STRIDE + i for i in range(a.devices or SET_DEVICES.get(s, 40))]
