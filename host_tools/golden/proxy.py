@@ -132,6 +132,9 @@ class ProxyConfig:
     def from_dict(cls, d: dict) -> "ProxyConfig":
         """Inverse of :meth:`to_dict` ('unit' is informative and checked if present; no other key;
         ``span`` at least SPAN_MIN, a drive frequency's ``ref`` > 0)."""
+        for key in ("kind", "ref", "span"):    # a missing key: KeyError, the model reader names config.proxy.<key>
+            if key not in d:
+                raise KeyError(key)
         check_fields("proxy config", d, ("kind", "ref", "span"), ("unit",))
         cfg = cls(d["kind"], d["ref"], d["span"])
         if cfg.span < SPAN_MIN[cfg.kind]:
