@@ -29,8 +29,9 @@ from host_tools.errors import UserError
 
 ROOT = Path(__file__).resolve().parent.parent.parent
 STUDIES = "docs/studies"
-M4_CYCLES_GOAL = 300                    # Cortex-M4: cycles per sample (the firmware a team would ship)
-M4_CODE_GOAL = 4096                     # Cortex-M4: bytes of per-sample code at -Os (4 KiB)
+M4_CYCLES_GOAL = 300                    # Cortex-M4: cycles per sample of the firmware entry point (hdrg_step_out)
+M4_SPECIALIZED_CYCLES_GOAL = 200        # Cortex-M4: cycles per sample of the build specialized to the default configuration
+M4_CODE_GOAL = 4096                     # Cortex-M4: bytes of per-sample code at -Os (4 KiB), firmware entry point
 DOCS = ("README.md", "docs/COST.md")    # the documents whose tables tests/test_cost_tables.py checks
 END = "<!-- /cost-table -->"
 _OPEN = re.compile(r"^<!-- cost-table: (\S+) \((.*)\) -->$")
@@ -157,18 +158,21 @@ def _bit_exact(r: Record, prefixes, what: str) -> str:
 def readme_m4(recs: dict) -> str:
     """README: cycles per sample (nominal model, mean over the e2e samples traced, -O2), per-sample code
     bytes at -Os and the vectors checked, of the generic build (hdrg_step_aux), the firmware entry point
-    (hdrg_step_out) and the build specialized to the default configuration; goals 300 cycles and 4 KiB."""
+    (hdrg_step_out) and the build specialized to the default configuration; goals: the firmware entry
+    point 300 cycles and 4 KiB, the specialized build 200 cycles."""
     r = recs["cortex-m4"]
-    spec = "builds.specialized."
+    spec, lean = "builds.specialized.", "builds.lean."
+    lcyc, lcode = r.get(lean + "cycles_per_sample"), r.get(lean + "code_bytes", "int")
     rows = [["generic (`hdrg_step_aux`, every intermediate)", _i(r.get("cycles_per_sample")),
              f"{_i(r.get('code_bytes', 'int'))} B", _bit_exact(r, GENERIC, f"{_i(r.get('-O2.vectors', 'int'))} vectors")],
-            ["firmware entry point (`hdrg_step_out`)", _i(r.get("builds.lean.cycles_per_sample")),
-             f"{_i(r.get('builds.lean.code_bytes', 'int'))} B",
-             _bit_exact(r, "builds.lean.", f"{_i(r.get('builds.lean.vectors', 'int'))} vectors")]]
+            ["firmware entry point (`hdrg_step_out`)",
+             f"**{_i(lcyc)}** (goal {M4_CYCLES_GOAL}: {_judge(lcyc, M4_CYCLES_GOAL)})",
+             f"**{_i(lcode)} B** (goal {M4_CODE_GOAL // 1024} KiB: {_judge(lcode, M4_CODE_GOAL)})",
+             _bit_exact(r, lean, f"{_i(r.get(lean + 'vectors', 'int'))} vectors")]]
     cyc, code = r.get(spec + "cycles_per_sample"), r.get(spec + "code_bytes", "int")
     rows.append(["specialized to the default configuration",
-                 f"**{_i(cyc)}** (goal {M4_CYCLES_GOAL}: {_judge(cyc, M4_CYCLES_GOAL)})",
-                 f"**{_i(code)} B** (goal {M4_CODE_GOAL // 1024} KiB: {_judge(code, M4_CODE_GOAL)})",
+                 f"**{_i(cyc)}** (goal {M4_SPECIALIZED_CYCLES_GOAL}: {_judge(cyc, M4_SPECIALIZED_CYCLES_GOAL)})",
+                 f"**{_i(code)} B**",
                  _bit_exact(r, spec, f"its {_i(r.get(spec + 'vectors', 'int'))} vectors; the other "
                             f"{_i(r.get(spec + '-O2.check.tables_refused', 'int'))} tables refused")])
     return _table(["build", "cycles / sample (QEMU, cycle model, e2e mean)", "per-sample code, -Os", "bit-exact"],
@@ -424,11 +428,9 @@ def cost_goals(recs: dict) -> str:
     """docs/COST.md "Goals": each goal (cycles per sample, bytes of code, LUT4 and SB_MAC16 cells, Fmax in
     MHz) with the record's figure and met / missed."""
     m4, ice = recs["cortex-m4"], recs["ice40"]
-    builds = [("specialized", "builds.specialized."), ("lean", "builds.lean."), ("generic", "")]
-    cyc = [(n, m4.get(p + "cycles_per_sample")) for n, p in builds]
-    code = [("specialized", m4.get("builds.specialized.code_bytes", "int")),
-            ("generic without aux generators", m4.get("code_bytes_no_aux_gen", "int")),
-            ("lean", m4.get("builds.lean.code_bytes", "int")), ("generic", m4.get("code_bytes", "int"))]
+    lean_cyc = [("firmware entry point", m4.get("builds.lean.cycles_per_sample"))]
+    spec_cyc = [("specialized", m4.get("builds.specialized.cycles_per_sample"))]
+    code = [("firmware entry point", m4.get("builds.lean.code_bytes", "int"))]
 
     def verdicts(items, goal, fmt):
         met = [n for n, v in items if v <= goal]
@@ -443,10 +445,13 @@ def cost_goals(recs: dict) -> str:
     e_fmax = ice.get(e + "fmax_mhz", "num?")
     e_ok = (ice.get(e + "luts", "int") <= UP5K["luts"] and ice.get(e + "dsps", "int") <= UP5K["dsps"]
             and e_fmax is not None and e_fmax >= FMAX_GOAL_MHZ and ice.get(e + "cycles_per_sample", "int") <= CYCLES_GOAL)
-    rows = [[f"Cortex-M4 <= {M4_CYCLES_GOAL} cycles per sample (e2e mean, nominal model)",
-             ", ".join(f"{n} {_d(v)}" for n, v in cyc),
-             verdicts(cyc, M4_CYCLES_GOAL, lambda v: f"{v / M4_CYCLES_GOAL:.2f}x")],
-            [f"Cortex-M4 <= {M4_CODE_GOAL // 1024} KiB per-sample code (-Os)",
+    rows = [[f"Cortex-M4 firmware entry point (`hdrg_step_out`) <= {M4_CYCLES_GOAL} cycles per sample (e2e mean, "
+             "nominal model)", ", ".join(f"{n} {_d(v)}" for n, v in lean_cyc),
+             verdicts(lean_cyc, M4_CYCLES_GOAL, lambda v: f"{v / M4_CYCLES_GOAL:.2f}x")],
+            [f"Cortex-M4 specialized to the default configuration <= {M4_SPECIALIZED_CYCLES_GOAL} cycles per sample",
+             ", ".join(f"{n} {_d(v)}" for n, v in spec_cyc),
+             verdicts(spec_cyc, M4_SPECIALIZED_CYCLES_GOAL, lambda v: f"{v / M4_SPECIALIZED_CYCLES_GOAL:.2f}x")],
+            [f"Cortex-M4 firmware entry point <= {M4_CODE_GOAL // 1024} KiB per-sample code (-Os)",
              ", ".join(f"{n} {_i(v)} B" for n, v in code),
              verdicts(code, M4_CODE_GOAL, lambda v: f"{_i(v - M4_CODE_GOAL)} B over")],
             [f"iCE40 UP5K, whole pipeline: <= {_i(UP5K['luts'])} LUT4", f"{_i(luts)} LUT4",
