@@ -425,12 +425,12 @@ def measure_build(target: str, work: Path, name: str, defines=(), accepts=None, 
                 for st_, part in _stage_runs(s_, stage_of_pc):
                     cyc_stage[st_] += cycles_m4(part, dis, **M4_MODEL["nominal"])
             n = len(samples)
+            cyc = {k: [cycles_m4(s_, dis, **m) for s_ in samples] for k, m in M4_MODEL.items()}
             res["per_sample"] = {"samples": n, "instructions": _stats([len(s_) for s_ in samples]),
-                                 "cycles_m4_model": {k: _stats([cycles_m4(s_, dis, **m) for s_ in samples])
-                                                     for k, m in M4_MODEL.items()},
+                                 "cycles_m4_model": {k: _stats(v) for k, v in cyc.items()},
                                  "per_stage_instructions": {k: round(v / n, 1) for k, v in counts.most_common()},
                                  "per_stage_cycles": {k: round(v / n, 1) for k, v in cyc_stage.most_common()},
-                                 **mix_summary(samples, dis)}
+                                 **mix_summary(samples, dis, cyc["nominal"])}
     bad = build_mcu(target, "-O2", work / f"{target}-{name}-broken", defines=(*defs, "HDRG_BREAK_ROUNDING"))
     res["broken_build_caught"] = check_cases(qemu_argv(target, bad["elf"]), accepts, LEAN_FIELDS,
                                              log=lambda s: None)["mismatches"] > 0
