@@ -38,6 +38,8 @@ def test_m4_cycle_model_counts_branches_loads_and_pops():
     assert mix == {"alu": 2, "multiply": 1, "divide": 0, "load/store": 3, "load/store multiple": 1,
                    "branch taken": 1, "branch not taken": 0}
     assert events == 4         # the taken bne, the pop into pc and the literal-pool load (twice)
+    _, events = cost_m4_model.instruction_mix([0x10], {0x10: ("ldr.w", "pc, [sp], #4", 4)})
+    assert events == 1         # a return through a load into pc refetches too (cycles_m4 charges it + P)
 
 
 def test_worst_stack_path_from_gcc_call_graph(tmp_path):

@@ -87,7 +87,7 @@ def instruction_mix(stream: list, dis: dict) -> tuple[dict, int]:
     """({class: count}, flash fetch events) of an executed instruction stream (:func:`decode`): the
     classes of MIX_CLASSES (load/store multiple: LDM/STM/PUSH/POP/LDRD/STRD; a table branch is a
     branch), and the events that would miss a flash prefetch buffer with no cache: every taken branch
-    and every POP/LDM into pc (a refetch at a new address) and every literal-pool load (LDR ...,
+    and every POP/LDM/LDR into pc (a refetch at a new address) and every literal-pool load (LDR ...,
     [pc, ...]).  The per-instruction model (:func:`cycles_m4`) assumes zero-wait-state memory; with
     code in flash of W wait states and no cache each event costs up to W more cycles."""
     mix = dict.fromkeys(MIX_CLASSES, 0)
@@ -98,7 +98,7 @@ def instruction_mix(stream: list, dis: dict) -> tuple[dict, int]:
             events += "pc" in _registers(ops)
         elif kind == "load/store":
             k = "load/store"
-            events += "[pc" in ops
+            events += "[pc" in ops or "pc" in ops.split(",")[0]     # a literal-pool load, or a load into pc
         elif kind in ("branch", "table branch"):
             taken = taken or base in ("bl", "blx", "bx")
             k = "branch taken" if taken else "branch not taken"
