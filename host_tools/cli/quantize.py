@@ -19,6 +19,7 @@ from host_tools import api
 from host_tools.cli.options import (distinct_outputs, example, file_argument, file_value, out_option, regular_input,
                                     writable_output)
 from host_tools.errors import UserError
+from host_tools.golden.checks import shorter_than_a_sample, whole_samples
 
 TIMER_LIMIT_N = F.TIMER_MAX - 1     # largest sequencer time in samples (the table's timing fields)
 
@@ -105,7 +106,7 @@ def check_samples(option: str, value_s: float, fs: float, zero: bool = True) -> 
     if value_s == 0:
         return
     n = round(value_s * fs)
-    if value_s * fs < 1 - 1e-9:
+    if shorter_than_a_sample(value_s, fs):
         raise UserError(f"{option} {value_s:g}: shorter than one sample at the model's sample rate {fs:g} Hz "
                         f"(one sample is {1 / fs:g} s); give at least {1 / fs:g} s"
                         + (" or 0 for none" if zero else ""))
@@ -117,8 +118,8 @@ def check_samples(option: str, value_s: float, fs: float, zero: bool = True) -> 
 def rounding_note(option: str, value_s: float, fs: float) -> str | None:
     """The note for a time ``value_s`` [s] that is not a whole number of samples at ``fs`` [Hz] (the
     table holds it rounded), or None."""
-    n = value_s * fs
-    if abs(n - round(n)) <= 1e-9 * max(1.0, n):
+    if whole_samples(value_s, fs):
         return None
+    n = value_s * fs
     return (f"{option} {value_s:g} s is {n:.6g} samples at the model's sample rate {fs:g} Hz: the table holds "
             f"{round(n)} samples ({round(n) / fs:g} s)")

@@ -121,6 +121,22 @@ def coverage_advice(logs, proxy: str | None = None) -> list:
     return out
 
 
+SAMPLES_RTOL = 1e-9      # float error allowed when a time [s] x a rate [Hz] is a whole number of samples
+
+
+def shorter_than_a_sample(value_s: float, fs: float) -> bool:
+    """True when the time ``value_s`` [s] is less than one sample at ``fs`` [Hz] (a schedule phase
+    or a timing field of that length would be empty or rounded up to one sample)."""
+    return value_s * fs < 1 - SAMPLES_RTOL
+
+
+def whole_samples(value_s: float, fs: float) -> bool:
+    """True when the time ``value_s`` [s] is a whole number of samples at ``fs`` [Hz] (a sequencer
+    counts samples: another time is rounded, or lasts one sample more or less by turns)."""
+    n = value_s * fs
+    return abs(n - round(n)) <= SAMPLES_RTOL * max(1.0, n)
+
+
 def check_sample_rate(log, fs: float) -> None:
     """Refuse a log whose sample rate differs from the model's nominal fs [Hz] by more than
     ``FS_TOLERANCE`` (1 %): the rate estimator assumes the nominal period.  Both the log's

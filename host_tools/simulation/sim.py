@@ -91,6 +91,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from host_tools.golden.checks import shorter_than_a_sample, whole_samples
 from host_tools.golden.runlog import RunLog
 from host_tools.simulation.sim_params import DEFAULT_EFFECTS, EFFECTS, SimConfig, SimParams, param_spec, effect_params
 from host_tools.simulation.sim_physics import run_physics
@@ -300,7 +301,7 @@ def build_config(scenario: str = "static", duration_s=None, sample_rate_hz: floa
     if params.reversal:
         for name in ("exchange_s", "dwell_s"):
             value = getattr(params, name)
-            if value != 0 and value * sample_rate_hz < 1 - 1e-9:
+            if value != 0 and shorter_than_a_sample(value, sample_rate_hz):
                 raise ValueError(f"{name} {value:g} s is shorter than one sample at {sample_rate_hz:g} Hz "
                                  f"({1 / sample_rate_hz:g} s)" + (" (or 0 for none)" if name == "exchange_s" else ""))
     n = int(round(duration_s * sample_rate_hz))
@@ -318,7 +319,7 @@ def schedule_notes(cfg: SimConfig) -> list:
     notes = []
     for name, phase in (("exchange_s", "exchange"), ("dwell_s", "mode-1/2 window")) if p.reversal else ():
         n = getattr(p, name) * fs
-        if abs(n - round(n)) > 1e-9 * max(1.0, n):
+        if not whole_samples(getattr(p, name), fs):
             notes.append(f"{name} {getattr(p, name):g} s is {n:.6g} samples at {fs:g} Hz: the schedule runs in "
                          f"continuous time, so each {phase} lasts {math.floor(n)} or {math.ceil(n)} samples "
                          f"(a sequencer counts whole samples)")
