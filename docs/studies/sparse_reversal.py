@@ -40,7 +40,6 @@ The second command: the start-up benchmark's devices (`hdrg bench startup`: 20 d
 power-ons each at constant ambient) under the paper's schedule and under sparse reversal.
 """
 import argparse
-import functools
 
 import numpy as np
 
@@ -94,11 +93,16 @@ def sparse_output(mode, r, used, dm, gain: bool) -> np.ndarray:
     return out
 
 
+def served_share(valid, t) -> float:
+    """The share of the samples from power-on + SERVED_FROM_S that are ``valid``."""
+    s = t >= SERVED_FROM_S
+    return float((s & valid).sum() / s.sum())
+
+
 def score(out, valid, t):
     """(served share, std of the served samples) from power-on + SERVED_FROM_S."""
-    s = t >= SERVED_FROM_S
-    ok = s & valid
-    return float(ok.sum() / s.sum()), float(np.std(out[ok])) if ok.sum() > 1 else float("nan")
+    ok = (t >= SERVED_FROM_S) & valid
+    return served_share(valid, t), float(np.std(out[ok])) if ok.sum() > 1 else float("nan")
 
 
 def residual_parts(log, model):
@@ -147,7 +151,7 @@ def one_device(seed: int) -> dict:
         k = used & (pr.mode == 1) & (t >= SERVED_FROM_S)
         A = np.c_[np.ones(k.sum()), dm[k]]
         res = r[k] - A @ np.linalg.lstsq(A, r[k], rcond=None)[0]
-        rec[f"hindsight {p} min"] = (float(k.sum() / (t >= SERVED_FROM_S).sum()), float(np.std(res)) / floor)
+        rec[f"hindsight {p} min"] = (served_share(k, t), float(np.std(res)) / floor)
     return rec
 
 
@@ -167,12 +171,12 @@ def one_startup_device(seed: int) -> dict:
         t = np.asarray(paper.t_s)
         out = compensate(paper, model)
         valid = np.asarray(out["valid"]) > 0
-        row = {"paper": {**start_figures(t, np.asarray(out.rate_dph), valid), "served": score(np.zeros(len(t)), valid, t)[0]}}
+        row = {"paper": {**start_figures(t, np.asarray(out.rate_dph), valid), "served": served_share(valid, t)}}
         log = simulate_foreign(dev, 1.0, True, p, p, effect=EFFECT, ambient_c=amb,
                                modes=sparse_sequence(t, EXCHANGE_S, WINDOW_S, 2700.0))
         pr, r, dm = residual_parts(log, model)
         o = sparse_output(pr.mode, r, np.asarray(pr.used, bool), dm, True)
-        row["sparse 45 min"] = {**start_figures(t, np.nan_to_num(o), np.isfinite(o)), "served": score(np.zeros(len(t)), np.isfinite(o), t)[0]}
+        row["sparse 45 min"] = {**start_figures(t, np.nan_to_num(o), np.isfinite(o)), "served": served_share(np.isfinite(o), t)}
         # the noise floors: the same start-ups without thermal terms, the paper's pairing of the raw
         # output (the start-up benchmark's floor) and one mode's output where sparse reversal serves
         fl = simulate_foreign(dev, 1.0, True, p, p, effect=EFFECT, ambient_c=amb, thermal=False)
@@ -233,7 +237,7 @@ def main():
     out = []
     for s in a.sets:
         seeds = [s * SEED_STRIDE + i for i in range(a.devices or SET_DEVICES.get(s, 40))]
-        out.append((s, map_ordered(functools.partial(one_device), seeds, a.workers)))
+        out.append((s, map_ordered(one_device, seeds, a.workers)))
     print(", ".join(f"set {s}: {len(r)} devices" for s, r in out) + "; served share and held-out std at 1 s / floor, from power-on + "
           f"{SERVED_FROM_S:g} s (a sample with no valid output counts as not served)\n")
     print(table(out))
