@@ -365,12 +365,12 @@ SERVED_MIN_G = 0.05   # an effect step whose terms stay below this (|g|) on ever
 def served_size(logs, model, terms) -> float:
     """The largest |g| of the generator ``terms`` (each at weight 1) over the samples ``model``'s
     output serves on ``logs``: how much of the term the user's output can ever carry."""
-    from host_tools.golden.compensate import compensate as _compensate
+    from host_tools.golden.compensate import prepare
     from host_tools.golden.regressors import generator_values
     fs = model.config.rate.fs
     top = 0.0
     for log in logs:
-        valid = np.asarray(_compensate(log, model)["valid"]) > 0
+        valid = prepare(log, model).valid           # the compensated output's valid column, without computing it
         if valid.any():
             top = max(top, max(float(np.max(np.abs(generator_values(log, t, fs)[valid]))) for t in terms))
     return top
