@@ -398,6 +398,7 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     there (:func:`write_report`).  ``progress``: a callable(str) told what is being done.
     ``phases``: the phases to run (default both, structure first; ``("effect",)`` searches the
     effects on the starting model as it is, e.g. to test one effect family)."""
+    call = dict(locals())       # this call's arguments: the second pass repeats them
     check_cv_blocks(cv_blocks)
     say = progress or (lambda msg: None)
     train = list(train_logs)
@@ -417,7 +418,6 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     given["text"] = taken_text(given)
     if given["text"]:
         say(given["text"])
-    families_in = families
     if term is not None:     # the loop does not offer a second power-on term, and keeps k7 room for it
         families = tuple(f for f in (FAMILIES if families is None else families) if f != "turn_on")
     model, cfg, gen_terms = start_model(train, fitted, term, opts, terms, with_block=not _without_block)
@@ -631,22 +631,18 @@ def diagnose(train_logs, holdout_logs=(), *, proxy=None, rate_estimator=None, ra
     if hold and start_block and not _without_block and max_iter > 0 and far:
         say("the loop again from hdrg fit's model without its k7 sum (a lag-state block fitted to the training "
             "runs can hide an effect from the scan)")
-        alt_rep, alt_model = diagnose(train_in, hold_in, proxy=proxy, rate_estimator=rate_estimator, rate_n=rate_n,
-                                      rate_shift=rate_shift, terms=terms, combiner=combiner, order=order,
-                                      settle_s=settle_s, proxy_range=proxy_range, rate_range=rate_range,
-                                      max_iter=max_iter, n_surrogates=n_surrogates, g_min=g_min, cv_blocks=cv_blocks,
-                                      cv_folds=cv_folds, seed=seed, families=families_in, max_tries=max_tries,
-                                      rate_alternatives=rate_alternatives, plots=False, progress=progress,
-                                      phases=phases, _without_block=True, _fitted=copy.deepcopy(fitted))
+        alt_rep, alt_model = diagnose(**{**call, "train_logs": train_in, "holdout_logs": hold_in, "out_dir": None,
+                                         "plots": False, "_without_block": True, "_fitted": copy.deepcopy(fitted)})
         if alt_rep["final_is"] == "the loop's model":
             sb, sa = step_errors(hold_in, model, alt_model)
             if confirmed_on_holdout(sb, sa):
-                say(f"without hdrg fit's k7 the loop ends better on the held-out runs ({_metric_text({'confirmed': True, 'heldout_error': step_metric(sb, sa), 'before': sb})}): "
+                metric = step_metric(sb, sa)
+                say(f"without hdrg fit's k7 the loop ends better on the held-out runs ({_metric_text({'confirmed': True, 'heldout_error': metric, 'before': sb})}): "
                     f"its model replaces it")
                 alt_rep["fit_block_replaced"] = {
                     "why": "the loop from hdrg fit's model without its k7 sum (lag-state block) ended better on the "
                            "held-out runs than the loop from the model with it (judged as a step: confirm_rule)",
-                    "with_block": step_metric(sb, sa)["before"], "without_block": step_metric(sb, sa)["after"],
+                    "with_block": metric["before"], "without_block": metric["after"],
                     "with_block_iterations": [{k: it[k] for k in ("effect", "params", "kind", "confirmed")}
                                               for it in iterations]}
                 alt_rep["verdict_detail"] += ("; hdrg fit's lag-state block was left out: the loop without it "
