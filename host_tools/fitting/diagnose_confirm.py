@@ -106,7 +106,7 @@ def error_stats(logs, model: BiasModel, other: BiasModel | None = None) -> dict:
         served = _served(valid)
         if other is not None:
             valid &= np.asarray(compensate(log, other)["valid"]) == 1
-        rows.append(_run_row(log, out, valid, model, served))
+        rows.append(_run_row(log, out, valid, model.config.proxy, served))
     return {**_mean_stats(rows), "runs": rows}
 
 
@@ -115,12 +115,12 @@ def _served(valid) -> float:
     return float(np.mean(valid)) if len(valid) else 0.0
 
 
-def _run_row(log, out, valid, model, served) -> dict:
+def _run_row(log, out, valid, proxy, served) -> dict:
     """One run's row of :func:`error_stats`: ``out`` (compensated ``log``) judged on ``valid``;
     ``served_share`` the share of the run's samples the model's own output serves; the start-up
-    figures where ``log`` is a start-up (:func:`start_stats`, ``model``'s proxy)."""
+    figures where ``log`` is a start-up (:func:`start_stats`, ``proxy`` the model's ProxyConfig)."""
     return {"run": log.source, "served_share": served, **stats_one(out.rate_dph, log.t_s, valid),
-            **start_stats(log, out.rate_dph, valid, model.config.proxy),
+            **start_stats(log, out.rate_dph, valid, proxy),
             "rms_legs_dph": leg_rms(out.rate_dph, valid, log.segments), "problems": problems(out)}
 
 
@@ -193,9 +193,10 @@ def step_errors(logs, before: BiasModel, after: BiasModel) -> tuple:
     rows_b, rows_a = [], []
     for log in logs:      # each model compensated once per run (error_stats(logs, a, b) twice would do it twice)
         out_b, out_a = compensate(log, before), compensate(log, after)
-        valid = (np.asarray(out_b["valid"]) == 1) & (np.asarray(out_a["valid"]) == 1)
-        rows_b.append(_run_row(log, out_b, valid, before, _served(np.asarray(out_b["valid"]) == 1)))
-        rows_a.append(_run_row(log, out_a, valid, before, _served(np.asarray(out_a["valid"]) == 1)))
+        valid_b, valid_a = np.asarray(out_b["valid"]) == 1, np.asarray(out_a["valid"]) == 1
+        both, proxy = valid_b & valid_a, before.config.proxy     # one start-up test for both models
+        rows_b.append(_run_row(log, out_b, both, proxy, _served(valid_b)))
+        rows_a.append(_run_row(log, out_a, both, proxy, _served(valid_a)))
     return {**_mean_stats(rows_b), "runs": rows_b}, {**_mean_stats(rows_a), "runs": rows_a}
 
 
