@@ -194,16 +194,13 @@ def run_one(spec: dict, duration_s=None, n_surrogates=None, second_train=None) -
 
 
 def _valid_share(log, model) -> float:
-    """The share of ``log``'s servable samples (host_tools.bench.accuracy.servable) that ``model``'s
-    output serves."""
-    from host_tools.bench.accuracy import servable
-    from host_tools.golden.compensate import compensate
-    serve = servable(log)
-    valid = (np.asarray(compensate(log, model)["valid"]) > 0) & serve
-    return float(valid.sum() / max(int(serve.sum()), 1))
+    """The share of ``log``'s servable samples that ``model``'s output serves (the accuracy
+    benchmark's count: host_tools.bench.accuracy.heldout_output)."""
+    from host_tools.bench.accuracy import heldout_output
+    return heldout_output(model, log)[1]
 
 
-LOOP_TOLERANCE = 1.05     # a run fails when the loop's final model is more than 5 % worse than hdrg fit's
+LOOP_TOLERANCE = 1.05     # a run (a start-up device: bench.startup) fails when the loop's final model is more than 5 % worse than hdrg fit's
 GAP_HALF = 0.5            # the loop should close at least half of the gap between the start and the noise floor
 
 

@@ -38,6 +38,7 @@ import time
 import numpy as np
 
 from host_tools.bench.accuracy import SEED_STRIDE, servable
+from host_tools.bench.loop import LOOP_TOLERANCE
 from host_tools.fitting.fit_pipeline import fit_default
 from host_tools.fitting.metrics import (START_BIN_S, START_FIRST_S, START_LATE_S, START_TURN_ON_S,
                                        start_figures)
@@ -171,9 +172,6 @@ def summarize(records) -> dict:
         out["loop_vs_fit_max"] = {k: float(np.nanmax([r["loop_vs_fit"][k] for r in ok])) for k in ("stability", "repeatability")}
         out["loop_min_valid_share_vs_fit"] = float(min(r["loop_vs_fit"]["valid_share"] for r in ok))
     return out
-
-
-LOOP_TOLERANCE = 1.05    # a device fails the loop when its loop model is more than 5 % worse than hdrg fit's
 
 
 def loop_vs_fit(rec) -> dict:

@@ -36,7 +36,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from host_tools.bench.loop import calibration_study, hdrg_clean_study, measured_study, run_benchmark, summarize
+    from host_tools.bench.loop import (LOOP_TOLERANCE, calibration_study, hdrg_clean_study, measured_study,
+                                       run_benchmark, summarize)
     from host_tools.fitting.diagnose_confirm import EFFECT_MIN_DROP
     from host_tools.lot.parallel import check_workers
 
@@ -137,7 +138,8 @@ def run(args) -> int:
         v = s["valid_share"]
         print(f"  final model = hdrg fit's on {s['final_is_fit']} runs; valid share of the held-out run: loop min "
               f"{_pct(v['min'])}, hdrg fit min {_pct(v['min_fit'])}, runs where the loop serves fewer samples: {v['runs_below_fit']}")
-        print(f"  runs where the loop ends more than 5 % worse than hdrg fit: {len(s['loop_worse_than_fit'])}"
+        print(f"  runs where the loop ends more than {100 * (LOOP_TOLERANCE - 1):.0f} % worse than hdrg fit: "
+              f"{len(s['loop_worse_than_fit'])}"
               + (f" (runs {s['loop_worse_than_fit']})" if s["loop_worse_than_fit"] else ""))
     if args.json:
         with atomic_open(args.json, "w", encoding="utf-8") as fh:
