@@ -8,7 +8,7 @@ import textwrap
 import pytest
 
 from host_tools import cli
-from host_tools.bench import cost, cost_fpga, cost_m4_model
+from host_tools.bench import cost, cost_fpga, cost_m4_model, cost_soc
 
 pytestmark = pytest.mark.target      # the target toolchains: `pytest -m target` (.ci/run)
 
@@ -136,11 +136,11 @@ def test_mcu_cost_json(target, tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("target", ["ice40", "xc7"])
 @pytest.mark.skipif(not FPGA or not shutil.which("nextpnr-ice40"),
                     reason="yosys, iverilog, verilator or nextpnr-ice40 not installed")
-def test_fpga_cost_json(target, tmp_path):
-    r = _cost_json(target, tmp_path)
+def test_xc7_cost_json(tmp_path):
+    """The dedicated RTL (hdrg_top): every vector under both simulators, cycles, 7-series cells."""
+    r = _cost_json("xc7", tmp_path)
     from host_tools import vectors as V
     sets = V.read_manifest(V.DEFAULT_DIR)["sets"]
     assert r["scope"] == "whole pipeline" and r["broken_build_caught"] is True
@@ -150,19 +150,38 @@ def test_fpga_cost_json(target, tmp_path):
     cyc = {n: x["cycles_max"] for n, x in r["icarus"].items()}
     assert 126 < max(c for n, c in cyc.items() if n != "aux") <= cost_fpga.CYCLES_GOAL   # the evaluator alone: 126
     assert r["cycles_per_sample"] == max(cyc.values()) <= cost_fpga.CYCLES_AUX_WORST     # 16-term aux tables
-    assert 1000 < r["luts"] and 1000 < r["ffs"] and 1 <= r["dsps"]
+    assert 1000 < r["luts"] and 1000 < r["ffs"] and 1 <= r["dsps"] and r["fmax_mhz"] is None
     e = r["evaluator_alone"]
     assert e["bit_exact"] is True and e["broken_build_caught"] is True and e["cycles_per_sample"] == 126
     assert e["luts"] < r["luts"] and e["dsps"] <= r["dsps"]
-    if target == "ice40":
-        fits = r["luts"] <= cost_fpga.UP5K["luts"] and r["dsps"] <= cost_fpga.UP5K["dsps"]
-        if r["pnr"]["fits"]:
-            assert r["fmax_mhz"] > 0 and r["pnr"]["utilisation"]["ICESTORM_DSP"][0] == r["dsps"]
-        else:                                           # nextpnr says why, and it agrees with the cell count
-            assert r["fmax_mhz"] is None and "UP5K" in r["pnr"]["error"] and not fits
-        assert e["luts"] <= 5280 and e["dsps"] <= 8 and e["fmax_mhz"] >= cost_fpga.FMAX_GOAL_MHZ
-    else:
-        assert r["fmax_mhz"] is None
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not FPGA or not shutil.which("nextpnr-ice40") or not shutil.which(cost_soc.RV_GCC),
+                    reason="yosys, iverilog, verilator, nextpnr-ice40 or gcc-riscv64-unknown-elf not installed")
+def test_ice40_cost_json(tmp_path):
+    """The SoC (the C twin on PicoRV32) on the UP5K: every vector under Verilator, the first of every
+    e2e case under Icarus, a broken firmware caught, placed and routed within the UP5K, the cycles and the
+    output rate stated."""
+    r = _cost_json("ice40", tmp_path)
+    from host_tools import vectors as V
+    sets = V.read_manifest(V.DEFAULT_DIR)["sets"]
+    assert r["scope"] == "whole pipeline" and r["bit_exact"] is True and r["first_mismatch"] is None
+    assert {n: (x["vectors"], x["mismatches"]) for n, x in r["verilator"].items()} == {
+        n: (sets[n]["rows"], 0) for n in cost_soc.SETS}
+    per_case = {n: sum(min(cost_soc.ICARUS_FIRST, c["rows"][1] - c["rows"][0]) for c in sets[n]["cases"])
+                for n in cost_soc.ICARUS_SETS}
+    assert {n: (x["vectors"], x["mismatches"]) for n, x in r["icarus"].items()} == {n: (per_case[n], 0) for n in per_case}
+    assert r["broken_build_caught"] is True and r["broken_build_mismatches"] > r["broken_build_vectors"] // 2
+    assert r["firmware"]["rom_bytes"] <= r["firmware"]["rom_capacity_bytes"] and "hdrg_step_aux" in r["firmware"]["functions"]
+    cyc = {n: x["cycles_max"] for n, x in r["verilator"].items() if x["samples"]}
+    assert r["cycles_per_sample"] == max(cyc.values()) and r["output_rate_hz_at_24mhz"] == 24_000_000 // max(cyc.values())
+    assert r["pnr"]["fits"] is True and r["pnr"]["utilisation"]["ICESTORM_DSP"][0] == r["dsps"]
+    for k in ("luts", "dsps", "brams", "sprams"):
+        assert 0 < r[k] <= cost_fpga.UP5K[k], k
+    assert r["fmax_mhz"] >= cost_fpga.FMAX_GOAL_MHZ
+    e = r["evaluator_alone"]
+    assert e["luts"] <= 5280 and e["dsps"] <= 8 and e["fmax_mhz"] >= cost_fpga.FMAX_GOAL_MHZ
 
 
 @pytest.mark.skipif(not shutil.which("gcc"), reason="gcc not installed")

@@ -4,12 +4,13 @@ the time-multiplexed evaluator alone (hdrg_eval_tm.v through tb_eval_tm.v): bit-
 under @slow) and under
 Verilator (@slow), cycles per sample within the goal, lint-clean under Verilator -Wall, and a
 deliberately broken build (-DHDRG_BREAK_ROUNDING) caught."""
+import re
 import shutil
 import subprocess
 
 import pytest
 
-from host_tools.bench import cost_fpga, cost_rtl
+from host_tools.bench import cost_fpga, cost_rtl, cost_soc
 from host_tools import vectors as V
 from host_tools.vectors.build import load_set
 from host_tools.vectors.runner import requests
@@ -96,7 +97,7 @@ def _run_subset(tmp_path, sim, defines=()):
     pr = subprocess.run([*argv, f"+cycles={cyc}"], input=data, capture_output=True, text=True, timeout=600)
     got = pr.stdout.splitlines()[:len(expected)]
     bad = [k for k, e in enumerate(expected) if k >= len(got) or got[k] != e]
-    return expected, got, bad, cost_rtl._cycles(cyc)
+    return expected, got, bad, cost_rtl.cycles_file(cyc)
 
 
 @pytest.mark.skipif(not ICARUS, reason="Icarus Verilog not installed (Debian package iverilog)")
@@ -124,10 +125,9 @@ def test_broken_top_is_caught(tmp_path):
 
 
 @pytest.mark.skipif(not VERILATOR, reason="Verilator not installed (Debian package verilator)")
-@pytest.mark.parametrize("top", ["hdrg_top", "hdrg_top_pnr"])
-def test_top_lint_clean(top):
-    files = [str(f) for f in cost_rtl.top_sources()] + ([str(cost_rtl.HDL / "hdrg_top_pnr.v")] if top != "hdrg_top" else [])
-    pr = subprocess.run([VERILATOR, "--lint-only", "-Wall", "-GN_HIST=4096", "--top-module", top, *files],
+def test_top_lint_clean():
+    files = [str(f) for f in cost_rtl.top_sources()]
+    pr = subprocess.run([VERILATOR, "--lint-only", "-Wall", "-GN_HIST=4096", "--top-module", "hdrg_top", *files],
                         capture_output=True, text=True)
     assert pr.returncode == 0 and "%Warning" not in pr.stderr, pr.stderr
 
@@ -157,9 +157,72 @@ def test_a_window_longer_than_the_rings_depth_is_refused(tmp_path):
     short = next(t for t in tables if t["fields"]["rate_n"] <= 6)
     long_ = next(t for t in tables if t["fields"]["rate_n"] > 6)
     exe = tmp_path / "tb_top_n6.vvp"
-    subprocess.run(["iverilog", "-g2001", "-Ptb_top.N_HIST=6", "-o", str(exe), str(cost_rtl.TB_TOP),
+    subprocess.run(["iverilog", "-g2001", f"-I{cost_rtl.HDL}", "-Ptb_top.N_HIST=6", "-o", str(exe), str(cost_rtl.TB_TOP),
                     *map(str, cost_rtl.top_sources())], check=True, capture_output=True, timeout=300)
     data = "".join("TABLE " + " ".join(t["words"]) + "\n" for t in (short, long_, short)) + "QUIT\n"
     out = subprocess.run(["vvp", "-n", str(exe)], input=data, capture_output=True, text=True, timeout=300).stdout.splitlines()
     assert out[0] == f"T {len(short['words'])} {short['words'][-1]}" and out[2] == out[0]
     assert out[1].startswith("ERR FIELD word 9 rate_n") and "N_HIST 6" in out[1]
+
+
+# -- the SoC (vectors/hdl/hdrg_soc.v: the C twin on PicoRV32), the iCE40 UP5K build ----------------------
+
+RV = shutil.which(cost_soc.RV_GCC)
+
+
+@pytest.fixture(scope="module")
+def soc(tmp_path_factory):
+    """The SoC's firmware image and its Icarus testbench (argv)."""
+    if not (ICARUS and RV):
+        pytest.skip("iverilog or gcc-riscv64-unknown-elf (Debian packages) not installed")
+    work = tmp_path_factory.mktemp("soc")
+    return cost_soc.firmware(work), cost_soc.build_tb("icarus", work), work
+
+
+def _soc_run(argv, rom, lines):
+    return subprocess.run([*argv, f"+rom={rom}"], input="".join(x + "\n" for x in lines) + "QUIT\n",
+                          capture_output=True, text=True, timeout=600).stdout.splitlines()
+
+
+def test_soc_rom_is_the_link_scripts_and_holds_the_firmware(soc):
+    """The ROM that hdrg_soc.v, tb_soc.v and the link script give is one size, and the image fits it."""
+    fw, _, _ = soc
+    words = cost_soc.rom_words()
+    for f in (cost_soc.SOC[0], cost_soc.TB_SOC):
+        assert re.search(r"parameter ROM_WORDS = (\d+)", f.read_text()).group(1) == str(words), f
+    assert 8000 < fw["rom_bytes"] <= 4 * words and len(fw["hex"].read_text().split()) == words
+
+
+def test_soc_checks_the_table_as_the_c_twin_does(soc):
+    """The firmware's table load is the C twin's hdrg_init: a wrong CRC word is refused with its
+    return code and word index (the dedicated RTL leaves that check to the host), the good table
+    loads, and a sample after it answers the C driver's 16 fields."""
+    fw, argv, _ = soc
+    m = V.read_manifest(V.DEFAULT_DIR)
+    vs = load_set(V.DEFAULT_DIR, "e2e", m["sets"]["e2e"])
+    table, sample = requests(vs, None, first_rows=1)[:2]
+    words = table[0].split()[1:]
+    bad = "TABLE " + " ".join(words[:-1] + [f"{int(words[-1], 16) ^ 1:08x}"])
+    out = _soc_run(argv, fw["hex"], [bad, table[0], sample[0]])
+    assert out[0] == f"ERR TABLE 4 word {len(words) - 1}"          # HDRG_ERR_CRC at the CRC word
+    assert out[1].split() == table[1] and out[2].split() == sample[1]
+
+
+def test_soc_trap_ends_the_run_with_an_error(soc, tmp_path):
+    """A ROM without a program (zero words: illegal instructions) traps the core; the testbench says
+    so instead of waiting for ever."""
+    _, argv, _ = soc
+    rom = tmp_path / "zeros.hex"
+    rom.write_text("00000000\n" * cost_soc.rom_words())
+    assert _soc_run(argv, rom, ["EVAL 0 0 0"]) == ["ERR TRAP the core trapped"]
+
+
+@pytest.mark.skipif(not VERILATOR, reason="Verilator not installed (Debian package verilator)")
+def test_soc_lint_clean():
+    """hdrg_soc, its RAM and the place-and-route wrapper are clean under verilator --lint-only -Wall
+    (the core's own file, and the core's outputs the SoC does not use, excepted)."""
+    files = [str(cost_soc.PNR_TOP), *map(str, cost_soc.SOC), str(cost_soc.picorv32())]
+    pr = subprocess.run([VERILATOR, "--lint-only", "-Wall", "-Wno-fatal", "-Wno-PINMISSING", "--top-module",
+                         "hdrg_soc_pnr", *files], capture_output=True, text=True)
+    ours = [line for line in pr.stderr.splitlines() if line.startswith("%Warning") and "picorv32.v" not in line]
+    assert pr.returncode == 0 and not ours, (ours, pr.stderr[-500:])

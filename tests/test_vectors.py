@@ -322,6 +322,25 @@ def test_check_impl_catches_the_broken_rounding_build(broken_exe):
     assert rep["mismatches"] > 0 and "fields:   out " in rep["first"]
 
 
+@needs_gcc
+def test_check_impl_first_rows_loads_every_table_and_the_first_vectors_of_each_case(c_exe, broken_exe, manifest):
+    """--first N (a slow simulator's subset): every case's table, then its first N vectors; the
+    broken build still fails on them; a count that is not a positive integer is refused."""
+    from host_tools.vectors.runner import requests
+    from host_tools.vectors.build import load_set
+    vs = load_set(VECTORS, "e2e", manifest["sets"]["e2e"])
+    reqs = requests(vs, None, first_rows=2)
+    cases = manifest["sets"]["e2e"]["cases"]
+    assert [r[0].split()[0] for r in reqs] == ["TABLE", "S", "S"] * len(cases)
+    assert [r[2] for r in reqs if r[2] is not None] == [c["rows"][0] + k for c in cases for k in (0, 1)]
+    rep = V.check_impl(str(c_exe), VECTORS, ["e2e", "primitives"], log=quiet, first_rows=2)
+    assert rep["mismatches"] == 0 and rep["sets"]["e2e"]["rows"] == 2 * len(cases) and rep["sets"]["primitives"]["rows"] == 2
+    assert V.check_impl(str(broken_exe), VECTORS, ["sequencer"], log=quiet, first_rows=40)["mismatches"] > 0
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(ValueError, match="--first"):
+            V.check_impl(str(c_exe), VECTORS, ["e2e"], log=quiet, first_rows=bad)
+
+
 def test_check_impl_reports_a_program_that_answers_nothing(manifest):
     cmd = f"{sys.executable} -c 'import sys; sys.stdin.read()'"
     rep = V.check_impl(cmd, VECTORS, ["evaluator"], log=quiet)

@@ -32,7 +32,8 @@ from pathlib import Path
 
 from firmware_ref import vocabulary as VOC
 from host_tools import vectors as V
-from host_tools.bench.cost_fpga import measure_fpga, summary_lines
+from host_tools.bench import cost_soc
+from host_tools.bench.cost_fpga import evaluator_line, measure_fpga, summary_lines
 from host_tools.bench.cost_m4_model import M4_MODEL, cycles_m4, mix_summary
 from host_tools.bench.cost_tools import CostError, need, run_tool, tool_version
 from host_tools.golden.compensate import DEFAULT_COMBINER, DEFAULT_ORDER, DEFAULT_RATE
@@ -564,6 +565,8 @@ def measure(target: str, work: Path, log=print) -> dict:
         return measure_mcu(target, work, log)
     if target == "host":
         return measure_host(work, log)
+    if target == "ice40":
+        return cost_soc.measure_soc(work, log)
     return measure_fpga(target, work, log)
 
 
@@ -571,10 +574,12 @@ def summary(r: dict) -> str:
     lines = [f"target {r['target']}: bit_exact {r['bit_exact']}" + (f" (figures below: {r['build']})" if "build" in r else "")]
     for k in ("cycles_per_sample", "instructions_per_sample", "code_bytes", "code_bytes_O2", "code_bytes_no_aux_gen",
               "stack_bytes",
-              "ns_per_sample", "luts", "ffs", "dsps", "brams", "fmax_mhz", "broken_build_caught"):
+              "ns_per_sample", "luts", "ffs", "dsps", "brams", "sprams", "fmax_mhz", "broken_build_caught"):
         if k in r:
             lines.append(f"  {k}: {r[k]}")
-    if "evaluator_alone" in r:
+    if "firmware" in r and "evaluator_alone" in r:
+        lines.extend(cost_soc.summary_lines(r) + [evaluator_line(r)])
+    elif "evaluator_alone" in r:
         lines.extend(summary_lines(r))
     if "per_stage" in r:
         for w, d in r["per_stage"].items():

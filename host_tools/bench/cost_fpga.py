@@ -1,11 +1,12 @@
-"""`hdrg cost --target ice40|xc7`: the RTL (vectors/hdl) checked bit for bit under Icarus and
-Verilator, synthesized by Yosys (``synth_ice40 -dsp``, ``synth_xilinx``) and placed and routed by
-nextpnr-ice40 for an UP5K (Fmax); docs/COST.md, FPGA sections.
+"""`hdrg cost --target xc7`: the dedicated RTL (vectors/hdl/hdrg_top.v) checked bit for bit under
+Icarus and Verilator and synthesized by Yosys (``synth_xilinx``); the evaluator alone for both FPGA
+targets (``synth_ice40 -dsp`` and nextpnr-ice40 for an UP5K: Fmax); the shared Yosys and nextpnr
+helpers of the iCE40 SoC (host_tools/bench/cost_soc.py); docs/COST.md, FPGA sections.
 
 * The full pipeline ``hdrg_top`` (the first row): check-impl of every pipeline vector set through
   tb_top under Icarus and Verilator (host_tools/bench/cost_rtl.py), a ``-DHDRG_BREAK_ROUNDING`` build
   that must fail, cycles per sample (worst case over the vectors, from the testbench), Yosys cells
-  of ``hdrg_top`` (ring depth TOP_N_HIST) and nextpnr-ice40 of the pin-light ``hdrg_top_pnr``.
+  of ``hdrg_top`` (ring depth TOP_N_HIST).
 * The evaluator alone ``hdrg_eval_tm`` (the secondary row): tb_eval_tm on the evaluator set, its
   synthesis and place-and-route (hdrg_eval_tm_pnr).
 
@@ -26,8 +27,9 @@ from host_tools.bench.cost_tools import CostError, run_tool, need, tool_version
 # -- FPGA: the evaluator alone (tb_eval_tm) ------------------------------------------------------------
 
 HDL = V.DEFAULT_DIR / "hdl"
-UP5K = {"luts": 5280, "dsps": 8, "brams": 30}      # iCE40 UP5K: LUT4 (logic cells), SB_MAC16, SB_RAM40_4K
-CYCLES_GOAL = 200
+UP5K = {"luts": 5280, "dsps": 8, "brams": 30, "sprams": 4}   # iCE40 UP5K: LUT4 (logic cells), SB_MAC16, SB_RAM40_4K, SB_SPRAM256KA
+UP5K_LUT_AIM = 3000                     # LUT4: "a small share of the device"
+CYCLES_GOAL = 200                       # the dedicated RTL (hdrg_top)
 # A sample whose aux generators (hdrg_aux: one operation per 2 cycles) run longer than the evaluator takes
 # their 2 + 2 (operations + 1) cycles plus the front end before them and the tail after them (at most
 # CYCLES_AUX_FRAME; 28 measured on the aux set).  The goal holds for tables of up to about 84 operations
@@ -41,7 +43,7 @@ TM_TOP, TM_PNR_TOP = "hdrg_eval_tm", "hdrg_eval_tm_pnr"
 FMAX_GOAL_MHZ = 24.0
 # Yosys cell -> resource, per family
 CELLS = {"ice40": {"luts": ("SB_LUT4",), "ffs": ("SB_DFF",), "dsps": ("SB_MAC16",), "brams": ("SB_RAM40_4K",),
-                   "carries": ("SB_CARRY",)},
+                   "sprams": ("SB_SPRAM256KA",), "carries": ("SB_CARRY",)},
          "xc7": {"luts": ("LUT1", "LUT2", "LUT3", "LUT4", "LUT5", "LUT6"), "ffs": ("FD",), "dsps": ("DSP48E1",),
                  "brams": ("RAMB18E1", "RAMB36E1"), "lutrams": ("RAM32M", "RAM64M", "RAM32X1D", "RAM64X1D"),
                  "carries": ("CARRY4",)}}
@@ -148,24 +150,27 @@ def synth(family: str, work: Path, full: bool = True) -> dict:
     return {"cells": cells, **resources(family, cells)}
 
 
-def pnr_ice40(work: Path, full: bool = True, seed: int = 1) -> dict:
-    """nextpnr-ice40 --up5k --package sg48 of the pin-light wrapper (hdrg_top_pnr or
-    hdrg_eval_tm_pnr): Fmax and utilisation; ``fits`` False (and no Fmax) when nextpnr cannot place it."""
-    js = work / f"pnr_{'top' if full else 'eval'}.json"
-    if full:
-        cmd = _synth_cmd("ice40", [*cost_rtl.top_sources(), HDL / "hdrg_top_pnr.v"], "hdrg_top_pnr",
-                         {"N_HIST": TOP_N_HIST}, "")
-    else:
-        cmd = _synth_cmd("ice40", [HDL / "hdrg_eval_tm.v", HDL / "hdrg_eval_tm_pnr.v"], TM_PNR_TOP, {}, "")
+def pnr_evaluator(work: Path, seed: int = 1) -> dict:
+    """nextpnr-ice40 --up5k --package sg48 of the evaluator alone's pin-light wrapper
+    (hdrg_eval_tm_pnr): Fmax and utilisation (nextpnr_up5k)."""
+    js = work / "pnr_eval.json"
+    cmd = _synth_cmd("ice40", [HDL / "hdrg_eval_tm.v", HDL / "hdrg_eval_tm_pnr.v"], TM_PNR_TOP, {}, "")
     run_tool([need("yosys"), "-q", "-p", cmd.replace("synth_ice40 -dsp -top", f"synth_ice40 -dsp -json {js} -top")],
-         what="yosys", timeout=3600)
+             what="yosys", timeout=3600)
+    return nextpnr_up5k(js, work, "eval", seed)
+
+
+def nextpnr_up5k(js: Path, work: Path, tag: str, seed: int = 1) -> dict:
+    """nextpnr-ice40 --up5k --package sg48 --freq FMAX_GOAL_MHZ of a Yosys JSON netlist: Fmax and
+    utilisation (the log: ``nextpnr_<tag>.log``); ``fits`` False (and no Fmax) when nextpnr cannot
+    place it."""
     pr = subprocess.run([need("nextpnr-ice40"), "--up5k", "--package", "sg48", "--json", str(js),
                          "--pcf-allow-unconstrained", "--freq", str(FMAX_GOAL_MHZ), "--seed", str(seed)],
                         capture_output=True, text=True, timeout=3600)
     log = pr.stdout + pr.stderr
-    (work / f"nextpnr_{'top' if full else 'eval'}.log").write_text(log)
+    (work / f"nextpnr_{tag}.log").write_text(log)
     util = {m.group(1): (int(m.group(2)), int(m.group(3)))
-            for m in re.finditer(r"(ICESTORM_LC|ICESTORM_DSP|ICESTORM_RAM|SB_IO):\s+(\d+)/\s*(\d+)", log)}
+            for m in re.finditer(r"(ICESTORM_LC|ICESTORM_DSP|ICESTORM_RAM|ICESTORM_SPRAM|SB_IO):\s+(\d+)/\s*(\d+)", log)}
     fm = re.findall(r"Max frequency for clock '(clk[^']*)': ([\d.]+) MHz", log)
     if not fm:                          # no timing report: it did not place (the log says why)
         over = [k for k, (used, avail) in util.items() if used > avail]
@@ -185,22 +190,23 @@ def measure_evaluator(family: str, work: Path, log=print) -> dict:
          "bit_exact": ic["mismatches"] == 0 and vl["mismatches"] == 0 and ic["vectors"] > 0,
          "broken_build_caught": broken["mismatches"] > 0, "cycles_per_sample": ic["cycles"], **syn}
     if family == "ice40":
-        p = pnr_ice40(work, full=False)
+        p = pnr_evaluator(work)
         r.update({"fmax_mhz": p["fmax_mhz"], "pnr": p})
     log(f"  evaluator alone: {r}")
     return r
 
 
 def measure_fpga(target: str, work: Path, log=print) -> dict:
-    """Every FPGA figure of `hdrg cost --target ice40|xc7` (see the module doc)."""
+    """Every figure of `hdrg cost --target xc7` (the dedicated RTL; see the module doc)."""
+    if target != "xc7":
+        raise CostError(f"the dedicated RTL is measured for xc7 (the iCE40 build is the SoC: cost_soc), not {target!r}")
     work.mkdir(parents=True, exist_ok=True)
-    family = "ice40" if target == "ice40" else "xc7"
     tools = {"yosys": tool_version("yosys", "-V"), "iverilog": tool_version("iverilog", "-V"),
              "verilator": tool_version("verilator")}
     ic = cost_rtl.check_top("icarus", work, log=log)
     vl = cost_rtl.check_top("verilator", work, log=log)
     broken = cost_rtl.check_top("icarus", work, sets=("sequencer",), defines=(cost_rtl.BREAK,), log=log)
-    syn = synth(family, work)
+    syn = synth("xc7", work)
     log(f"  yosys hdrg_top: {syn}")
     per_set = {n: {k: v for k, v in x.items() if k != "first"} for n, x in ic.items()}
     res = {"target": target,
@@ -214,18 +220,9 @@ def measure_fpga(target: str, work: Path, log=print) -> dict:
            "broken_build_caught": broken["sequencer"]["mismatches"] > 0,
            "broken_build_mismatches": broken["sequencer"]["mismatches"],
            "cycles_per_sample": max(x["cycles_max"] for x in ic.values()),
-           "cycles_per_sample_mean": {n: x["cycles_mean"] for n, x in ic.items() if x["samples"]}, **syn}
-    if family == "ice40":
-        tools["nextpnr-ice40"] = tool_version("nextpnr-ice40")
-        p = pnr_ice40(work)
-        log(f"  nextpnr hdrg_top_pnr: {p}")
-        res.update({"fmax_mhz": p["fmax_mhz"], "pnr": p, "device": "iCE40 UP5K (sg48)",
-                    "goals": {"luts": [res["luts"], UP5K["luts"]], "dsps": [res["dsps"], UP5K["dsps"]],
-                              "fmax_mhz": [p["fmax_mhz"], FMAX_GOAL_MHZ],
-                              "cycles_per_sample": [res["cycles_per_sample"], CYCLES_GOAL]}})
-    else:
-        res.update({"fmax_mhz": None, "device": "Xilinx 7-series (Yosys synth_xilinx; no place-and-route in Debian)"})
-    res["evaluator_alone"] = measure_evaluator(family, work, log)
+           "cycles_per_sample_mean": {n: x["cycles_mean"] for n, x in ic.items() if x["samples"]}, **syn,
+           "fmax_mhz": None, "device": "Xilinx 7-series (Yosys synth_xilinx; no place-and-route in Debian)"}
+    res["evaluator_alone"] = measure_evaluator("xc7", work, log)
     return res
 
 
@@ -237,8 +234,12 @@ def summary_lines(r: dict) -> list:
                          for n, x in r["icarus"].items())]
     if r.get("pnr") and not r["pnr"]["fits"]:
         lines.append(f"  nextpnr: {r['pnr']['error']}")
+    return lines + [evaluator_line(r)]
+
+
+def evaluator_line(r: dict) -> str:
+    """The summary line of the evaluator alone (hdrg_eval_tm) of an FPGA record."""
     e = r["evaluator_alone"]
-    lines.append(f"  evaluator alone: bit_exact {e['bit_exact']} ({e['vectors']} vectors), {e['cycles_per_sample']} "
-                 f"cycles; luts {e['luts']}, ffs {e['ffs']}, dsps {e['dsps']}, brams {e['brams']}"
-                 + (f", fmax {e['fmax_mhz']} MHz" if e.get("fmax_mhz") else ""))
-    return lines
+    return (f"  evaluator alone: bit_exact {e['bit_exact']} ({e['vectors']} vectors), {e['cycles_per_sample']} "
+            f"cycles; luts {e['luts']}, ffs {e['ffs']}, dsps {e['dsps']}, brams {e['brams']}"
+            + (f", fmax {e['fmax_mhz']} MHz" if e.get("fmax_mhz") else ""))

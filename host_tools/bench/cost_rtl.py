@@ -45,17 +45,19 @@ def build_top(sim: str, work: Path, defines=()) -> list:
     src = [TB_TOP, *top_sources()]
     if sim == "icarus":
         exe = work / f"tb_top_{tag}.vvp"
-        run_tool([need("iverilog"), "-g2001", "-Wall", *(f"-D{d}" for d in defines), "-o", exe, *src], what="iverilog")
+        run_tool([need("iverilog"), "-g2001", "-Wall", f"-I{HDL}", *(f"-D{d}" for d in defines), "-o", exe, *src],
+                 what="iverilog")
         return [need("vvp"), "-n", str(exe)]
     if sim == "verilator":
         obj = work / f"vl_top_{tag}"
         run_tool([need("verilator"), "--binary", "-j", "0", "-Wno-fatal", "-Wno-lint", "-Wno-style", "-O2", "--top-module", "tb_top",
-              *(f"-D{d}" for d in defines), "-Mdir", obj, *src], what="verilator", timeout=1800)
+              f"-I{HDL}", *(f"-D{d}" for d in defines), "-Mdir", obj, *src], what="verilator", timeout=1800)
         return [str(obj / "Vtb_top")]
     raise CostError(f"unknown simulator {sim!r} (icarus, verilator)")
 
 
-def _cycles(path: Path) -> dict:
+def cycles_file(path: Path) -> dict:
+    """The testbench's +cycles file: samples, worst and mean clock cycles per sample request."""
     words = path.read_text().split() if path.is_file() else []
     if len(words) != 6 or words[0::2] != ["samples", "max", "sum"]:
         raise CostError(f"{path}: no cycle count from the testbench")
@@ -92,7 +94,7 @@ def _check_top(sim: str, work: Path, sets, defines, log) -> dict:
         cyc.unlink(missing_ok=True)
         rep = check_impl([*argv, f"+cycles={cyc}"], names=[name], timeout=1800, log=lambda s: None)
         r = rep["sets"][name]
-        out[name] = {"vectors": r["rows"], "mismatches": r["mismatches"], "first": r["first"], **_cycles(cyc)}
+        out[name] = {"vectors": r["rows"], "mismatches": r["mismatches"], "first": r["first"], **cycles_file(cyc)}
         log(f"  {sim}{' ' + ' '.join(defines) if defines else ''} {name}: {r['rows']} vectors, "
             f"{r['mismatches']} mismatches, max {out[name]['cycles_max']} cycles/sample")
     return out
@@ -102,8 +104,8 @@ _CHECKED: dict = {}     # once()'s results in this process, by (key..., fingerpr
 
 
 def fingerprint() -> str:
-    """SHA-256 of every HDL source and testbench and of the vector files (their manifest)."""
+    """SHA-256 of every HDL source, testbench and include and of the vector files (their manifest)."""
     h = hashlib.sha256()
-    for f in sorted(HDL.glob("*.v")) + [V.DEFAULT_DIR / "manifest.json"]:
+    for f in sorted(HDL.glob("*.v")) + sorted(HDL.glob("*.vh")) + [V.DEFAULT_DIR / "manifest.json"]:
         h.update(f.name.encode() + b"\0" + f.read_bytes())
     return h.hexdigest()

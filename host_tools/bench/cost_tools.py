@@ -1,5 +1,5 @@
 """The tool helpers of `hdrg cost` shared by the MCU (host_tools.bench.cost) and the FPGA/RTL measurements
-(host_tools.bench.cost_fpga, cost_rtl, cost_aux): find a tool or name the Debian package that ships it,
+(host_tools.bench.cost_fpga, cost_rtl, cost_aux, cost_soc): find a tool or name the Debian package that ships it,
 its version banner, run it or raise a CostError with its output."""
 from __future__ import annotations
 
@@ -11,7 +11,9 @@ PACKAGES = {"arm-none-eabi-gcc": "gcc-arm-none-eabi", "arm-none-eabi-nm": "binut
             "arm-none-eabi-objdump": "binutils-arm-none-eabi", "arm-none-eabi-size": "binutils-arm-none-eabi",
             "arm-none-eabi-addr2line": "binutils-arm-none-eabi",
             "qemu-system-arm": "qemu-system-arm", "gcc": "gcc", "yosys": "yosys", "nextpnr-ice40": "nextpnr-ice40",
-            "iverilog": "iverilog", "vvp": "iverilog", "verilator": "verilator"}
+            "iverilog": "iverilog", "vvp": "iverilog", "verilator": "verilator",
+            "riscv64-unknown-elf-gcc": "gcc-riscv64-unknown-elf", "riscv64-unknown-elf-objcopy": "binutils-riscv64-unknown-elf",
+            "riscv64-unknown-elf-nm": "binutils-riscv64-unknown-elf"}
 
 
 class CostError(ValueError):

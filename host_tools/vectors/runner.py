@@ -24,12 +24,14 @@ from host_tools.vectors.build import describe_row, load_set, set_order
 
 # -- check-impl ---------------------------------------------------------------------------------------
 
-def requests(vs: VectorSet, fields) -> list:
-    """(request line, expected response tokens, row index or None, compared token positions)."""
+def requests(vs: VectorSet, fields, first_rows: int | None = None) -> list:
+    """(request line, expected response tokens, row index or None, compared token positions).
+    ``first_rows``: only the first rows of each case (of the primitives set: of the set), every table
+    still loaded (a slow simulator's subset; None: every row)."""
     c = vs.columns
     reqs = []
     if vs.name == "primitives":
-        for i in range(len(vs)):
+        for i in range(len(vs) if first_rows is None else min(first_rows, len(vs))):
             op = PRIM_OPS[c["op"][i]]
             args = [c["a"][i], c["b"][i], c["c"][i]][:PRIM_ARITY[op]]
             exp = ["R", str(c["result"][i])] + ([str(c["flag"][i])] if op in PRIM_FLAGGED else [])
@@ -42,6 +44,7 @@ def requests(vs: VectorSet, fields) -> list:
         reqs.append(("TABLE " + " ".join(f"{w:08x}" for w in words), ["T", str(len(words)), f"{words[-1]:08x}"],
                      None, None))
         lo, hi = case["rows"]
+        hi = hi if first_rows is None else min(hi, lo + first_rows)
         if vs.name == "evaluator":
             for i in range(lo, hi):
                 bank = f" {c['bank'][i]}" if c["bank"][i] != 1 else ""
@@ -171,13 +174,14 @@ def run_bounded(argv, data: bytes, timeout_s: float, max_bytes: int) -> tuple:
 
 
 def check_impl(cmd, directory=DEFAULT_DIR, names=None, fields=None, timeout: float = DEFAULT_TIMEOUT_S, log=print,
-               max_output: int | None = None) -> dict:
+               max_output: int | None = None, first_rows: int | None = None) -> dict:
     """Drive the program ``cmd`` (a command line, split like a POSIX shell; one process per set)
     through the protocol with every set's requests and compare its answers with the vectors.
     Each set's process is bounded (:func:`run_bounded`): killed after ``timeout`` seconds (ValueError
     naming the set) or when it writes more than ``max_output`` bytes (default :func:`output_cap`:
     4 x the expected answers, at least 1 MiB); its exit status or signal is reported.
-    ``fields``: compare only these O fields of the pipeline sets (default all 16).  Returns
+    ``fields``: compare only these O fields of the pipeline sets (default all 16); ``first_rows``: only
+    the first rows of each case (:func:`requests`; None: every vector).  Returns
     ``{"sets": {name: {"requests", "rows", "mismatches", "first"}}, "mismatches": total,
     "first": text of the first mismatch or None}``."""
     directory = Path(directory)
@@ -191,6 +195,9 @@ def check_impl(cmd, directory=DEFAULT_DIR, names=None, fields=None, timeout: flo
         raise ValueError(f"--timeout {timeout!r}: must be a number of seconds in (0, {MAX_TIMEOUT_S:g}]")
     if max_output is not None and not (isinstance(max_output, int) and max_output > 0):
         raise ValueError(f"max_output {max_output!r}: must be a positive number of bytes")
+    if first_rows is not None and not (isinstance(first_rows, int) and not isinstance(first_rows, bool)
+                                       and first_rows > 0):
+        raise ValueError(f"--first {first_rows!r}: must be a positive number of rows per case")
     if fields is not None:
         if not list(fields):
             raise VectorsError(f"--fields is empty: name at least one of {', '.join(O_NAMES)} (or leave it out "
@@ -208,7 +215,7 @@ def check_impl(cmd, directory=DEFAULT_DIR, names=None, fields=None, timeout: flo
     for name in set_order(manifest, names):
         meta = manifest["sets"][name]
         vs = load_set(directory, name, meta)
-        reqs = requests(vs, fields)
+        reqs = requests(vs, fields, first_rows)
         data = "".join(r[0] + "\n" for r in reqs) + "QUIT\n"
         try:
             stdout, stderr, rc, problem = run_bounded(argv, data.encode(), timeout,

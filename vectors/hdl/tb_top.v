@@ -44,157 +44,74 @@ module tb_top;
 
     always #5 clk = ~clk;
 
-    reg [8*LINE-1:0] line;
-    reg [8*1024-1:0] cyc_path;
-    integer fd, nch, p, cyc, nsamp, maxcyc, fo, i, ntok;
-    reg [63:0] sumcyc;
-    reg [7:0] ch;
-    reg signed [63:0] val;
-    reg signed [63:0] a [0:15];
-    reg [31:0] last;
-    reg ok, neg, quit;
-    reg [8*8-1:0] cmd;
-
-    // the next character of the line (p counts down from the first character)
-    task skip_space;
-        begin
-            while (p >= 0 && (line[8*p +: 8] == " " || line[8*p +: 8] == "\t")) p = p - 1;
-        end
-    endtask
-    task next_word;                           // the command word, up to 8 characters
-        begin
-            skip_space;
-            cmd = 64'd0;
-            while (p >= 0 && line[8*p +: 8] != " " && line[8*p +: 8] != "\n" && line[8*p +: 8] != "\r") begin
-                cmd = {cmd[55:0], line[8*p +: 8]};
-                p = p - 1;
-            end
-        end
-    endtask
-    task next_int;                            // decimal (hex = 1: hex) integer; ok = 0 at the end of the line
-        input hex;
-        begin
-            skip_space;
-            val = 64'sd0;
-            ok = 1'b0;
-            neg = 1'b0;
-            if (p >= 0 && line[8*p +: 8] == "-") begin neg = 1'b1; p = p - 1; end
-            while (p >= 0 && line[8*p +: 8] != " " && line[8*p +: 8] != "\n" && line[8*p +: 8] != "\r") begin
-                ch = line[8*p +: 8];
-                if (hex)
-                    val = val * 16 + ((ch >= "a") ? ch - "a" + 10 : ((ch >= "A") ? ch - "A" + 10 : ch - "0"));
-                else
-                    val = val * 10 + (ch - "0");
-                ok = 1'b1;
-                p = p - 1;
-            end
-            if (neg) val = -val;
-        end
-    endtask
-
-    task tick;
-        begin
-            @(posedge clk);
-            #1;
-        end
-    endtask
+    `include "tb_protocol.vh"
 
     initial begin
-        nsamp = 0;
-        maxcyc = 0;
-        sumcyc = 64'd0;
-        fd = $fopen("/dev/stdin", "r");
+        open_requests;
         repeat (2) tick;
         rst = 1'b0;
         tick;
-        quit = 1'b0;
         while (!quit && !$feof(fd)) begin
-            line = 0;
-            nch = $fgets(line, fd);
-            if (nch > 0) begin
-                p = nch - 1;
-                next_word;
-                if (cmd == "QUIT") begin
-                    if ($value$plusargs("cycles=%s", cyc_path)) begin
-                        fo = $fopen(cyc_path, "w");
-                        $fdisplay(fo, "samples %0d max %0d sum %0d", nsamp, maxcyc, sumcyc);
-                        $fclose(fo);
-                    end
-                    quit = 1'b1;
-                end else if (cmd == "TABLE") begin
-                    ntok = 0;
+            next_request;
+            if (quit || cmd == 0)
+                ;                             // QUIT, or nothing on the line
+            else if (cmd == "TABLE") begin
+                ntok = 0;
+                next_int(1'b1);
+                while (ok) begin
+                    waddr = ntok[7:0];
+                    wdata = val[31:0];
+                    last = val[31:0];
+                    we = 1'b1;
+                    tick;
+                    we = 1'b0;
+                    ntok = ntok + 1;
                     next_int(1'b1);
-                    while (ok) begin
-                        waddr = ntok[7:0];
-                        wdata = val[31:0];
-                        last = val[31:0];
-                        we = 1'b1;
-                        tick;
-                        we = 1'b0;
-                        ntok = ntok + 1;
-                        next_int(1'b1);
-                    end
-                    load = 1'b1;
-                    tick;
-                    load = 1'b0;
-                    if (table_fits)
-                        $display("T %0d %08x", ntok, last);
-                    else
-                        $display("ERR FIELD word 9 rate_n: the window is longer than this build's ring (N_HIST %0d)", N_HIST);
-                end else if (cmd == "S") begin
-                    ntok = 0;
-                    for (i = 0; i < 11; i = i + 1) a[i] = 64'sd0;
-                    next_int(1'b0);
-                    while (ok && ntok < 11) begin
-                        a[ntok] = val;
-                        ntok = ntok + 1;
-                        next_int(1'b0);
-                    end
-                    f = a[0][31:0];
-                    t = a[1][31:0];
-                    r = a[2][31:0];
-                    self_timed = (a[3] < 0);
-                    mode = a[3][1:0];
-                    restart = a[4][0];
-                    invalid = a[4][1];                // RESTART bit 1: the input-invalid bit
-                    zin = a[5][31:0];
-                    kin = a[6];
-                    k_given = (ntok > 6);
-                    a0 = a[7][31:0];
-                    a1 = a[8][31:0];
-                    a2 = a[9][31:0];
-                    a3 = a[10][31:0];
-                    start = 1'b1;
-                    tick;
-                    start = 1'b0;
-                    cyc = 1;
-                    while (!done) begin tick; cyc = cyc + 1; end
-                    nsamp = nsamp + 1;
-                    sumcyc = sumcyc + cyc;
-                    if (cyc > maxcyc) maxcyc = cyc;
-                    $display("O %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d", state, vs, mode_o, sign,
-                             u, v, z, s, acc, cnt, y, b, out, bias, valid, flags);
-                end else if (cmd == "EVAL") begin
-                    ntok = 0;
-                    a[3] = 64'sd1;
-                    next_int(1'b0);
-                    while (ok && ntok < 4) begin
-                        a[ntok] = val;
-                        ntok = ntok + 1;
-                        next_int(1'b0);
-                    end
-                    eu = a[0][31:0];
-                    ev = a[1][31:0];
-                    zin = a[2][31:0];
-                    ebank = (a[3] == 64'sd2);
-                    eval_start = 1'b1;
-                    tick;
-                    eval_start = 1'b0;
-                    while (!done) tick;
-                    $display("E %0d %0d", b, zc);
-                end else if (cmd != 0)
-                    $display("ERR UNSUPPORTED %0s", cmd);
-            end
+                end
+                load = 1'b1;
+                tick;
+                load = 1'b0;
+                if (table_fits)
+                    $display("T %0d %08x", ntok, last);
+                else
+                    $display("ERR FIELD word 9 rate_n: the window is longer than this build's ring (N_HIST %0d)", N_HIST);
+            end else if (cmd == "S") begin
+                read_args(11);
+                f = a[0][31:0];
+                t = a[1][31:0];
+                r = a[2][31:0];
+                self_timed = (a[3] < 0);
+                mode = a[3][1:0];
+                restart = a[4][0];
+                invalid = a[4][1];                // RESTART bit 1: the input-invalid bit
+                zin = a[5][31:0];
+                kin = a[6];
+                k_given = (ntok > 6);
+                a0 = a[7][31:0];
+                a1 = a[8][31:0];
+                a2 = a[9][31:0];
+                a3 = a[10][31:0];
+                start = 1'b1;
+                tick;
+                start = 1'b0;
+                cyc = 1;
+                while (!done) begin tick; cyc = cyc + 1; end
+                count_cycles;
+                $display("O %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d", state, vs, mode_o, sign,
+                         u, v, z, s, acc, cnt, y, b, out, bias, valid, flags);
+            end else if (cmd == "EVAL") begin
+                read_args(4);
+                eu = a[0][31:0];
+                ev = a[1][31:0];
+                zin = a[2][31:0];
+                ebank = (a[3] == 64'sd2);
+                eval_start = 1'b1;
+                tick;
+                eval_start = 1'b0;
+                while (!done) tick;
+                $display("E %0d %0d", b, zc);
+            end else
+                $display("ERR UNSUPPORTED %0s", cmd);
         end
         $finish;
     end
