@@ -22,6 +22,24 @@ def test_missing_tool_names_the_debian_package(monkeypatch):
         cost.need("qemu-system-arm")
     with pytest.raises(cost.CostError, match="gcc-arm-none-eabi"):
         cost.need("arm-none-eabi-gcc")
+    with pytest.raises(cost.CostError, match="install the Debian package gcc-riscv64-unknown-elf"):
+        cost.need(cost_soc.RV_GCC)
+
+
+def test_missing_core_package_names_it(monkeypatch, tmp_path):
+    """Without the pythondata-cpu-picorv32 package the iCE40 target says what to install, before it
+    builds anything."""
+    import builtins
+    real = builtins.__import__
+
+    def no_core(name, *a, **k):
+        if name == "pythondata_cpu_picorv32":
+            raise ImportError(name)
+        return real(name, *a, **k)
+    monkeypatch.setattr(builtins, "__import__", no_core)
+    with pytest.raises(cost.CostError, match="pip install pythondata-cpu-picorv32"):
+        cost.measure("ice40", tmp_path, log=lambda s: None)
+    assert not any(tmp_path.iterdir())
 
 
 def test_m4_cycle_model_counts_branches_loads_and_pops():
