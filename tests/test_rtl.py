@@ -195,17 +195,19 @@ def test_soc_rom_is_the_link_scripts_and_holds_the_firmware(soc):
 
 def test_soc_checks_the_table_as_the_c_twin_does(soc):
     """The firmware's table load is the C twin's hdrg_init: a wrong CRC word is refused with its
-    return code and word index (the dedicated RTL leaves that check to the host), the good table
-    loads, and a sample after it answers the C driver's 16 fields."""
+    return code and word index (the dedicated RTL leaves that check to the host); a sample or an
+    eval without a loaded table is refused as the C driver refuses it; the good table loads, and a
+    sample after it answers the C driver's 16 fields."""
     fw, argv, _ = soc
     m = V.read_manifest(V.DEFAULT_DIR)
     vs = load_set(V.DEFAULT_DIR, "e2e", m["sets"]["e2e"])
     table, sample = requests(vs, None, first_rows=1)[:2]
     words = table[0].split()[1:]
     bad = "TABLE " + " ".join(words[:-1] + [f"{int(words[-1], 16) ^ 1:08x}"])
-    out = _soc_run(argv, fw["hex"], [bad, table[0], sample[0]])
-    assert out[0] == f"ERR TABLE 4 word {len(words) - 1}"          # HDRG_ERR_CRC at the CRC word
-    assert out[1].split() == table[1] and out[2].split() == sample[1]
+    out = _soc_run(argv, fw["hex"], [sample[0], bad, sample[0], "EVAL 0 0 0", table[0], sample[0]])
+    assert out[0] == out[2] == out[3] == "ERR NOTABLE send TABLE first"  # no table yet, or a refused one
+    assert out[1] == f"ERR TABLE 4 word {len(words) - 1}"          # HDRG_ERR_CRC at the CRC word
+    assert out[4].split() == table[1] and out[5].split() == sample[1]
 
 
 def test_soc_trap_ends_the_run_with_an_error(soc, tmp_path):

@@ -1,6 +1,7 @@
-"""Where the iCE40 LUT4s of the whole pipeline go: Yosys `synth_ice40 -dsp -noflatten` of hdrg_top
-(the RTL of `hdrg cost --target ice40`, N_HIST 64), the cells of each module.  The flattened
-synthesis of the cost record optimizes across module boundaries, so its total is a little lower.
+"""Where the iCE40 LUT4s of the dedicated RTL go: Yosys `synth_ice40 -dsp -noflatten` of hdrg_top
+(N_HIST 64; `hdrg cost --target xc7` measures it, the UP5K build is the SoC of
+`hdrg cost --target ice40`), the cells of each module.  A flattened synthesis optimizes across
+module boundaries, so its total is a little lower.
 
     python docs/studies/ice40_modules.py > docs/studies/ice40_modules.txt
 """

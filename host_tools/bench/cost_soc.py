@@ -71,7 +71,8 @@ def rom_words() -> int:
 
 def firmware(work: Path, defines=()) -> dict:
     """Build the SoC firmware (RV32IMC, -Os): ``{"elf", "hex", "rom_bytes", "functions"}``
-    (rom_bytes: the image's .text, code and constants; functions: name -> bytes, from nm)."""
+    (rom_bytes: the image's .text, code and constants; functions: name -> bytes of each symbol of the
+    image, functions and constant tables alike, from nm)."""
     work.mkdir(parents=True, exist_ok=True)
     tag = "".join("_" + d for d in defines)
     elf, binf, hexf = work / f"soc{tag}.elf", work / f"soc{tag}.bin", work / f"rom{tag}.hex"
@@ -187,7 +188,8 @@ def measure_soc(work: Path, log=print) -> dict:
            "first_mismatch": next((x["first"] for r in (every, ic) for x in r.values() if x["first"]), None),
            "broken_build_caught": broken[BROKEN_SET]["mismatches"] > 0,
            "broken_build_mismatches": broken[BROKEN_SET]["mismatches"],
-           "broken_build_vectors": broken[BROKEN_SET]["vectors"],
+           "broken_build_vectors": broken[BROKEN_SET]["vectors"], "broken_build_set": BROKEN_SET,
+           "broken_build_first_rows": BROKEN_FIRST,
            "cycles_per_sample": worst,
            "cycles_per_sample_mean": {n: x["cycles_mean"] for n, x in every.items() if x["samples"]},
            "output_rate_hz_at_24mhz": int(OUTPUT_CLOCK_MHZ * 1e6 // worst),

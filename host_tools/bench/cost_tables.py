@@ -446,7 +446,8 @@ def cost_fpga(recs: dict) -> str:
             return "**not caught**"
         if r.has("firmware"):
             return (f"firmware built with it: caught, {_i(r.get('broken_build_mismatches', 'int'))} of "
-                    f"{_i(r.get('broken_build_vectors', 'int'))} e2e vectors (the first of every case) differ")
+                    f"{_i(r.get('broken_build_vectors', 'int'))} {r.get('broken_build_set', 'str')} vectors (the first "
+                    f"{r.get('broken_build_first_rows', 'int')} of every case) differ")
         return (f"caught: {_i(r.get('broken_build_mismatches', 'int'))} of "
                 f"{_i(r.get('icarus.sequencer.vectors', 'int'))} sequencer vectors differ")
 
@@ -499,6 +500,7 @@ def cost_goals(recs: dict) -> str:
 
     worst, sets, aux = _fpga_cycles(xc7)
     luts = ice.get("luts", "int")
+    lcs = ice.get("pnr.utilisation.ICESTORM_LC", "list")[0]
     e = "evaluator_alone."
     fits = ice.get("pnr.fits", "bool")
     e_fmax = ice.get(e + "fmax_mhz", "num?")
@@ -516,8 +518,10 @@ def cost_goals(recs: dict) -> str:
              ", ".join(f"{n} {_i(v)} B" for n, v in code),
              verdicts(code, M4_CODE_GOAL, lambda v: f"{_i(v - M4_CODE_GOAL)} B over")],
             [f"iCE40 UP5K, whole pipeline placed and routed: <= {_i(UP5K['luts'])} LUT4 "
-             f"(aim {_i(UP5K_LUT_AIM)})", f"{_i(luts)} LUT4; " + ("placed and routed" if fits else "not placed"),
-             _judge(luts, UP5K["luts"]) + f"; aim {_judge(luts, UP5K_LUT_AIM)}" + ("" if fits else "; does not place")],
+             f"(aim {_i(UP5K_LUT_AIM)})", f"{_i(luts)} LUT4; " + (f"placed and routed: {_i(lcs)} logic cells "
+                                                                 "(LUT4 and flip-flop)" if fits else "not placed"),
+             _judge(luts, UP5K["luts"]) + ("" if fits else "; does not place")
+             + f"; aim: {_judge(luts, UP5K_LUT_AIM)} on LUT4, {_judge(lcs, UP5K_LUT_AIM)} on placed logic cells"],
             ["iCE40 UP5K, whole pipeline: within the UP5K's DSP, EBR and SPRAM",
              ", ".join(f"{_i(v)} {name} of {UP5K[k]}" for k, name, v in cells),
              _judge(max(v / UP5K[k] for k, _, v in cells), 1.0)],

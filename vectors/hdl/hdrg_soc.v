@@ -11,13 +11,14 @@
 // map: ROM 0x00000-0x0ffff, RAM 0x10000-0x1ffff, command register 0x20000.
 //
 // Host port (one word per clock; not while busy): we writes wdata at mailbox word addr, re reads
-// mailbox word addr into rdata (valid from the next clock until the next read).  The mailbox
-// (words of the RAM from 0x10000; the firmware's header comment has the layout): 0..255 the table
-// words, 256..271 a command's inputs, 272..303 its results.  A command is a one-clock pulse: load
-// (the table; its word count in word 256), start (a sample), eval_start (the evaluator alone);
-// busy is high from the next clock until the firmware has written the results; done pulses one
-// clock when it has.  The host has priority on the RAM: a firmware access waits while we or re is
-// high.  The core's trap (an illegal instruction or a misaligned access of a broken firmware)
+// mailbox word addr into rdata (valid on the next clock only: the RAM reads for the core after it).
+// The mailbox (words of the RAM from 0x10000; the firmware's header comment has the layout): 0..255
+// the table words, 256..271 a command's inputs, 272..303 its results.  A command is a one-clock
+// pulse, sent only while busy is low: load (the table; its word count in word 256), start (a
+// sample), eval_start (the evaluator alone); busy is high from the next clock until the firmware
+// has written the results; done pulses one clock when it has.  After reset busy is high until the
+// firmware has booted (about 106,000 clocks: it zeroes its state), and done pulses once then.  The
+// host has priority on the RAM: a firmware access waits while we or re is high.  The core's trap (an illegal instruction or a misaligned access of a broken firmware)
 // holds it and raises trap.
 `timescale 1ns / 1ns
 `ifndef HDRG_SOC_ROM
@@ -95,10 +96,13 @@ module hdrg_soc #(
     hdrg_soc_ram ram (.clk(clk), .a(ram_a), .d(ram_d), .we(ram_we), .q(ram_q));
     assign rdata = ram_q;
 
-    // the command register: set by a host pulse, cleared by the firmware's write (done)
+    // the command register: set by a host pulse, cleared by the firmware's write (done); booted: the
+    // firmware's first write (after its start-up)
     reg [1:0] cmd;
+    reg booted;
     wire cmd_write = issue && sel_cmd && mem_wstrb != 4'd0;
     always @(posedge clk) begin
+        booted <= !rst && (booted || cmd_write);
         if (rst)
             cmd <= 2'd0;
         else if (load)
@@ -111,7 +115,7 @@ module hdrg_soc #(
             cmd <= 2'd0;
         done <= !rst && cmd_write;
     end
-    assign busy = cmd != 2'd0;
+    assign busy = !booted || cmd != 2'd0;
 
     // the core's bus: an access is issued on the clock it is seen (a RAM access waits while the host
     // uses the RAM), its read word registered on the next and handed to the core with mem_ready on

@@ -6,7 +6,8 @@
 // inputs into the mailbox through the host port, pulses the command and reads the results
 // (hdrg_soc_main.c has the mailbox layout).  Answers: "T <n> <CRC word>" (or "ERR TABLE <return
 // code> word <index>" for a table the firmware refuses: the C twin checks the header, the fields
-// and the CRC), "O <16 fields>", "E <B> <zclamped>"; anything else "ERR UNSUPPORTED".  A trap of
+// and the CRC), "O <16 fields>", "E <B> <zclamped>" ("ERR NOTABLE" before a table is loaded);
+// anything else "ERR UNSUPPORTED".  A trap of
 // the core ends the run with "ERR TRAP".  +cycles=FILE: tb_top.v's cycle file (start to done).
 // The firmware image: `HDRG_SOC_ROM (hdrg_soc.v).
 `timescale 1ns / 1ns
@@ -14,6 +15,7 @@ module tb_soc;
     parameter LINE = 4096;                    // longest request line (characters)
     parameter ROM_WORDS = 3072;               // hdrg_soc's ROM (the firmware link script's)
     localparam ARG = 256, OUT = 272;          // mailbox words (hdrg_soc_main.c)
+    localparam NOTABLE = 255;                 // a result's return code: no table loaded (hdrg_soc_main.c)
 
     reg clk = 1'b0, rst = 1'b1, we = 1'b0, re = 1'b0, load = 1'b0, start = 1'b0, eval_start = 1'b0;
     reg [8:0] addr = 9'd0;
@@ -77,7 +79,7 @@ module tb_soc;
         open_requests;
         repeat (2) tick;
         rst = 1'b0;
-        while (!done && !trap) tick;          // the firmware's first done: booted
+        while (busy && !trap) tick;           // booting: busy until the firmware's first done
         while (!quit && !$feof(fd)) begin
             next_request;
             if (quit || cmd == 0)
@@ -107,7 +109,9 @@ module tb_soc;
                 run(1);
                 count_cycles;
                 get(21);
-                if (w[0] != 0)
+                if (w[0] == NOTABLE)
+                    $display("ERR NOTABLE send TABLE first");
+                else if (w[0] != 0)
                     $display("ERR INPUT %0d", w[0]);
                 else
                     $display("O %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d %0d",
@@ -119,7 +123,10 @@ module tb_soc;
                 for (i = 0; i < 4; i = i + 1) put(ARG + i, a[i][31:0]);
                 run(2);
                 get(4);
-                $display("E %0d %0d", $signed({w[2], w[1]}), w[3]);
+                if (w[0] == NOTABLE)
+                    $display("ERR NOTABLE send TABLE first");
+                else
+                    $display("E %0d %0d", $signed({w[2], w[1]}), w[3]);
             end else
                 $display("ERR UNSUPPORTED %0s", cmd);
         end

@@ -13,8 +13,11 @@
  *            sample:  rc, state, vs, mode, sign, u, v, z, s (low, high), acc (low, high), cnt,
  *                     y (low, high), b (low, high), out, bias, valid, flags
  *            eval:    rc, B (low, high), z clamped
+ * Return code SOC_NOTABLE: a sample or eval before a table was loaded (or after a refused one).
  * Command register (MMIO 0x20000, read): 0 none, 1 table, 2 sample, 3 eval (set by the host's
- * load / start / eval_start pulse); writing it (any value) reports the command done. */
+ * load / start / eval_start pulse); writing it (any value) reports the command done.  The mailbox is
+ * plain memory that the host writes while the core polls the command register: a compiler barrier
+ * after the poll and before the done keeps every mailbox access in between. */
 #include <stdint.h>
 #include "hdrg_fw.h"
 
@@ -23,12 +26,15 @@
 #define MB_OUT 272u
 #define MB_WORDS 304u
 #define SOC_CMD (*(volatile uint32_t *)0x20000u)
+#define SOC_NOTABLE 255u
+#define BARRIER() __asm__ volatile("" ::: "memory")
 
 enum { CMD_NONE = 0, CMD_TABLE = 1, CMD_SAMPLE = 2, CMD_EVAL = 3 };
 
-__attribute__((section(".mbox"), used)) volatile uint32_t mbox[MB_WORDS];
+__attribute__((section(".mbox"), used)) uint32_t mbox[MB_WORDS];
 
 static hdrg_state_t g_st;
+static int g_have_table;
 
 /* a freestanding build: GCC may call memcpy and memset for structure copies and clears */
 void *memcpy(void *dst, const void *src, unsigned long n);
@@ -68,8 +74,8 @@ static void cmd_table(void)
 {
     unsigned bad = 0;
     uint32_t n = mbox[MB_ARG];
-    int e = n > MB_ARG ? HDRG_ERR_LENGTH
-                       : hdrg_init(&g_st, (const uint32_t *)&mbox[MB_TABLE], (size_t)n, &bad);
+    int e = n > MB_ARG ? HDRG_ERR_LENGTH : hdrg_init(&g_st, &mbox[MB_TABLE], (size_t)n, &bad);
+    g_have_table = e == HDRG_OK;
     mbox[MB_OUT] = (uint32_t)e;
     mbox[MB_OUT + 1u] = bad;
     mbox[MB_OUT + 2u] = g_st.t.crc;
@@ -80,9 +86,13 @@ static void cmd_sample(void)
     hdrg_input_t in;
     hdrg_aux_input_t ax;
     hdrg_sample_t o;
-    const volatile uint32_t *a = &mbox[MB_ARG];
+    const uint32_t *a = &mbox[MB_ARG];
     unsigned c;
     int e;
+    if (!g_have_table) {
+        mbox[MB_OUT] = SOC_NOTABLE;
+        return;
+    }
     in.f = a[0];
     in.t = (int32_t)a[1];
     in.r = (int32_t)a[2];
@@ -117,9 +127,14 @@ static void cmd_sample(void)
 
 static void cmd_eval(void)
 {
-    const volatile uint32_t *a = &mbox[MB_ARG];
+    const uint32_t *a = &mbox[MB_ARG];
     int zc = 0;
-    int64_t b = hdrg_evaluate_bank(&g_st.t, a[3], (int32_t)a[0], (int32_t)a[1], (int32_t)a[2], &zc);
+    int64_t b;
+    if (!g_have_table) {
+        mbox[MB_OUT] = SOC_NOTABLE;
+        return;
+    }
+    b = hdrg_evaluate_bank(&g_st.t, a[3], (int32_t)a[0], (int32_t)a[1], (int32_t)a[2], &zc);
     mbox[MB_OUT] = HDRG_OK;
     put64(1u, b);
     mbox[MB_OUT + 3u] = (uint32_t)zc;
@@ -130,6 +145,7 @@ int main(void)
     SOC_CMD = CMD_NONE;                             /* the first done: booted */
     for (;;) {
         uint32_t c = SOC_CMD;
+        BARRIER();
         if (c == CMD_TABLE) {
             cmd_table();
         } else if (c == CMD_SAMPLE) {
@@ -139,6 +155,7 @@ int main(void)
         } else {
             continue;
         }
+        BARRIER();
         SOC_CMD = c;                                /* done */
     }
 }
