@@ -14,7 +14,6 @@ from pathlib import Path
 
 from host_tools.bench import cost_rtl, cost_soc
 from host_tools.bench.cost_tools import tool_version
-from host_tools.vectors.runner import check_impl
 
 
 def main():
@@ -27,15 +26,12 @@ def main():
         argv = cost_soc.build_tb("icarus", work)
         print(f"iCE40 SoC under {tool_version('iverilog', '-V')}; firmware {fw['rom_bytes']} B (RV32IMC -Os)")
         for name in args.sets.split(","):
-            cyc = work / f"cycles_{name}.txt"
             t0 = time.monotonic()
-            rep = check_impl([*argv, f"+rom={fw['hex']}", f"+cycles={cyc}"], names=[name], timeout=86400,
-                             log=lambda s: None)
+            c = cost_rtl.check_set([*argv, f"+rom={fw['hex']}"], name, work / f"cycles_{name}.txt", timeout=86400)
             wall = time.monotonic() - t0
-            r, c = rep["sets"][name], cost_rtl.cycles_file(cyc)
             total = c["samples"] * (c["cycles_mean"] or 0)
-            print(f"{name}: {r['rows']} vectors, {r['mismatches']} mismatches"
-                  + (f" (first: {r['first']})" if r["first"] else "")
+            print(f"{name}: {c['vectors']} vectors, {c['mismatches']} mismatches"
+                  + (f" (first: {c['first']})" if c["first"] else "")
                   + f"; {c['samples']} sample requests, worst {c['cycles_max']} / mean {c['cycles_mean']} clock cycles; "
                   f"wall {wall / 60:.1f} min: about {total / wall / 1e3:.0f} k sample clocks per second")
 

@@ -65,6 +65,17 @@ def cycles_file(path: Path) -> dict:
     return {"samples": n, "cycles_max": mx, "cycles_mean": round(total / n, 1) if n else None}
 
 
+def check_set(argv: list, name: str, cyc: Path, timeout: float = 1800, first_rows=None) -> dict:
+    """check-impl of one vector set through a testbench (``argv``, which gets ``+cycles=cyc``):
+    ``{"vectors", "mismatches", "first", "samples", "cycles_max", "cycles_mean"}`` (cycles: sample
+    requests only; ``first_rows``: the first vectors of every case)."""
+    cyc.unlink(missing_ok=True)
+    rep = check_impl([*argv, f"+cycles={cyc}"], names=[name], timeout=timeout, log=lambda s: None,
+                     first_rows=first_rows)
+    r = rep["sets"][name]
+    return {"vectors": r["rows"], "mismatches": r["mismatches"], "first": r["first"], **cycles_file(cyc)}
+
+
 def once(key: tuple, compute, reused=lambda: None):
     """``compute()``, run once per process for ``key`` and the content of the RTL and vectors
     (fingerprint()); a deep copy of the result (callers may change it). ``reused()`` is called when
@@ -90,13 +101,9 @@ def _check_top(sim: str, work: Path, sets, defines, log) -> dict:
     argv = build_top(sim, work, defines)
     out = {}
     for name in sets:
-        cyc = work / f"cycles_{sim}_{name}{''.join('_' + d for d in defines)}.txt"
-        cyc.unlink(missing_ok=True)
-        rep = check_impl([*argv, f"+cycles={cyc}"], names=[name], timeout=1800, log=lambda s: None)
-        r = rep["sets"][name]
-        out[name] = {"vectors": r["rows"], "mismatches": r["mismatches"], "first": r["first"], **cycles_file(cyc)}
-        log(f"  {sim}{' ' + ' '.join(defines) if defines else ''} {name}: {r['rows']} vectors, "
-            f"{r['mismatches']} mismatches, max {out[name]['cycles_max']} cycles/sample")
+        out[name] = check_set(argv, name, work / f"cycles_{sim}_{name}{''.join('_' + d for d in defines)}.txt")
+        log(f"  {sim}{' ' + ' '.join(defines) if defines else ''} {name}: {out[name]['vectors']} vectors, "
+            f"{out[name]['mismatches']} mismatches, max {out[name]['cycles_max']} cycles/sample")
     return out
 
 

@@ -27,7 +27,6 @@ from pathlib import Path
 from host_tools import vectors as V
 from host_tools.bench import cost_fpga, cost_rtl
 from host_tools.bench.cost_tools import CostError, need, run_tool, tool_version
-from host_tools.vectors.runner import check_impl
 
 ROOT = Path(__file__).resolve().parent.parent.parent
 C_DIR = ROOT / "firmware_ref" / "c"
@@ -121,12 +120,8 @@ def check(argv: list, rom: Path, work: Path, sets=SETS, first_rows=None, tag: st
     once as the machine has cores: ``{set: {"vectors", "mismatches", "first", "samples",
     "cycles_max", "cycles_mean"}}``."""
     def one(name):
-        cyc = work / f"cycles_soc_{tag}_{name}.txt"
-        cyc.unlink(missing_ok=True)
-        rep = check_impl([*argv, f"+rom={rom}", f"+cycles={cyc}"], names=[name], timeout=7200, log=lambda s: None,
-                         first_rows=first_rows)
-        r = rep["sets"][name]
-        return {"vectors": r["rows"], "mismatches": r["mismatches"], "first": r["first"], **cost_rtl.cycles_file(cyc)}
+        return cost_rtl.check_set([*argv, f"+rom={rom}"], name, work / f"cycles_soc_{tag}_{name}.txt", timeout=7200,
+                                  first_rows=first_rows)
 
     rows = {n: s["rows"] for n, s in V.read_manifest(V.DEFAULT_DIR)["sets"].items()}
     order = sorted(sets, key=lambda n: -rows.get(n, 0))         # the largest sets first
